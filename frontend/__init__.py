@@ -1,0 +1,1 @@
+"""The viser live viewer and the dashboard pages."""

@@ -1,0 +1,3 @@
+"""mapqual: automatic map-quality evaluation of SLAM algorithms."""
+
+__version__ = "0.1.0"

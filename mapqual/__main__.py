@@ -1,0 +1,5 @@
+"""`python -m mapqual` runs the command line."""
+
+from mapqual.cli import main
+
+main()

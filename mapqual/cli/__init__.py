@@ -1,0 +1,32 @@
+"""The `mapqual` command line: one typer app, one module per command group."""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from worker.errors import InputError
+
+app = typer.Typer(
+    name="mapqual",
+    help="Score how good a map a SLAM algorithm builds of a building.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# Each command module adds its commands to `app` on import. Heavy imports (numba kernels,
+# matplotlib) stay inside the command functions so that `mapqual --help` starts fast.
+# (command modules are imported here, one line each)
+
+
+def main() -> None:
+    """Console entry point: bad input is one line on stderr and exit code 2, never a traceback."""
+    try:
+        app()
+    except InputError as exc:
+        print(f"mapqual: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    except (BrokenPipeError, KeyboardInterrupt):
+        sys.exit(130 if sys.exc_info()[0] is KeyboardInterrupt else 1)

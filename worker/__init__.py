@@ -1,0 +1,1 @@
+"""The pipeline: worlds, simulator, exploration, SLAM and evaluation (pure numpy/numba)."""
