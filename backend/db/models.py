@@ -1,0 +1,145 @@
+"""SQLAlchemy 2 models: worlds, jobs, runs, and each run's trajectories and final map.
+
+Trajectories and maps are stored as one compressed array blob each (see `arrays.py`), never a
+row per pose: a two-hour run has 72,000 poses per trajectory.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+
+def utcnow() -> datetime:
+    """Timezone-aware now, for column defaults."""
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    """Declarative base of every mapqual table."""
+
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class World(Base):
+    """A floorplan: its normalised occupancy image, resolution, origin and facts."""
+
+    __tablename__ = "worlds"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    # Content hash of the source files: the same upload twice is the same world.
+    sha256: Mapped[str] = mapped_column(String(64), index=True)
+    source_format: Mapped[str] = mapped_column(String(20))  # image | yaml | stage
+    source_path: Mapped[str | None] = mapped_column(Text)
+    resolution: Mapped[float] = mapped_column(Float)  # [m/pixel]
+    origin_x: Mapped[float] = mapped_column(Float)  # [m]
+    origin_y: Mapped[float] = mapped_column(Float)  # [m]
+    width_px: Mapped[int] = mapped_column(Integer)
+    height_px: Mapped[int] = mapped_column(Integer)
+    start_pose: Mapped[list[Any]] = mapped_column(JSON)  # [x, y, theta]
+    facts: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # The occupancy grid as the pipeline sees it (bool [iy, ix], bottom row first), packed.
+    occupancy: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    jobs: Mapped[list[Job]] = relationship(back_populates="world")
+
+
+class Job(Base):
+    """A request for one or more runs of one world (a batch is a job too)."""
+
+    __tablename__ = "jobs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
+    # queued | running | done | failed | cancelled; follows its runs.
+    status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
+    slam: Mapped[str] = mapped_column(String(40))
+    params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(
+        DateTime(timezone=True), default=utcnow, onupdate=utcnow
+    )
+
+    world: Mapped[World] = relationship(back_populates="jobs")
+    runs: Mapped[list[Run]] = relationship(back_populates="job", order_by="Run.id")
+
+
+class Run(Base):
+    """One simulated exploration with SLAM, and its evaluation."""
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
+    world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
+    seed: Mapped[int] = mapped_column(Integer)
+    slam: Mapped[str] = mapped_column(String(40))
+    params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # queued | running | done | failed (internal error) | cancelled
+    status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
+    # The run's own result once done: completed, or failed with a reason (collision, stuck, ...).
+    outcome: Mapped[str | None] = mapped_column(String(20))
+    reason: Mapped[str | None] = mapped_column(String(40))
+    coverage: Mapped[float | None] = mapped_column(Float)
+    # Headline score (B relations), duplicated from `metrics` for cheap aggregate queries.
+    b_mean_t: Mapped[float | None] = mapped_column(Float)  # [m]
+    b_mean_r: Mapped[float | None] = mapped_column(Float)  # [rad]
+    sim_time: Mapped[float | None] = mapped_column(Float)  # [s] simulated
+    wall_time: Mapped[float | None] = mapped_column(Float)  # [s]
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    summary: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    progress: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    error: Mapped[str | None] = mapped_column(Text)
+    report_dir: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+    job: Mapped[Job] = relationship(back_populates="runs")
+    trajectories: Mapped[list[RunTrajectory]] = relationship(
+        back_populates="run", cascade="all, delete-orphan"
+    )
+    map: Mapped[RunMap | None] = relationship(back_populates="run", cascade="all, delete-orphan")
+
+
+class RunTrajectory(Base):
+    """A run's ground-truth or estimated trajectory: `(N, 4) [t, x, y, theta]` packed."""
+
+    __tablename__ = "run_trajectories"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
+    kind: Mapped[str] = mapped_column(String(8), primary_key=True)  # gt | est
+    n_poses: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+    run: Mapped[Run] = relationship(back_populates="trajectories")
+
+
+class RunMap(Base):
+    """A run's final SLAM map as a ROS occupancy grid (int8: -1 unknown, 0..100), packed."""
+
+    __tablename__ = "run_maps"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
+    resolution: Mapped[float] = mapped_column(Float)  # [m/cell]
+    origin_x: Mapped[float] = mapped_column(Float)  # [m]
+    origin_y: Mapped[float] = mapped_column(Float)  # [m]
+    width: Mapped[int] = mapped_column(Integer)
+    height: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+    run: Mapped[Run] = relationship(back_populates="map")

@@ -1,0 +1,189 @@
+"""Persistence of worlds, jobs and runs: the only module that writes mapqual's tables."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.db.arrays import pack_array, unpack_array
+from backend.db.models import Job, Run, RunMap, RunTrajectory, World, utcnow
+
+TRAJECTORY_KINDS = ("gt", "est")
+
+
+def get_or_create_world(
+    session: Session,
+    *,
+    name: str,
+    sha256: str,
+    source_format: str,
+    source_path: str | None,
+    resolution: float,
+    origin: Sequence[float],
+    occ: np.ndarray,
+    start_pose: Sequence[float],
+    facts: dict[str, Any],
+) -> World:
+    """The stored world with this content hash, or a new one: uploading twice is harmless."""
+    existing = session.scalars(select(World).where(World.sha256 == sha256)).first()
+    if existing is not None:
+        return existing
+    world = World(
+        name=name,
+        sha256=sha256,
+        source_format=source_format,
+        source_path=source_path,
+        resolution=float(resolution),
+        origin_x=float(origin[0]),
+        origin_y=float(origin[1]),
+        width_px=int(occ.shape[1]),
+        height_px=int(occ.shape[0]),
+        start_pose=[float(v) for v in start_pose],
+        facts=facts,
+        occupancy=pack_array(np.asarray(occ, dtype=bool)),
+    )
+    session.add(world)
+    session.flush()
+    return world
+
+
+def world_occupancy(world: World) -> np.ndarray:
+    """The stored occupancy grid `(H, W) bool`, `[iy, ix]` bottom row first."""
+    return unpack_array(world.occupancy)
+
+
+def create_job(
+    session: Session, *, world_id: int, slam: str, params: dict[str, Any], seeds: Sequence[int]
+) -> Job:
+    """A queued job with one queued run per seed; every call makes new runs, never reuses old."""
+    if not seeds:
+        raise ValueError("a job needs at least one seed")
+    job = Job(world_id=world_id, slam=slam, params=params, status="queued")
+    session.add(job)
+    session.flush()
+    for seed in seeds:
+        session.add(Run(job_id=job.id, world_id=world_id, seed=int(seed), slam=slam, params=params))
+    session.flush()
+    return job
+
+
+def mark_run_started(session: Session, run_id: int) -> Run:
+    """Mark a run running; a restarted run (a redelivered task) starts over cleanly."""
+    run = session.get_one(Run, run_id)
+    run.status = "running"
+    run.started_at = utcnow()
+    run.finished_at = None
+    run.error = None
+    run.progress = {}
+    _refresh_job_status(session, run.job)
+    return run
+
+
+def store_run_result(
+    session: Session,
+    run_id: int,
+    *,
+    summary: dict[str, Any],
+    t: np.ndarray,
+    pose_gt: np.ndarray,
+    pose_est: np.ndarray,
+    map_ros: np.ndarray,
+    map_resolution: float,
+    map_origin: Sequence[float],
+    report_dir: str | None,
+) -> Run:
+    """Store a finished run, replacing anything a previous attempt of the same run stored.
+
+    `t (N,)`, `pose_gt`/`pose_est (N, 3)` at the same timestamps; `map_ros (H, W) int8`.
+    `summary` is the report's summary.json; its headline figures are copied into columns.
+    """
+    run = session.get_one(Run, run_id)
+    run.trajectories.clear()
+    run.map = None
+    session.flush()
+    for kind, poses in (("gt", pose_gt), ("est", pose_est)):
+        data = np.column_stack([np.asarray(t, dtype=np.float64), np.asarray(poses, np.float64)])
+        run.trajectories.append(RunTrajectory(kind=kind, n_poses=len(t), data=pack_array(data)))
+    run.map = RunMap(
+        resolution=float(map_resolution),
+        origin_x=float(map_origin[0]),
+        origin_y=float(map_origin[1]),
+        width=int(map_ros.shape[1]),
+        height=int(map_ros.shape[0]),
+        data=pack_array(np.asarray(map_ros, dtype=np.int8)),
+    )
+    b_trans = summary.get("relations", {}).get("B", {}).get("translation", {})
+    b_rot = summary.get("relations", {}).get("B", {}).get("rotation", {})
+    timings = summary.get("timings", {})
+    run.summary = summary
+    run.metrics = {k: summary[k] for k in ("relations", "ate") if k in summary}
+    run.outcome = summary.get("outcome")
+    run.reason = summary.get("reason")
+    run.coverage = summary.get("coverage")
+    run.b_mean_t = b_trans.get("mean")
+    run.b_mean_r = b_rot.get("mean")
+    run.sim_time = timings.get("sim_time_s")
+    run.wall_time = timings.get("wall_time_s")
+    run.report_dir = report_dir
+    run.status = "done"
+    run.finished_at = utcnow()
+    _refresh_job_status(session, run.job)
+    return run
+
+
+def mark_run_failed(session: Session, run_id: int, error: str) -> Run:
+    """An internal error (not a failed exploration, which is a done run with outcome failed)."""
+    run = session.get_one(Run, run_id)
+    run.status = "failed"
+    run.error = error
+    run.finished_at = utcnow()
+    _refresh_job_status(session, run.job)
+    return run
+
+
+def load_trajectory(session: Session, run_id: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """A stored trajectory as `(t (N,), poses (N, 3))`."""
+    if kind not in TRAJECTORY_KINDS:
+        raise ValueError(f"trajectory kind must be one of {TRAJECTORY_KINDS}, not {kind!r}")
+    row = session.get(RunTrajectory, (run_id, kind))
+    if row is None:
+        raise LookupError(f"run {run_id} has no {kind} trajectory")
+    data = unpack_array(row.data)
+    return data[:, 0].copy(), data[:, 1:4].copy()
+
+
+def load_map(session: Session, run_id: int) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """A stored final map as `(grid (H, W) int8, resolution, (origin_x, origin_y))`."""
+    row = session.get(RunMap, run_id)
+    if row is None:
+        raise LookupError(f"run {run_id} has no map")
+    return unpack_array(row.data), row.resolution, (row.origin_x, row.origin_y)
+
+
+def list_runs(session: Session, limit: int = 50, world_id: int | None = None) -> list[Run]:
+    """The most recent runs first."""
+    stmt = select(Run).order_by(Run.id.desc()).limit(limit)
+    if world_id is not None:
+        stmt = stmt.where(Run.world_id == world_id)
+    return list(session.scalars(stmt))
+
+
+def _refresh_job_status(session: Session, job: Job) -> None:
+    """A job's status follows its runs: cancelled, running, queued, failed, or done."""
+    session.flush()
+    states = {r.status for r in job.runs}
+    if job.status == "cancelled":
+        return
+    if "running" in states or ("queued" in states and len(states) > 1):
+        job.status = "running"
+    elif states == {"queued"}:
+        job.status = "queued"
+    elif "failed" in states:
+        job.status = "failed"
+    else:
+        job.status = "done"
+    job.updated_at = utcnow()

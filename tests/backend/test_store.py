@@ -1,0 +1,194 @@
+"""The store against real SQLite and PostgreSQL: round trips, re-runs, job status, replacement."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sqlalchemy import func, select
+
+from backend.db.models import Job, Run, RunTrajectory
+from backend.db.session import session_scope
+from backend.store import (
+    create_job,
+    get_or_create_world,
+    list_runs,
+    load_map,
+    load_trajectory,
+    mark_run_failed,
+    mark_run_started,
+    store_run_result,
+    world_occupancy,
+)
+
+
+def _world(session, sha="a" * 64):
+    occ = np.zeros((30, 40), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    occ[10, 5] = True  # asymmetric, so a flipped or transposed grid would not compare equal
+    return get_or_create_world(
+        session,
+        name="box",
+        sha256=sha,
+        source_format="image",
+        source_path=None,
+        resolution=0.05,
+        origin=(1.5, -2.0),
+        occ=occ,
+        start_pose=(1.0, 0.75, 0.0),
+        facts={"free_area_m2": 2.5},
+    ), occ
+
+
+def _summary(b_t=0.12, b_r=0.004):
+    return {
+        "outcome": "completed",
+        "reason": None,
+        "coverage": 0.97,
+        "relations": {"B": {"translation": {"mean": b_t}, "rotation": {"mean": b_r}}},
+        "timings": {"sim_time_s": 600.0, "wall_time_s": 12.5},
+    }
+
+
+def _result_arrays(n=1000, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.1
+    gt = np.cumsum(rng.normal(size=(n, 3)), axis=0)
+    est = gt + rng.normal(scale=0.01, size=(n, 3))
+    grid = rng.integers(-1, 101, size=(50, 60)).astype(np.int8)
+    return t, gt, est, grid
+
+
+def test_world_is_stored_once_per_content_and_occupancy_round_trips(db_url):
+    with session_scope(db_url) as s:
+        w1, occ = _world(s)
+        w2, _ = _world(s)
+        assert w1.id == w2.id
+        assert np.array_equal(world_occupancy(w1), occ)
+        assert (w1.origin_x, w1.origin_y, w1.width_px, w1.height_px) == (1.5, -2.0, 40, 30)
+
+
+def test_result_round_trips_bit_for_bit_and_fills_headline_columns(db_url):
+    t, gt, est, grid = _result_arrays()
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        job = create_job(s, world_id=world.id, slam="rbpf", params={"seed": 1}, seeds=[1])
+        run_id = job.runs[0].id
+        mark_run_started(s, run_id)
+        store_run_result(
+            s,
+            run_id,
+            summary=_summary(),
+            t=t,
+            pose_gt=gt,
+            pose_est=est,
+            map_ros=grid,
+            map_resolution=0.05,
+            map_origin=(-3.0, 4.0),
+            report_dir="runs/1",
+        )
+    with session_scope(db_url) as s:
+        t2, gt2 = load_trajectory(s, run_id, "gt")
+        _, est2 = load_trajectory(s, run_id, "est")
+        grid2, res, origin = load_map(s, run_id)
+        run = s.get_one(Run, run_id)
+        assert np.array_equal(t2, t) and np.array_equal(gt2, gt) and np.array_equal(est2, est)
+        assert np.array_equal(grid2, grid) and grid2.dtype == np.int8
+        assert (res, origin) == (0.05, (-3.0, 4.0))
+        assert (run.status, run.outcome, run.coverage) == ("done", "completed", 0.97)
+        assert (run.b_mean_t, run.b_mean_r, run.sim_time) == (0.12, 0.004, 600.0)
+        assert run.job.status == "done"
+        # one row per trajectory, not per pose
+        assert s.scalar(select(func.count()).select_from(RunTrajectory)) == 2
+
+
+def test_storing_a_run_again_replaces_its_result_instead_of_adding_one(db_url):
+    t, gt, est, grid = _result_arrays()
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        run_id = create_job(s, world_id=world.id, slam="rbpf", params={}, seeds=[3]).runs[0].id
+    for attempt, b_t in enumerate((0.5, 0.25)):
+        with session_scope(db_url) as s:
+            mark_run_started(s, run_id)
+            store_run_result(
+                s,
+                run_id,
+                summary=_summary(b_t=b_t),
+                t=t[: 500 + attempt],
+                pose_gt=gt[: 500 + attempt],
+                pose_est=est[: 500 + attempt],
+                map_ros=grid,
+                map_resolution=0.05,
+                map_origin=(0, 0),
+                report_dir=None,
+            )
+    with session_scope(db_url) as s:
+        assert s.scalar(select(func.count()).select_from(RunTrajectory)) == 2
+        assert s.get_one(Run, run_id).b_mean_t == 0.25
+        assert len(load_trajectory(s, run_id, "est")[0]) == 501
+
+
+def test_same_world_params_and_seed_again_make_a_new_run(db_url):
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        a = create_job(s, world_id=world.id, slam="rbpf", params={"x": 1}, seeds=[7]).runs[0].id
+        b = create_job(s, world_id=world.id, slam="rbpf", params={"x": 1}, seeds=[7]).runs[0].id
+        assert a != b
+        assert [r.id for r in list_runs(s)] == [b, a]
+
+
+def test_job_status_follows_its_runs(db_url):
+    t, gt, est, grid = _result_arrays(n=20)
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        job = create_job(s, world_id=world.id, slam="odometry", params={}, seeds=[1, 2])
+        job_id, (r1, r2) = job.id, [r.id for r in job.runs]
+        assert job.status == "queued"
+        mark_run_started(s, r1)
+        assert s.get_one(Job, job_id).status == "running"
+        store_run_result(
+            s,
+            r1,
+            summary=_summary(),
+            t=t,
+            pose_gt=gt,
+            pose_est=est,
+            map_ros=grid,
+            map_resolution=0.05,
+            map_origin=(0, 0),
+            report_dir=None,
+        )
+        assert s.get_one(Job, job_id).status == "running"  # r2 still queued
+        mark_run_started(s, r2)
+        mark_run_failed(s, r2, "worker crashed")
+        assert s.get_one(Job, job_id).status == "failed"
+
+
+def test_a_failed_transaction_leaves_earlier_data_intact(db_url):
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        run_id = create_job(s, world_id=world.id, slam="rbpf", params={}, seeds=[1]).runs[0].id
+    t, gt, est, grid = _result_arrays(n=10)
+    with pytest.raises(RuntimeError), session_scope(db_url) as s:
+        mark_run_started(s, run_id)
+        store_run_result(
+            s,
+            run_id,
+            summary=_summary(),
+            t=t,
+            pose_gt=gt,
+            pose_est=est,
+            map_ros=grid,
+            map_resolution=0.05,
+            map_origin=(0, 0),
+            report_dir=None,
+        )
+        raise RuntimeError("crash before commit")
+    with session_scope(db_url) as s:
+        run = s.get_one(Run, run_id)
+        assert run.status == "queued" and run.outcome is None
+        assert s.scalar(select(func.count()).select_from(RunTrajectory)) == 0
+
+
+def test_unknown_trajectory_kind_is_rejected(db_url):
+    with session_scope(db_url) as s, pytest.raises(ValueError, match="gt"):
+        load_trajectory(s, 1, "truth")

@@ -1,0 +1,70 @@
+"""Real servers for integration tests: use the machine's, or start our own where none runs."""
+
+from __future__ import annotations
+
+import glob
+import shutil
+import socket
+import subprocess
+import time
+
+PG_HOST, PG_PORT = "127.0.0.1", 5432
+REDIS_HOST, REDIS_PORT = "127.0.0.1", 6379
+
+
+def _port_open(host: str, port: int) -> bool:
+    try:
+        with socket.create_connection((host, port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+def _wait_port(host: str, port: int, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if _port_open(host, port):
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def ensure_postgres() -> str:
+    """The admin URL of a running PostgreSQL on 127.0.0.1:5432, starting the cluster if needed."""
+    if not _port_open(PG_HOST, PG_PORT):
+        versions = sorted(glob.glob("/etc/postgresql/*"))
+        if not versions or shutil.which("pg_ctlcluster") is None:
+            raise RuntimeError("PostgreSQL is not running on 127.0.0.1:5432 and cannot be started")
+        version = versions[-1].rsplit("/", 1)[-1]
+        subprocess.run(
+            ["pg_ctlcluster", "--skip-systemctl-redirect", version, "main", "start"], check=False
+        )
+        if not _wait_port(PG_HOST, PG_PORT, 30):
+            raise RuntimeError("PostgreSQL did not come up on 127.0.0.1:5432")
+    return f"postgresql+psycopg://postgres@{PG_HOST}:{PG_PORT}/test"
+
+
+def ensure_redis() -> str:
+    """The URL of a running Redis on 127.0.0.1:6379, starting one if needed."""
+    if not _port_open(REDIS_HOST, REDIS_PORT):
+        if shutil.which("redis-server") is None:
+            raise RuntimeError("Redis is not running on 127.0.0.1:6379 and cannot be started")
+        subprocess.run(
+            [
+                "redis-server",
+                "--daemonize",
+                "yes",
+                "--bind",
+                "127.0.0.1",
+                "--port",
+                str(REDIS_PORT),
+                "--save",
+                "",
+                "--appendonly",
+                "no",
+            ],
+            check=False,
+        )
+        if not _wait_port(REDIS_HOST, REDIS_PORT, 15):
+            raise RuntimeError("Redis did not come up on 127.0.0.1:6379")
+    return f"redis://{REDIS_HOST}:{REDIS_PORT}/0"
