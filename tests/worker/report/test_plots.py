@@ -1,0 +1,55 @@
+"""Report images put map cells where map_server would and draw both paths in their colours."""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image
+
+from worker.report.plots import errors_png, map_png, ros_grid_to_grey, trajectories_png
+
+
+def test_grey_levels_and_orientation_follow_map_saver():
+    grid = np.full((4, 3), -1, dtype=np.int8)  # [iy, ix], iy = 0 is the bottom row
+    grid[0, 0] = 0  # bottom-left free
+    grid[3, 2] = 100  # top-right occupied
+    grid[1, 1] = 50  # in between: unknown for map_saver
+    grey = ros_grid_to_grey(grid)  # image rows: top first
+    assert grey[3, 0] == 254
+    assert grey[0, 2] == 0
+    assert grey[2, 1] == 205
+    assert grey[0, 0] == 205
+
+
+def test_map_png_is_scaled_by_whole_cells_and_keeps_the_grid(tmp_path):
+    grid = np.zeros((100, 160), dtype=np.int8)
+    grid[:, 150:] = 100  # a wall band on the right
+    path = tmp_path / "map.png"
+    map_png(path, grid, ["T mean 0.123 m"], min_width=640)
+    img = np.asarray(Image.open(path).convert("L"))
+    assert img.shape == (400, 640)  # scale 4
+    assert img[-1, -1] == 0 and img[-1, 0] == 254  # bottom row: wall right, free left
+
+
+def test_trajectories_png_draws_green_ground_truth_and_red_estimate(tmp_path):
+    occ = np.zeros((200, 300), dtype=bool)
+    occ[[0, -1], :] = True
+    occ[:, [0, -1]] = True
+    s = np.linspace(1, 14, 300)
+    gt = np.column_stack([s, np.full_like(s, 5.0), np.zeros_like(s)])
+    est = np.column_stack([s, np.full_like(s, 6.0), np.zeros_like(s)])
+    path = tmp_path / "traj.png"
+    trajectories_png(path, occ, 0.05, (0.0, 0.0), gt, est)
+    rgb = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    green = (rgb[..., 1] > 120) & (rgb[..., 0] < 80) & (rgb[..., 2] < 80)
+    red = (rgb[..., 0] > 150) & (rgb[..., 1] < 110) & (rgb[..., 2] < 110)
+    assert green.sum() > 200 and red.sum() > 200
+    # the estimate lies above the ground truth (y = 6 vs 5): red rows are higher in the image
+    assert np.median(np.nonzero(red)[0]) < np.median(np.nonzero(green)[0])
+
+
+def test_errors_png_writes_an_image(tmp_path):
+    rng = np.random.default_rng(0)
+    t2 = rng.uniform(0, 600, 500)
+    path = tmp_path / "errors.png"
+    errors_png(path, t2, t2 / 600 * rng.uniform(0, 1, 500), rng.uniform(0, 0.02, 500))
+    assert Image.open(path).size[0] > 500

@@ -1,0 +1,137 @@
+"""Report images: the map with its errors written on it (thesis Fig. 5.3), trajectories, errors."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+# map_server's trinary colours (map_saver): free 254, occupied 0, unknown 205.
+FREE_GREY, OCC_GREY, UNKNOWN_GREY = 254, 0, 205
+
+
+def ros_grid_to_grey(grid_ros: np.ndarray) -> np.ndarray:
+    """`(H, W) int8` (-1 unknown, 0..100) to a top-row-first uint8 image as map_saver writes it.
+
+    map_saver's thresholds: occupied when p >= 65, free when p <= 19.6 (0.196), else unknown.
+    """
+    grey = np.full(grid_ros.shape, UNKNOWN_GREY, dtype=np.uint8)
+    known = grid_ros >= 0
+    grey[known & (grid_ros <= 19)] = FREE_GREY
+    grey[known & (grid_ros >= 65)] = OCC_GREY
+    return np.flipud(grey)
+
+
+def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
+    return ImageFont.load_default(size=size)
+
+
+def map_png(path: str | Path, grid_ros: np.ndarray, lines: Sequence[str], min_width: int = 640):
+    """Write the map with `lines` of text on it in a box at the top left.
+
+    Small maps are scaled up by an integer factor (nearest neighbour) so that the text stays
+    readable and every map cell remains a crisp square of pixels.
+    """
+    grey = ros_grid_to_grey(grid_ros)
+    scale = max(1, int(np.ceil(min_width / max(grey.shape[1], 1))))
+    img = Image.fromarray(grey, mode="L").convert("RGB")
+    if scale > 1:
+        img = img.resize((img.width * scale, img.height * scale), Image.Resampling.NEAREST)
+    draw = ImageDraw.Draw(img, "RGBA")
+    font = _font(max(12, img.width // 45))
+    pad = 6
+    boxes = [draw.textbbox((0, 0), s, font=font) for s in lines]
+    line_h = max((b[3] - b[1] for b in boxes), default=0) + 4
+    box_w = max((b[2] - b[0] for b in boxes), default=0) + 2 * pad
+    if lines:
+        draw.rectangle((0, 0, box_w, line_h * len(lines) + 2 * pad), fill=(255, 255, 255, 215))
+        for i, s in enumerate(lines):
+            draw.text((pad, pad + i * line_h), s, fill=(160, 0, 0), font=font)
+    img.save(path)
+
+
+def _floorplan_axes(ax, occ: np.ndarray, resolution: float, origin: Sequence[float]) -> None:
+    """Draw the floorplan (walls dark) in world coordinates; `occ` is `[iy, ix]`, bottom first."""
+    h, w = occ.shape
+    extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
+    ax.imshow(
+        np.where(occ, 0.25, 1.0),
+        cmap="gray",
+        vmin=0,
+        vmax=1,
+        origin="lower",
+        extent=extent,
+        interpolation="nearest",
+    )
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal")
+
+
+def trajectories_png(
+    path: str | Path,
+    occ: np.ndarray,
+    resolution: float,
+    origin: Sequence[float],
+    pose_gt: np.ndarray,
+    pose_est: np.ndarray,
+    title: str = "",
+) -> None:
+    """Ground truth (green) and estimate (red) over the floorplan; `(N, 3)` poses in metres."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h, w = occ.shape
+    fig_w = 9.0
+    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, fig_w * h / max(w, 1))), dpi=110)
+    _floorplan_axes(ax, occ, resolution, origin)
+    ax.plot(pose_gt[:, 0], pose_gt[:, 1], color="#1a9e1a", lw=1.4, label="ground truth")
+    ax.plot(pose_est[:, 0], pose_est[:, 1], color="#d62020", lw=1.3, label="estimate")
+    if len(pose_gt):
+        ax.plot(*pose_gt[0, :2], "o", color="black", ms=5, label="start")
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def errors_png(
+    path: str | Path,
+    t2: np.ndarray,
+    err_trans: np.ndarray,
+    err_rot: np.ndarray,
+    title: str = "B-relation errors along the run",
+) -> None:
+    """Each relation's translational and rotational error at the later of its two times."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_t, ax_r) = plt.subplots(2, 1, figsize=(9, 5.5), dpi=110, sharex=True)
+    order = np.argsort(t2)
+    for ax, err, unit, colour in (
+        (ax_t, err_trans, "m", "#1f5fbf"),
+        (ax_r, err_rot, "rad", "#bf5f1f"),
+    ):
+        ax.scatter(t2, err, s=3, alpha=0.35, color=colour, linewidths=0)
+        if len(err) >= 20:
+            # running median over ~2 % of the relations shows the trend under the scatter
+            k = max(5, len(err) // 50)
+            e = err[order]
+            med = np.array([np.median(e[max(0, i - k) : i + k + 1]) for i in range(0, len(e), k)])
+            ax.plot(t2[order][::k], med, color="black", lw=1.2, label="running median")
+            ax.legend(loc="upper left", fontsize=8)
+        ax.set_ylabel(f"error [{unit}]")
+        ax.grid(alpha=0.3)
+    ax_r.set_xlabel("time of the relation's later pose [s]")
+    ax_t.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
