@@ -1,0 +1,150 @@
+"""`mapqual runs list|show` and `mapqual db upgrade`: read back and maintain the database."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+
+from mapqual.cli import app
+from worker.errors import InputError
+
+runs_app = typer.Typer(help="Stored runs.", no_args_is_help=True)
+db_app = typer.Typer(help="The database.", no_args_is_help=True)
+app.add_typer(runs_app, name="runs")
+app.add_typer(db_app, name="db")
+
+
+def _database_url() -> str:
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+
+    url = get_settings().database_url
+    upgrade(url)  # the embedded database is created and kept current on first use
+    return url
+
+
+def _fmt(v: float | None, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+@runs_app.command("list")
+def runs_list(
+    limit: Annotated[int, typer.Option(min=1, help="How many runs, newest first.")] = 50,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON array on stdout.")] = False,
+) -> None:
+    """The most recent runs with their outcome, coverage and B errors."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from backend.db.models import World
+    from backend.db.session import session_scope
+    from backend.store import list_runs
+
+    with session_scope(_database_url()) as s:
+        rows = []
+        for r in list_runs(s, limit=limit):
+            world = s.get(World, r.world_id)
+            rows.append(
+                {
+                    "id": r.id,
+                    "job_id": r.job_id,
+                    "world": world.name if world else None,
+                    "seed": r.seed,
+                    "slam": r.slam,
+                    "status": r.status,
+                    "outcome": r.outcome,
+                    "reason": r.reason,
+                    "coverage": r.coverage,
+                    "b_mean_t": r.b_mean_t,
+                    "b_mean_r": r.b_mean_r,
+                    "sim_time": r.sim_time,
+                    "wall_time": r.wall_time,
+                    "created_at": r.created_at.isoformat() if r.created_at else None,
+                }
+            )
+    if as_json:
+        print(json.dumps(rows))
+        return
+    table = Table(title="runs (newest first)")
+    for col in (
+        "id",
+        "world",
+        "seed",
+        "slam",
+        "status",
+        "outcome",
+        "coverage",
+        "B trans [m]",
+        "B rot [rad]",
+        "sim time [s]",
+    ):
+        table.add_column(col, justify="right" if col not in ("world", "slam") else "left")
+    for r in rows:
+        outcome = r["outcome"] or "-"
+        if r["reason"]:
+            outcome = f"{outcome} ({r['reason']})"
+        table.add_row(
+            str(r["id"]),
+            r["world"] or "-",
+            str(r["seed"]),
+            r["slam"],
+            r["status"],
+            outcome,
+            _fmt(r["coverage"], ".1%"),
+            _fmt(r["b_mean_t"], ".3f"),
+            _fmt(r["b_mean_r"], ".4f"),
+            _fmt(r["sim_time"], ".0f"),
+        )
+    Console().print(table)
+
+
+@runs_app.command("show")
+def runs_show(
+    run_id: Annotated[int, typer.Argument(help="The run's id.")],
+    as_json: Annotated[bool, typer.Option("--json", help="The run's summary as JSON.")] = False,
+) -> None:
+    """One run: its summary (the report's summary.json) and where its report folder is."""
+    from backend.db.models import Run
+    from backend.db.session import session_scope
+
+    with session_scope(_database_url()) as s:
+        run = s.get(Run, run_id)
+        if run is None:
+            raise InputError(f"no run with id {run_id}")
+        doc = {
+            "id": run.id,
+            "job_id": run.job_id,
+            "world_id": run.world_id,
+            "seed": run.seed,
+            "slam": run.slam,
+            "status": run.status,
+            "error": run.error,
+            "report_dir": run.report_dir,
+            "summary": run.summary,
+        }
+    if as_json:
+        print(json.dumps(doc))
+        return
+    from rich.console import Console
+    from rich.pretty import Pretty
+
+    Console().print(Pretty(doc))
+
+
+@db_app.command("upgrade")
+def db_upgrade() -> None:
+    """Apply the Alembic migrations to DATABASE_URL (creates the SQLite file if needed)."""
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+
+    url = get_settings().database_url
+    upgrade(url)
+    print(f"database at head: {_redact(url)}")
+
+
+def _redact(url: str) -> str:
+    from sqlalchemy.engine import make_url
+
+    return make_url(url).render_as_string(hide_password=True)
