@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import secrets
 from collections.abc import Sequence
 from typing import Any
 
@@ -10,14 +12,50 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
-from backend.db.models import Job, Run, RunMap, RunTrajectory, World, utcnow
+from backend.db.models import Job, Run, RunMap, RunTrajectory, User, World, utcnow
 
 TRAJECTORY_KINDS = ("gt", "est")
+LOCAL_USER = "local"
+
+
+def hash_key(key: str) -> str:
+    """The stored form of an API key (keys are 256-bit random tokens: SHA-256 suffices)."""
+    return hashlib.sha256(key.encode("utf-8")).hexdigest()
+
+
+def add_user(session: Session, name: str, is_admin: bool = False) -> tuple[User, str]:
+    """A new user and their API key; the key itself is shown once and never stored."""
+    if not name or len(name) > 100:
+        raise ValueError("a user name is 1 to 100 characters")
+    if session.scalars(select(User).where(User.name == name)).first() is not None:
+        raise ValueError(f"a user named {name!r} exists already")
+    key = "mq_" + secrets.token_urlsafe(32)
+    user = User(name=name, is_admin=is_admin, key_hash=hash_key(key))
+    session.add(user)
+    session.flush()
+    return user, key
+
+
+def user_for_key(session: Session, key: str) -> User | None:
+    """The user holding `key`, or None."""
+    return session.scalars(select(User).where(User.key_hash == hash_key(key))).first()
+
+
+def local_user(session: Session) -> User:
+    """The owner of everything made with authentication switched off (embedded use).
+
+    Its key is random and discarded, so nobody can sign in as it over the API.
+    """
+    user = session.scalars(select(User).where(User.name == LOCAL_USER)).first()
+    if user is None:
+        user, _ = add_user(session, LOCAL_USER, is_admin=True)
+    return user
 
 
 def get_or_create_world(
     session: Session,
     *,
+    owner_id: int,
     name: str,
     sha256: str,
     source_format: str,
@@ -28,11 +66,14 @@ def get_or_create_world(
     start_pose: Sequence[float],
     facts: dict[str, Any],
 ) -> World:
-    """The stored world with this content hash, or a new one: uploading twice is harmless."""
-    existing = session.scalars(select(World).where(World.sha256 == sha256)).first()
+    """The owner's world with this content hash, or a new one: uploading twice is harmless."""
+    existing = session.scalars(
+        select(World).where(World.owner_id == owner_id, World.sha256 == sha256)
+    ).first()
     if existing is not None:
         return existing
     world = World(
+        owner_id=owner_id,
         name=name,
         sha256=sha256,
         source_format=source_format,
@@ -57,16 +98,46 @@ def world_occupancy(world: World) -> np.ndarray:
 
 
 def create_job(
-    session: Session, *, world_id: int, slam: str, params: dict[str, Any], seeds: Sequence[int]
+    session: Session,
+    *,
+    owner_id: int,
+    world_id: int,
+    slam: str,
+    params: dict[str, Any],
+    seeds: Sequence[int],
+    idempotency_key: str | None = None,
 ) -> Job:
-    """A queued job with one queued run per seed; every call makes new runs, never reuses old."""
+    """A queued job with one queued run per seed; every call makes new runs, never reuses old
+    (except a repeated `idempotency_key` of the same owner, which returns the first job)."""
     if not seeds:
         raise ValueError("a job needs at least one seed")
-    job = Job(world_id=world_id, slam=slam, params=params, status="queued")
+    if idempotency_key is not None:
+        found = session.scalars(
+            select(Job).where(Job.owner_id == owner_id, Job.idempotency_key == idempotency_key)
+        ).first()
+        if found is not None:
+            return found
+    job = Job(
+        owner_id=owner_id,
+        world_id=world_id,
+        slam=slam,
+        params=params,
+        status="queued",
+        idempotency_key=idempotency_key,
+    )
     session.add(job)
     session.flush()
     for seed in seeds:
-        session.add(Run(job_id=job.id, world_id=world_id, seed=int(seed), slam=slam, params=params))
+        session.add(
+            Run(
+                owner_id=owner_id,
+                job_id=job.id,
+                world_id=world_id,
+                seed=int(seed),
+                slam=slam,
+                params=params,
+            )
+        )
     session.flush()
     return job
 

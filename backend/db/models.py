@@ -11,13 +11,16 @@ from typing import Any
 
 from sqlalchemy import (
     JSON,
+    Boolean,
     DateTime,
     Float,
     ForeignKey,
     Integer,
     LargeBinary,
+    MetaData,
     String,
     Text,
+    UniqueConstraint,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
@@ -30,17 +33,43 @@ def utcnow() -> datetime:
 class Base(DeclarativeBase):
     """Declarative base of every mapqual table."""
 
+    # Named constraints, so that later migrations (SQLite batch mode included) can address them.
+    metadata = MetaData(
+        naming_convention={
+            "ix": "ix_%(column_0_label)s",
+            "uq": "uq_%(table_name)s_%(column_0_name)s",
+            "ck": "ck_%(table_name)s_%(constraint_name)s",
+            "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+            "pk": "pk_%(table_name)s",
+        }
+    )
     type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class User(Base):
+    """Someone who holds an API key; every world, job and run has an owner."""
+
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    is_admin: Mapped[bool] = mapped_column(Boolean, default=False)
+    # SHA-256 of the key: keys are 256-bit random tokens, so a fast hash is enough and a
+    # stolen database reveals no usable key.
+    key_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
 class World(Base):
     """A floorplan: its normalised occupancy image, resolution, origin and facts."""
 
     __tablename__ = "worlds"
+    __table_args__ = (UniqueConstraint("owner_id", "sha256"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
     name: Mapped[str] = mapped_column(String(200))
-    # Content hash of the source files: the same upload twice is the same world.
+    # Content hash of the source files: the same upload twice (per owner) is the same world.
     sha256: Mapped[str] = mapped_column(String(64), index=True)
     source_format: Mapped[str] = mapped_column(String(20))  # image | yaml | stage
     source_path: Mapped[str | None] = mapped_column(Text)
@@ -62,8 +91,12 @@ class Job(Base):
     """A request for one or more runs of one world (a batch is a job too)."""
 
     __tablename__ = "jobs"
+    __table_args__ = (UniqueConstraint("owner_id", "idempotency_key"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    # The client's Idempotency-Key: the same key again returns this job instead of a new one.
+    idempotency_key: Mapped[str | None] = mapped_column(String(200))
     world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
     # queued | running | done | failed | cancelled; follows its runs.
     status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
@@ -84,6 +117,7 @@ class Run(Base):
     __tablename__ = "runs"
 
     id: Mapped[int] = mapped_column(primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
     job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
     world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
     seed: Mapped[int] = mapped_column(Integer)

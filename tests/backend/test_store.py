@@ -9,14 +9,17 @@ from sqlalchemy import func, select
 from backend.db.models import Job, Run, RunTrajectory
 from backend.db.session import session_scope
 from backend.store import (
+    add_user,
     create_job,
     get_or_create_world,
     list_runs,
     load_map,
     load_trajectory,
+    local_user,
     mark_run_failed,
     mark_run_started,
     store_run_result,
+    user_for_key,
     world_occupancy,
 )
 
@@ -27,6 +30,7 @@ def _world(session, sha="a" * 64):
     occ[10, 5] = True  # asymmetric, so a flipped or transposed grid would not compare equal
     return get_or_create_world(
         session,
+        owner_id=local_user(session).id,
         name="box",
         sha256=sha,
         source_format="image",
@@ -71,7 +75,14 @@ def test_result_round_trips_bit_for_bit_and_fills_headline_columns(db_url):
     t, gt, est, grid = _result_arrays()
     with session_scope(db_url) as s:
         world, _ = _world(s)
-        job = create_job(s, world_id=world.id, slam="rbpf", params={"seed": 1}, seeds=[1])
+        job = create_job(
+            s,
+            owner_id=world.owner_id,
+            world_id=world.id,
+            slam="rbpf",
+            params={"seed": 1},
+            seeds=[1],
+        )
         run_id = job.runs[0].id
         mark_run_started(s, run_id)
         store_run_result(
@@ -105,7 +116,13 @@ def test_storing_a_run_again_replaces_its_result_instead_of_adding_one(db_url):
     t, gt, est, grid = _result_arrays()
     with session_scope(db_url) as s:
         world, _ = _world(s)
-        run_id = create_job(s, world_id=world.id, slam="rbpf", params={}, seeds=[3]).runs[0].id
+        run_id = (
+            create_job(
+                s, owner_id=world.owner_id, world_id=world.id, slam="rbpf", params={}, seeds=[3]
+            )
+            .runs[0]
+            .id
+        )
     for attempt, b_t in enumerate((0.5, 0.25)):
         with session_scope(db_url) as s:
             mark_run_started(s, run_id)
@@ -130,8 +147,30 @@ def test_storing_a_run_again_replaces_its_result_instead_of_adding_one(db_url):
 def test_same_world_params_and_seed_again_make_a_new_run(db_url):
     with session_scope(db_url) as s:
         world, _ = _world(s)
-        a = create_job(s, world_id=world.id, slam="rbpf", params={"x": 1}, seeds=[7]).runs[0].id
-        b = create_job(s, world_id=world.id, slam="rbpf", params={"x": 1}, seeds=[7]).runs[0].id
+        a = (
+            create_job(
+                s,
+                owner_id=world.owner_id,
+                world_id=world.id,
+                slam="rbpf",
+                params={"x": 1},
+                seeds=[7],
+            )
+            .runs[0]
+            .id
+        )
+        b = (
+            create_job(
+                s,
+                owner_id=world.owner_id,
+                world_id=world.id,
+                slam="rbpf",
+                params={"x": 1},
+                seeds=[7],
+            )
+            .runs[0]
+            .id
+        )
         assert a != b
         assert [r.id for r in list_runs(s)] == [b, a]
 
@@ -140,7 +179,9 @@ def test_job_status_follows_its_runs(db_url):
     t, gt, est, grid = _result_arrays(n=20)
     with session_scope(db_url) as s:
         world, _ = _world(s)
-        job = create_job(s, world_id=world.id, slam="odometry", params={}, seeds=[1, 2])
+        job = create_job(
+            s, owner_id=world.owner_id, world_id=world.id, slam="odometry", params={}, seeds=[1, 2]
+        )
         job_id, (r1, r2) = job.id, [r.id for r in job.runs]
         assert job.status == "queued"
         mark_run_started(s, r1)
@@ -166,7 +207,13 @@ def test_job_status_follows_its_runs(db_url):
 def test_a_failed_transaction_leaves_earlier_data_intact(db_url):
     with session_scope(db_url) as s:
         world, _ = _world(s)
-        run_id = create_job(s, world_id=world.id, slam="rbpf", params={}, seeds=[1]).runs[0].id
+        run_id = (
+            create_job(
+                s, owner_id=world.owner_id, world_id=world.id, slam="rbpf", params={}, seeds=[1]
+            )
+            .runs[0]
+            .id
+        )
     t, gt, est, grid = _result_arrays(n=10)
     with pytest.raises(RuntimeError), session_scope(db_url) as s:
         mark_run_started(s, run_id)
@@ -192,3 +239,39 @@ def test_a_failed_transaction_leaves_earlier_data_intact(db_url):
 def test_unknown_trajectory_kind_is_rejected(db_url):
     with session_scope(db_url) as s, pytest.raises(ValueError, match="gt"):
         load_trajectory(s, 1, "truth")
+
+
+def test_worlds_are_per_owner_and_keys_are_stored_hashed(db_url):
+    with session_scope(db_url) as s:
+        alice, key = add_user(s, "alice")
+        assert key not in alice.key_hash and user_for_key(s, key).id == alice.id
+        assert user_for_key(s, key + "x") is None
+        mine, _ = _world(s)
+        occ = np.zeros((5, 5), bool)
+        hers = get_or_create_world(
+            s,
+            owner_id=alice.id,
+            name="box",
+            sha256="a" * 64,
+            source_format="image",
+            source_path=None,
+            resolution=0.05,
+            origin=(0, 0),
+            occ=occ,
+            start_pose=(0, 0, 0),
+            facts={},
+        )
+        assert hers.id != mine.id  # same content, other owner: a world of her own
+        with pytest.raises(ValueError, match="exists already"):
+            add_user(s, "alice")
+
+
+def test_idempotency_key_returns_the_first_job(db_url):
+    with session_scope(db_url) as s:
+        world, _ = _world(s)
+        kw = dict(owner_id=world.owner_id, world_id=world.id, slam="rbpf", params={}, seeds=[1])
+        a = create_job(s, **kw, idempotency_key="k1")
+        b = create_job(s, **kw, idempotency_key="k1")
+        c = create_job(s, **kw, idempotency_key="k2")
+        assert a.id == b.id != c.id
+        assert len(a.runs) == 1

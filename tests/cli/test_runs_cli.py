@@ -10,7 +10,13 @@ import sys
 import numpy as np
 
 from backend.db.session import session_scope
-from backend.store import create_job, get_or_create_world, mark_run_started, store_run_result
+from backend.store import (
+    create_job,
+    get_or_create_world,
+    local_user,
+    mark_run_started,
+    store_run_result,
+)
 
 
 def _mapqual(tmp_path, *args):
@@ -39,6 +45,7 @@ def test_runs_show_reads_back_a_stored_run(tmp_path):
     with session_scope(url) as s:
         w = get_or_create_world(
             s,
+            owner_id=local_user(s).id,
             name="box",
             sha256="f" * 64,
             source_format="image",
@@ -49,7 +56,11 @@ def test_runs_show_reads_back_a_stored_run(tmp_path):
             start_pose=(0, 0, 0),
             facts={},
         )
-        run_id = create_job(s, world_id=w.id, slam="rbpf", params={}, seeds=[4]).runs[0].id
+        run_id = (
+            create_job(s, owner_id=w.owner_id, world_id=w.id, slam="rbpf", params={}, seeds=[4])
+            .runs[0]
+            .id
+        )
         mark_run_started(s, run_id)
         z = np.zeros((3, 3))
         store_run_result(
