@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -19,6 +20,13 @@ class Settings(BaseSettings):
     database_url: str = Field(default="sqlite:///mapqual.db", alias="DATABASE_URL")
     # Report folders of runs (`runs/<id>/`).
     runs_dir: Path = Field(default=Path("runs"), alias="MAPQUAL_RUNS_DIR")
+    # The Celery broker and the live-view pub/sub.
+    redis_url: str = Field(default="redis://127.0.0.1:6379/0", alias="REDIS_URL")
+    # API keys are required unless this is set to "off" explicitly (embedded, single-user use);
+    # the server then logs a warning at start and every request acts as the local user.
+    auth: Literal["on", "off"] = Field(default="on", alias="MAPQUAL_AUTH")
+    # Largest accepted upload [bytes].
+    max_upload_bytes: int = Field(default=20 * 1024 * 1024, alias="MAPQUAL_MAX_UPLOAD_BYTES")
 
 
 @lru_cache(maxsize=1)

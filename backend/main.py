@@ -1,0 +1,42 @@
+"""The FastAPI application: `uvicorn backend.main:app` (or `mapqual serve`)."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+
+from backend.api.routes import health, stats
+from backend.core.config import Settings, get_settings
+from worker.errors import InputError
+
+API_PREFIX = "/api/v1"
+log = logging.getLogger("mapqual.api")
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """A configured app; tests pass their own settings (database, broker, auth)."""
+    settings = settings or get_settings()
+    app = FastAPI(
+        title="mapqual",
+        version="0.1.0",
+        description="Automatic map-quality evaluation of SLAM algorithms: upload a floorplan, "
+        "submit runs, fetch metrics, trajectories and maps.",
+        openapi_url=f"{API_PREFIX}/openapi.json",
+        docs_url=f"{API_PREFIX}/docs",
+    )
+    app.state.settings = settings
+    if settings.auth == "off":
+        log.warning("authentication is OFF (MAPQUAL_AUTH=off): every request acts as 'local'")
+
+    @app.exception_handler(InputError)
+    async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=400)
+
+    app.include_router(health.router)
+    app.include_router(stats.router, prefix=API_PREFIX)
+    return app
+
+
+app = create_app()

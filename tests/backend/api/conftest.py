@@ -1,0 +1,44 @@
+"""API clients on a real, migrated database, with two users and an admin."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.core.config import Settings
+from backend.db.session import session_scope
+from backend.main import create_app
+from backend.store import add_user
+from tests.services import ensure_redis
+
+
+@dataclass
+class Api:
+    client: TestClient
+    url: str
+    keys: dict[str, str]
+
+    def get(self, path, user="alice", **kw):
+        return self.client.get(path, headers=self._auth(user), **kw)
+
+    def post(self, path, user="alice", **kw):
+        headers = {**self._auth(user), **kw.pop("headers", {})}
+        return self.client.post(path, headers=headers, **kw)
+
+    def _auth(self, user):
+        return {} if user is None else {"Authorization": f"Bearer {self.keys[user]}"}
+
+
+@pytest.fixture
+def api(db_url):
+    redis_url = ensure_redis()
+    with session_scope(db_url) as s:
+        keys = {
+            name: add_user(s, name, is_admin=(name == "admin"))[1]
+            for name in ("alice", "bob", "admin")
+        }
+    settings = Settings(DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on")
+    with TestClient(create_app(settings)) as client:
+        yield Api(client, db_url, keys)

@@ -1,0 +1,41 @@
+"""The one Celery app and all of its configuration (tasks in `worker.tasks`)."""
+
+from __future__ import annotations
+
+import os
+
+from celery import Celery
+
+REDIS_URL = os.environ.get("REDIS_URL", "redis://127.0.0.1:6379/0")
+# A run is minutes of CPU: the hard limit kills a runaway task, the soft one lets it store why.
+SOFT_TIME_LIMIT_S = int(os.environ.get("MAPQUAL_TASK_SOFT_TIME_LIMIT", "7200"))
+HARD_TIME_LIMIT_S = int(os.environ.get("MAPQUAL_TASK_TIME_LIMIT", "7500"))
+# Redis redelivers a message that no worker acknowledged after this long (a worker died
+# mid-run, since tasks are acknowledged late). It must exceed the longest run, or a slow run
+# is started twice; runs are idempotent (keyed by run id), so that only costs time.
+VISIBILITY_TIMEOUT_S = int(
+    os.environ.get("MAPQUAL_VISIBILITY_TIMEOUT", str(HARD_TIME_LIMIT_S + 300))
+)
+
+app = Celery("mapqual", broker=REDIS_URL, include=["worker.tasks"])
+app.conf.update(
+    task_serializer="json",
+    accept_content=["json"],
+    result_serializer="json",
+    # Results live in the database, keyed by run id; Celery keeps none.
+    task_ignore_result=True,
+    result_backend=None,
+    # One run at a time per worker process: a run is long, prefetching would starve others.
+    worker_prefetch_multiplier=1,
+    # Acknowledge after the run, and requeue when the worker process dies: at-least-once
+    # delivery, which the idempotent run task turns into exactly one stored result.
+    task_acks_late=True,
+    task_reject_on_worker_lost=True,
+    task_soft_time_limit=SOFT_TIME_LIMIT_S,
+    task_time_limit=HARD_TIME_LIMIT_S,
+    broker_transport_options={"visibility_timeout": VISIBILITY_TIMEOUT_S},
+    broker_connection_retry_on_startup=True,
+    worker_send_task_events=False,
+    task_default_queue="mapqual",
+    timezone="UTC",
+)
