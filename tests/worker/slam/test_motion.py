@@ -1,0 +1,42 @@
+"""SE(2) helpers and GMapping's motion model sampling."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.slam.motion import compose, draw_from_motion, inverse, relative, wrap_angle
+
+
+def test_compose_inverse_by_hand():
+    a = np.array([1.0, 2.0, math.pi / 2])
+    b = np.array([1.0, 0.0, math.pi / 2])
+    # one metre ahead of a robot facing +y is (1, 3); heading pi wraps to -pi
+    assert np.allclose(compose(a, b), [1.0, 3.0, -math.pi])
+    assert np.allclose(compose(a, inverse(a)), 0.0)
+    assert np.allclose(relative(a, compose(a, b)), b)
+    assert wrap_angle(math.pi) == -math.pi
+
+
+def test_noise_free_motion_is_exact(rng):
+    poses = np.array([[0.0, 0.0, 0.0], [5.0, -1.0, math.pi / 2]])
+    old = np.array([1.0, 1.0, 0.0])
+    new = np.array([2.0, 1.0, 0.3])  # 1 m forward then turn 0.3 rad
+    out = draw_from_motion(poses, new, old, 0, 0, 0, 0, rng)
+    assert np.allclose(out[0], [1.0, 0.0, 0.3])
+    assert np.allclose(out[1], [5.0, 0.0, math.pi / 2 + 0.3])
+
+
+def test_motion_noise_follows_gmapping_formula(rng):
+    # a pure 1 m forward step: std x = srr * 1, y = 0.3 srr * 1, theta = srt * 1
+    poses = np.zeros((20000, 3))
+    out = draw_from_motion(poses, np.array([1.0, 0, 0]), np.zeros(3), 0.1, 0.2, 0.1, 0.2, rng)
+    assert abs(out[:, 0].mean() - 1.0) < 0.01
+    # y and theta noise compose: small angles, so y ~ noise_y (+ 1 m * sin(noise_theta) / 1)
+    assert abs(out[:, 2].std() - 0.2) < 0.01
+    assert abs(out[:, 0].std() - 0.1) < 0.01
+    # a pure rotation of 0.5 rad: theta std = stt * 0.5, x and y std = str * 0.5
+    out = draw_from_motion(poses, np.array([0, 0, 0.5]), np.zeros(3), 0.1, 0.2, 0.1, 0.2, rng)
+    assert abs(out[:, 2].std() - 0.1) < 0.005
+    assert abs(out[:, 0].std() - 0.05) < 0.003 and abs(out[:, 1].std() - 0.05) < 0.003

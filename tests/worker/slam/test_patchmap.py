@@ -1,0 +1,90 @@
+"""Patch maps: GMapping's scan registration on cells, growth, copy-on-write sharing."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worker.slam.patchmap import PATCH, PatchMaps
+
+
+def _beam(maps, pose, r, usable=30.0, max_range=29.99):
+    ranges = np.array([r])
+    maps.register(np.atleast_2d(pose), ranges, np.ones(1), np.zeros(1), usable, max_range)
+
+
+def test_single_beam_free_cells_and_hit():
+    maps = PatchMaps(1, 0.1, 2.0, 0.25)
+    # from the centre of cell (0, 0) along +x, 1.03 m: end point x = 1.08 in cell 10
+    _beam(maps, [0.05, 0.05, 0.0], 1.03)
+    g = maps.occupancy(0)
+    assert g.shape == (1, 11)
+    assert np.allclose(g.origin, [0.0, 0.0])
+    assert np.all(g.prob[0, :10] == 0.0) and g.prob[0, 10] == 1.0
+    # the hit's mean position (GMapping's cell.mean()) is kept relative to the cell
+    e = maps.tables[0, -maps.tpy0, -maps.tpx0]
+    cell = maps.pool[e, 0, 10]
+    assert cell[0] == 1 and cell[1] == 1
+    assert abs(cell[2] - 0.08) < 1e-6 and abs(cell[3] - 0.05) < 1e-6
+
+
+def test_usable_range_cuts_beam_without_hit_and_max_range_ignores():
+    maps = PatchMaps(1, 0.1, 2.0, 0.25)
+    _beam(maps, [0.05, 0.05, 0.0], 5.0, usable=1.0)
+    g = maps.occupancy(0)
+    # cut at 1.0 m: end point x = 1.05 in cell 10, which is not marked (no hit, not free)
+    assert g.shape == (1, 10) and np.all(g.prob == 0.0)
+    maps2 = PatchMaps(1, 0.1, 2.0, 0.25)
+    _beam(maps2, [0.05, 0.05, 0.0], 30.0)  # a no-return reading past maxRange
+    assert maps2.occupancy(0).known.sum() == 0
+
+
+def test_hits_over_visits():
+    maps = PatchMaps(1, 0.1, 2.0, 0.25)
+    _beam(maps, [0.05, 0.05, 0.0], 0.5)  # hit in cell 5
+    _beam(maps, [0.05, 0.05, 0.0], 1.0)  # passes cell 5, hit in cell 10
+    _beam(maps, [0.05, 0.05, 0.0], 1.0)
+    g = maps.occupancy(0)
+    assert np.isclose(g.prob[0, 5], 1 / 3) and g.prob[0, 10] == 1.0
+
+
+def test_map_grows_with_explored_area_negative_side():
+    maps = PatchMaps(1, 0.05, 1.0, 0.25)
+    _beam(maps, [0.01, 0.01, 0.0], 1.0)
+    before = maps.tables.shape
+    maps.register(np.array([[-20.0, -20.0, np.pi]]), np.array([3.0]), np.ones(1), np.zeros(1),
+                  30.0, 29.99)  # fmt: skip
+    assert maps.tables.shape[1] > before[1] and maps.tables.shape[2] > before[2]
+    g = maps.occupancy(0)
+    # both beams are in the map: the old one at y ~ 0 and the new one ending at x = -23.0
+    hits = np.argwhere(g.prob == 1.0)
+    xs = g.origin[0] + (hits[:, 1] + 0.5) * g.resolution
+    assert np.isclose(xs.min(), -23.0 + 0.025, atol=0.05) and np.isclose(xs.max(), 1.0, atol=0.05)
+
+
+def test_copy_on_write_sharing():
+    maps = PatchMaps(3, 0.05, 1.0, 0.25)
+    ranges = np.full(8, 1.0)  # 20 cells: stays in the 4 patches around the origin
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    poses = np.zeros((3, 3))
+    maps.register(poses, ranges, np.cos(angles), np.sin(angles), 30.0, 29.99)
+    live = maps.live_patches()
+    assert live == 3 * 4  # each particle owns the four patches around the origin
+    maps.select(np.array([1, 1, 1]))  # resampling: no patch copied, all shared
+    assert maps.live_patches() == 4
+    assert np.all(maps.counts[maps.counts > 0] == 3)
+    # each particle registers a beam from its own pose; all write in the origin's patch only,
+    # so that patch is copied three times and the old shared one is freed: 3 shared + 3 own
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 1.0, 0.0]])
+    maps.register(poses, np.array([1.0]), np.ones(1), np.zeros(1), 30.0, 29.99)
+    assert maps.live_patches() == 6
+    assert np.all(maps.counts[maps.counts > 0] <= 3)
+    differ = maps.tables[0] != maps.tables[1]
+    assert differ.sum() == 1 and np.array_equal(differ, maps.tables[1] != maps.tables[2])
+    p0, p1 = maps.occupancy(0), maps.occupancy(1)
+    # the beam at y = 0.5 is in particle 1's map only (cell (14, 10): off the diagonals)
+    cell = p1.world_to_cell(np.array([[0.7, 0.5]]))[0]
+    assert p1.prob[cell[1], cell[0]] == 0.0
+    cell = p0.world_to_cell(np.array([[0.7, 0.5]]))[0]
+    assert np.isnan(p0.prob[cell[1], cell[0]])
+    assert maps.dropped == 0
+    assert PATCH == 32

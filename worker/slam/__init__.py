@@ -1,0 +1,1 @@
+"""SLAM behind one interface: `make_slam("rbpf" | "odometry", laser, params, rng)`."""

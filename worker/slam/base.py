@@ -1,0 +1,84 @@
+"""The SLAM interface every algorithm implements, and `make_slam` to choose one by name."""
+
+from __future__ import annotations
+
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+from worker.errors import InputError
+from worker.slam.grid import OccupancyGrid
+from worker.slam.params import SlamParams
+
+SlamName = Literal["rbpf", "odometry"]
+SLAM_NAMES: tuple[str, ...] = ("rbpf", "odometry")
+
+
+class LaserGeometry(Protocol):
+    """What SLAM needs of a laser (worker.sim.laser.LaserSpec has these fields)."""
+
+    n_beams: int
+    angle_min: float  # [rad] first beam, relative to the robot heading
+    angle_increment: float  # [rad]
+    range_max: float  # [m] readings at or past this are "no return"
+
+
+@runtime_checkable
+class SlamAlgorithm(Protocol):
+    """Online 2D SLAM fed with odometry and laser scans.
+
+    Frames as in ROS: `odom` (the robot's dead reckoning), `map` (the SLAM map; equal to the
+    odometry frame at the first scan), and T_map_odom, the correction between the two.
+    """
+
+    name: str
+
+    def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        """Feed one scan: t [s], pose_odom (3,) [x, y, theta], ranges_m (B,) [m].
+
+        Returns True when the map / filter was updated with this scan.
+        """
+        ...
+
+    def pose_estimate(self) -> np.ndarray:
+        """(3,) [x, y, theta] map frame: T_map_odom (+) the latest odometry pose."""
+        ...
+
+    def T_map_odom(self) -> np.ndarray:
+        """(3,) [x, y, theta] the map -> odom correction of the latest update."""
+        ...
+
+    def occupancy(self) -> OccupancyGrid:
+        """The current map (of the best particle for a particle filter)."""
+        ...
+
+
+def beam_angles(laser: LaserGeometry) -> np.ndarray:
+    """(B,) [rad] beam angles relative to the robot heading."""
+    n = int(laser.n_beams)
+    if n < 1:
+        raise InputError(f"laser has {n} beams; at least one is needed")
+    return float(laser.angle_min) + float(laser.angle_increment) * np.arange(n, dtype=np.float64)
+
+
+def make_slam(
+    name: SlamName,
+    laser: LaserGeometry,
+    params: SlamParams | None = None,
+    rng: np.random.Generator | None = None,
+) -> SlamAlgorithm:
+    """The SLAM algorithm `name` ("rbpf" or "odometry") for this laser.
+
+    params: None = the thesis defaults; rng: the run's generator (None = seed 0).
+    """
+    params = SlamParams() if params is None else params
+    rng = np.random.default_rng(0) if rng is None else rng
+    if name == "odometry":
+        from worker.slam.odometry import OdometrySlam
+
+        return OdometrySlam(laser, params)
+    if name == "rbpf":
+        from worker.slam.rbpf import RbpfSlam
+
+        return RbpfSlam(laser, params, rng)
+    raise InputError(f"unknown SLAM algorithm {name!r}; choose one of: {', '.join(SLAM_NAMES)}")

@@ -1,0 +1,112 @@
+"""OccupancyGrid: a SLAM map as hit/visit probabilities, exportable as map_server PGM + YAML."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+# map_saver's output levels and the thresholds it writes in the YAML
+PGM_OCCUPIED = 0
+PGM_FREE = 254
+PGM_UNKNOWN = 205
+YAML_OCCUPIED_THRESH = 0.65
+YAML_FREE_THRESH = 0.196
+
+
+@dataclass(frozen=True, eq=False)
+class OccupancyGrid:
+    """A 2D occupancy map.
+
+    prob: (H, W) float32, indexed [iy, ix] with iy = 0 the bottom row; the share of laser
+        beams through a cell that ended in it (GMapping's hits / visits), NaN = never seen.
+    resolution: [m] cell side.
+    origin: (2,) [m] world position of the lower-left corner of cell (0, 0).
+    occ_thresh: a cell is occupied above this probability when published (GMapping's
+        occ_thresh, 0.25), free at or below it.
+    """
+
+    prob: np.ndarray
+    resolution: float
+    origin: np.ndarray
+    occ_thresh: float = 0.25
+
+    def __post_init__(self) -> None:
+        prob = np.array(self.prob, dtype=np.float32, copy=True)
+        if prob.ndim != 2:
+            raise ValueError(f"prob must be 2D (H, W), got shape {prob.shape}")
+        origin = np.array(self.origin, dtype=np.float64, copy=True).reshape(2)
+        prob.setflags(write=False)
+        origin.setflags(write=False)
+        object.__setattr__(self, "prob", prob)
+        object.__setattr__(self, "origin", origin)
+        object.__setattr__(self, "resolution", float(self.resolution))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) in cells."""
+        return self.prob.shape  # type: ignore[return-value]
+
+    @property
+    def known(self) -> np.ndarray:
+        """(H, W) bool: cells seen at least once."""
+        return ~np.isnan(self.prob)
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """(H, W) bool: cells above occ_thresh (unknown cells are not occupied)."""
+        with np.errstate(invalid="ignore"):
+            return np.nan_to_num(self.prob, nan=0.0) > self.occ_thresh
+
+    @property
+    def free(self) -> np.ndarray:
+        """(H, W) bool: seen cells at or below occ_thresh."""
+        return self.known & ~self.occupied
+
+    def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) [m] world points -> (N, 2) int64 [ix, iy] (may lie outside the grid)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.floor((xy - self.origin) / self.resolution).astype(np.int64)
+
+    def to_ros(self) -> np.ndarray:
+        """(H, W) int8 as slam_gmapping publishes it: -1 unknown, 0 free, 100 occupied."""
+        out = np.zeros(self.prob.shape, dtype=np.int8)
+        out[self.occupied] = 100
+        out[~self.known] = -1
+        return out
+
+    def to_image(self) -> np.ndarray:
+        """(H, W) uint8 image, TOP row first, with map_saver's levels (0 / 254 / 205)."""
+        ros = self.to_ros()
+        img = np.full(ros.shape, PGM_UNKNOWN, dtype=np.uint8)
+        # map_saver: 0 <= v <= threshold_free (25) -> free; v >= threshold_occupied (65) -> occ
+        img[(ros >= 0) & (ros <= 25)] = PGM_FREE
+        img[ros >= 65] = PGM_OCCUPIED
+        return np.flipud(img)
+
+    def save_map_server(self, stem: str | Path) -> tuple[Path, Path]:
+        """Write `stem.pgm` and `stem.yaml` as ROS map_server's map_saver does; return both."""
+        stem = Path(stem)
+        pgm, yml = stem.with_suffix(".pgm"), stem.with_suffix(".yaml")
+        img = self.to_image()
+        header = f"P5\n# CREATOR: mapqual {self.resolution:.3f} m/pix\n"
+        header += f"{img.shape[1]} {img.shape[0]}\n255\n"
+        pgm.write_bytes(header.encode("ascii") + img.tobytes())
+        yml.write_text(
+            f"image: {pgm.name}\n"
+            f"resolution: {self.resolution:.6f}\n"
+            f"origin: [{self.origin[0]:.6f}, {self.origin[1]:.6f}, 0.000000]\n"
+            "negate: 0\n"
+            f"occupied_thresh: {YAML_OCCUPIED_THRESH}\n"
+            f"free_thresh: {YAML_FREE_THRESH}\n\n"
+        )
+        return pgm, yml
+
+    def save_png(self, path: str | Path) -> Path:
+        """Write the map as a greyscale PNG (map_saver's levels), top row first."""
+        from PIL import Image
+
+        path = Path(path)
+        Image.fromarray(self.to_image()).save(path)
+        return path

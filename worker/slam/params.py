@@ -1,0 +1,71 @@
+"""SlamParams: the GMapping settings (thesis values where the thesis set them), with units."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from worker.errors import InputError
+
+
+@dataclass(frozen=True)
+class SlamParams:
+    """Parameters of the SLAM algorithms, named after GMapping's ROS parameters.
+
+    Defaults: the thesis settings (particles 40, angularUpdate 0.25, maxUrange 30) and
+    GMapping's defaults elsewhere (slam_gmapping 1.x). The odometry baseline uses only the
+    map and update-gating fields. JSON: `worker.params.to_dict` / `from_dict`.
+    """
+
+    particles: int = 40  # number of particles (thesis: 40; GMapping default 30)
+    # update gating: the filter runs when any threshold is passed since the last update
+    linear_update: float = 1.0  # [m] linearUpdate (0 = every scan)
+    angular_update: float = 0.25  # [rad] angularUpdate (thesis; GMapping default 0.5)
+    temporal_update: float = -1.0  # [s] temporalUpdate, negative = off
+    resample_threshold: float = 0.5  # resample when Neff < this * particles
+    # map
+    delta: float = 0.05  # [m] map resolution
+    max_urange: float = 30.0  # [m] maxUrange: beams are cut to this length (thesis: 30)
+    max_range: float | None = None  # [m] maxRange: longer beams ignored; None = laser max - 0.01
+    occ_thresh: float = 0.25  # occupied above this hit/visit ratio when published (ROS map)
+    map_margin: float = 8.0  # [m] growth margin when a scan leaves the allocated map area
+    # scan matcher (improved proposal)
+    sigma: float = 0.05  # [m] sigma of the matching score (GMapping: exp(-mu^2 / sigma))
+    kernel_size: int = 1  # [cells] search window around each beam end point
+    lstep: float = 0.05  # [m] initial translational step of the hill climbing
+    astep: float = 0.05  # [rad] initial angular step of the hill climbing
+    iterations: int = 5  # step halvings of the hill climbing
+    lsigma: float = 0.075  # [m^2] beam log-likelihood is -mu^2 / lsigma (weights)
+    ogain: float = 3.0  # gain smoothing the likelihood when normalising weights
+    lskip: int = 0  # beams skipped between two used ones when matching
+    minimum_score: float = 0.0  # below this match score, keep the odometry guess
+    # motion model (GMapping's MotionModel::drawFromMotion)
+    srr: float = 0.1  # [m/m] translation noise from translation
+    srt: float = 0.2  # [rad/m] rotation noise from translation
+    str_: float = 0.1  # [m/rad] translation noise from rotation (GMapping's `str`)
+    stt: float = 0.2  # [rad/rad] rotation noise from rotation
+
+    def __post_init__(self) -> None:
+        positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"SLAM parameter {name} must be a positive number, got {value}")
+        nonneg = ("linear_update", "angular_update", "srr", "srt", "str_", "stt", "map_margin")
+        for name in nonneg:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"SLAM parameter {name} must be >= 0, got {value}")
+        if self.particles < 1:
+            raise InputError(f"SLAM parameter particles must be >= 1, got {self.particles}")
+        if self.kernel_size < 0 or self.iterations < 0 or self.lskip < 0:
+            raise InputError("SLAM parameters kernel_size, iterations and lskip must be >= 0")
+        if not 0.0 <= self.resample_threshold <= 1.0:
+            raise InputError(
+                "SLAM parameter resample_threshold must be in [0, 1], "
+                f"got {self.resample_threshold}"
+            )
+        if not 0.0 < self.occ_thresh < 1.0:
+            raise InputError(f"SLAM parameter occ_thresh must be in (0, 1), got {self.occ_thresh}")
+        if self.max_range is not None and not (self.max_range > 0):
+            raise InputError(f"SLAM parameter max_range must be positive, got {self.max_range}")

@@ -1,0 +1,162 @@
+"""PatchMaps: the occupancy maps of all particles, sharing 32 x 32-cell patches copy-on-write."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worker.slam.grid import OccupancyGrid
+from worker.slam.map_kernels import N_CHANNELS, PATCH, PATCH_BITS, dense_prob, register_scans
+
+
+class PatchMaps:
+    """Per-particle occupancy maps over one pool of patches.
+
+    Cell (gx, gy) covers x in [gx * res, (gx + 1) * res) in the map frame, so every particle
+    indexes the same cells; `tables` (N, TH, TW) int32 maps patch (px, py) to a pool id,
+    -1 = never seen, with table cell (0, 0) = patch (tpx0, tpy0). The table grows (all
+    particles alike) when a scan reaches past it, so a map covers the explored area only.
+    Resampling copies table rows, never patches (`select`).
+    """
+
+    def __init__(self, n_particles: int, resolution: float, margin_m: float, occ_thresh: float):
+        self.resolution = float(resolution)
+        self.occ_thresh = float(occ_thresh)
+        self._margin_patches = max(1, int(np.ceil(margin_m / (resolution * PATCH))))
+        self.tables = np.full((n_particles, 0, 0), -1, dtype=np.int32)
+        self.tpx0 = 0
+        self.tpy0 = 0
+        self.pool = np.zeros((0, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
+        self.counts = np.zeros(0, dtype=np.int32)
+        self.dropped = 0  # cell updates lost for lack of pool space (always 0 in practice)
+
+    @property
+    def n_particles(self) -> int:
+        return self.tables.shape[0]
+
+    def live_patches(self) -> int:
+        """Distinct patches referenced by any particle."""
+        return int(np.count_nonzero(self.counts))
+
+    def nbytes(self) -> int:
+        """Bytes held by the pool and the tables."""
+        return int(self.pool.nbytes + self.tables.nbytes + self.counts.nbytes)
+
+    def select(self, indices: np.ndarray) -> None:
+        """Resampling: particle k becomes a copy of old particle indices[k] (shares patches)."""
+        self.tables = self.tables[np.asarray(indices, dtype=np.intp)]
+        self._recount()
+
+    def _recount(self) -> None:
+        flat = self.tables.ravel()
+        self.counts = np.bincount(flat[flat >= 0], minlength=self.pool.shape[0]).astype(np.int32)
+
+    def _ensure_table(self, lo_x: float, lo_y: float, hi_x: float, hi_y: float) -> None:
+        """Grow the tables so that the box [lo, hi] (map frame, [m]) lies inside, plus margin."""
+        side = self.resolution * PATCH
+        plo_x, plo_y = int(np.floor(lo_x / side)), int(np.floor(lo_y / side))
+        phi_x, phi_y = int(np.floor(hi_x / side)), int(np.floor(hi_y / side))
+        n, th, tw = self.tables.shape
+        if th > 0 and (
+            plo_x >= self.tpx0
+            and plo_y >= self.tpy0
+            and phi_x < self.tpx0 + tw
+            and phi_y < self.tpy0 + th
+        ):
+            return
+        m = self._margin_patches
+        if th == 0:
+            nx0, ny0, nx1, ny1 = plo_x - m, plo_y - m, phi_x + m + 1, phi_y + m + 1
+        else:
+            nx0 = min(self.tpx0, plo_x - m)
+            ny0 = min(self.tpy0, plo_y - m)
+            nx1 = max(self.tpx0 + tw, phi_x + m + 1)
+            ny1 = max(self.tpy0 + th, phi_y + m + 1)
+        grown = np.full((n, ny1 - ny0, nx1 - nx0), -1, dtype=np.int32)
+        oy, ox = self.tpy0 - ny0, self.tpx0 - nx0
+        grown[:, oy : oy + th, ox : ox + tw] = self.tables
+        self.tables, self.tpx0, self.tpy0 = grown, nx0, ny0
+
+    def _grow_pool(self, extra: int) -> None:
+        old = self.pool.shape[0]
+        new = max(old + extra, int(old * 1.5), 256)
+        pool = np.zeros((new, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
+        pool[:old] = self.pool
+        self.pool = pool
+        counts = np.zeros(new, dtype=np.int32)
+        counts[:old] = self.counts
+        self.counts = counts
+
+    def register(
+        self,
+        poses: np.ndarray,
+        ranges_m: np.ndarray,
+        cos_a: np.ndarray,
+        sin_a: np.ndarray,
+        usable_range: float,
+        max_range: float,
+    ) -> None:
+        """Integrate one scan into every particle's map at its pose.
+
+        poses: (N, 3) [x, y, theta] map frame; ranges_m: (B,); cos_a, sin_a: (B,) of the
+        beam angles relative to the robot heading.
+        """
+        poses = np.ascontiguousarray(poses, dtype=np.float64).reshape(-1, 3)
+        if poses.shape[0] != self.n_particles:
+            raise ValueError(f"{poses.shape[0]} poses for {self.n_particles} particle maps")
+        ranges = np.ascontiguousarray(ranges_m, dtype=np.float64)
+        used = (ranges > 0) & (ranges <= max_range)
+        reach = float(min(np.max(ranges[used]), usable_range)) if used.any() else 0.0
+        reach += 2 * self.resolution
+        lo = poses[:, :2].min(axis=0) - reach
+        hi = poses[:, :2].max(axis=0) + reach
+        self._ensure_table(lo[0], lo[1], hi[0], hi[1])
+        # worst case a particle allocates every patch of its scan's bounding box
+        side = self.resolution * PATCH
+        span = np.floor((poses[:, :2] + reach) / side) - np.floor((poses[:, :2] - reach) / side) + 1
+        need = (span[:, 0] * span[:, 1]).astype(np.int64)
+        self._recount()
+        start = 0
+        while start < self.n_particles:
+            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
+            if free_stack.size < need[start]:
+                self._grow_pool(int(need[start:].max()) - free_stack.size)
+                continue
+            n_free = np.array([free_stack.size], dtype=np.int64)
+            start, dropped = register_scans(
+                self.pool,
+                self.counts,
+                free_stack,
+                n_free,
+                self.tables,
+                self.tpx0,
+                self.tpy0,
+                poses,
+                ranges,
+                cos_a,
+                sin_a,
+                self.resolution,
+                usable_range,
+                max_range,
+                need,
+                start,
+            )
+            self.dropped += int(dropped)
+
+    def occupancy(self, particle: int) -> OccupancyGrid:
+        """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none)."""
+        prob = dense_prob(self.pool, self.tables[particle])
+        known = ~np.isnan(prob)
+        side = self.resolution * PATCH
+        origin = np.array([self.tpx0 * side, self.tpy0 * side])
+        if not known.any():
+            return OccupancyGrid(
+                np.full((1, 1), np.nan, np.float32), self.resolution, origin, self.occ_thresh
+            )
+        rows = np.flatnonzero(known.any(axis=1))
+        cols = np.flatnonzero(known.any(axis=0))
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        origin = origin + np.array([c0, r0]) * self.resolution
+        return OccupancyGrid(prob[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh)
+
+
+__all__ = ["PatchMaps", "PATCH", "PATCH_BITS"]
