@@ -1,0 +1,1 @@
+"""Evaluation: SE(2) maths, trajectory files, relation generators, the relations metric, ATE."""
