@@ -7,7 +7,7 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from backend.api.routes import health, stats
+from backend.api.routes import health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from worker.errors import InputError
 
@@ -35,7 +35,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"detail": str(exc)}, status_code=400)
 
     app.include_router(health.router)
-    app.include_router(stats.router, prefix=API_PREFIX)
+    for module in (worlds, jobs, runs, stats):
+        app.include_router(module.router, prefix=API_PREFIX)
     return app
 
 

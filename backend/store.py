@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import secrets
 from collections.abc import Sequence
@@ -13,6 +14,7 @@ from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
 from backend.db.models import Job, Run, RunMap, RunTrajectory, User, World, utcnow
+from worker.world.world import World as WorldModel
 
 TRAJECTORY_KINDS = ("gt", "est")
 LOCAL_USER = "local"
@@ -90,6 +92,45 @@ def get_or_create_world(
     session.add(world)
     session.flush()
     return world
+
+
+def save_world(
+    session: Session,
+    *,
+    owner_id: int,
+    world: WorldModel,
+    sha256: str,
+    source_format: str,
+) -> World:
+    """Store a loaded floorplan (once per owner and content hash)."""
+    facts = dataclasses.asdict(world.facts)
+    facts["warnings"] = list(world.warnings)
+    return get_or_create_world(
+        session,
+        owner_id=owner_id,
+        name=world.name,
+        sha256=sha256,
+        source_format=source_format,
+        source_path=world.source,
+        resolution=world.resolution,
+        origin=world.origin,
+        occ=world.occ,
+        start_pose=world.start_pose,
+        facts=facts,
+    )
+
+
+def world_model(row: World) -> WorldModel:
+    """The pipeline's World for a stored world (grid, resolution, origin, start pose)."""
+    return WorldModel.from_array(
+        world_occupancy(row),
+        row.resolution,
+        origin=(row.origin_x, row.origin_y),
+        start_pose=tuple(row.start_pose),
+        name=row.name,
+        n_rooms=row.facts.get("n_rooms"),
+        source=row.source_path,
+    )
 
 
 def world_occupancy(world: World) -> np.ndarray:

@@ -19,6 +19,7 @@ class Api:
     client: TestClient
     url: str
     keys: dict[str, str]
+    broker: object  # redis.Redis on the broker's database
 
     def get(self, path, user="alice", **kw):
         return self.client.get(path, headers=self._auth(user), **kw)
@@ -33,7 +34,12 @@ class Api:
 
 @pytest.fixture
 def api(db_url):
-    redis_url = ensure_redis()
+    # a Redis database of its own, emptied before and after, so queued messages can be counted
+    redis_url = ensure_redis().rsplit("/", 1)[0] + "/13"
+    import redis
+
+    broker = redis.Redis.from_url(redis_url)
+    broker.flushdb()
     with session_scope(db_url) as s:
         keys = {
             name: add_user(s, name, is_admin=(name == "admin"))[1]
@@ -41,4 +47,6 @@ def api(db_url):
         }
     settings = Settings(DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on")
     with TestClient(create_app(settings)) as client:
-        yield Api(client, db_url, keys)
+        yield Api(client, db_url, keys, broker)
+    broker.flushdb()
+    broker.close()

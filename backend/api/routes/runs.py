@@ -1,0 +1,130 @@
+"""Runs: summary and metrics, trajectories, the final map, relations, the whole report."""
+
+from __future__ import annotations
+
+import io
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Literal
+
+from fastapi import APIRouter, HTTPException, Query, status
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+
+from backend.api.deps import CurrentUser, SessionDep, owned
+from backend.db.models import Run
+from backend.schemas import RunOut
+from backend.store import load_map, load_trajectory
+
+router = APIRouter(tags=["runs"])
+
+
+def _run(session, user, run_id: int) -> Run:
+    return owned(user, session.get(Run, run_id), "run", run_id)
+
+
+def _report_dir(run: Run) -> Path:
+    if run.status != "done" or not run.report_dir or not Path(run.report_dir).is_dir():
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run.id} has no report (yet)")
+    return Path(run.report_dir)
+
+
+def _require_done(run: Run) -> None:
+    if run.status != "done":
+        raise HTTPException(
+            status.HTTP_404_NOT_FOUND, f"run {run.id} is {run.status}: no results yet"
+        )
+
+
+@router.get("/runs/{run_id}", response_model=RunOut)
+def get_run(run_id: int, session: SessionDep, user: CurrentUser) -> RunOut:
+    """A run: status, progress, and once done its summary and metrics."""
+    return RunOut.of(_run(session, user, run_id))
+
+
+@router.get("/runs/{run_id}/trajectory")
+def get_trajectory(
+    run_id: int,
+    session: SessionDep,
+    user: CurrentUser,
+    kind: Literal["gt", "est"] = Query("est", description="ground truth or estimate"),
+    format: Literal["tum", "carmen", "json"] = Query("tum"),
+) -> Response:
+    """A trajectory at 10 Hz: TUM (evo reads it), CARMEN FLASER (the thesis), or JSON."""
+    from worker.evaluate.trajectory import Trajectory
+    from worker.evaluate.trajio import write_carmen, write_tum
+
+    run = _run(session, user, run_id)
+    _require_done(run)
+    t, poses = load_trajectory(session, run.id, kind)
+    if format == "json":
+        return JSONResponse({"kind": kind, "t": t.tolist(), "poses": poses.tolist()})
+    writer = write_tum if format == "tum" else write_carmen
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "traj.txt"
+        writer(path, Trajectory(t, poses))
+        text = path.read_text()
+    name = f"run{run.id}_{kind}.{'tum' if format == 'tum' else 'log'}"
+    return PlainTextResponse(text, headers={"Content-Disposition": f'inline; filename="{name}"'})
+
+
+def _map_files(run: Run, session) -> dict[str, bytes]:
+    from worker.report.plots import map_png, ros_grid_to_grey
+
+    grid, res, origin = load_map(session, run.id)
+    grey = ros_grid_to_grey(grid)
+    h, w = grey.shape
+    pgm = f"P5\n# mapqual run {run.id}\n{w} {h}\n255\n".encode() + grey.tobytes()
+    yaml = (
+        f"image: map.pgm\nresolution: {res}\norigin: [{origin[0]}, {origin[1]}, 0.0]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    ).encode()
+    buf = io.BytesIO()
+    map_png(buf, grid, [])
+    return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
+
+
+@router.get("/runs/{run_id}/map.{ext}")
+def get_map(
+    run_id: int, ext: Literal["png", "pgm", "yaml"], session: SessionDep, user: CurrentUser
+) -> Response:
+    """The final SLAM map as map_server files (PGM + YAML) or PNG (with its errors written
+    on it when the report folder is there)."""
+    run = _run(session, user, run_id)
+    _require_done(run)
+    if run.report_dir and (Path(run.report_dir) / f"map.{ext}").is_file():
+        return FileResponse(Path(run.report_dir) / f"map.{ext}", media_type=_MEDIA[ext])
+    return Response(_map_files(run, session)[ext], media_type=_MEDIA[ext])
+
+
+_MEDIA = {"png": "image/png", "pgm": "image/x-portable-graymap", "yaml": "application/yaml"}
+
+
+@router.get("/runs/{run_id}/relations")
+def get_relations(
+    run_id: int,
+    session: SessionDep,
+    user: CurrentUser,
+    kind: Literal["A", "B", "SM"] = Query("B"),
+) -> FileResponse:
+    """The run's relations file of that kind (`t1 t2 x y z roll pitch yaw`)."""
+    path = _report_dir(_run(session, user, run_id)) / f"relations_{kind}.txt"
+    if not path.is_file():
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {kind} relations")
+    return FileResponse(path, media_type="text/plain", filename=path.name)
+
+
+@router.get("/runs/{run_id}/report.zip")
+def get_report(run_id: int, session: SessionDep, user: CurrentUser) -> Response:
+    """The whole report folder as one zip."""
+    folder = _report_dir(_run(session, user, run_id))
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                zf.write(path, f"run{run_id}/{path.relative_to(folder)}")
+    return Response(
+        buf.getvalue(),
+        media_type="application/zip",
+        headers={"Content-Disposition": f'attachment; filename="run{run_id}.zip"'},
+    )

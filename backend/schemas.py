@@ -1,0 +1,171 @@
+"""Pydantic bodies and answers of the API (the core uses dataclasses; this is the boundary)."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field, model_validator
+
+from backend.db.models import Job, Run, World
+
+MAX_RUNS_PER_JOB = 1000
+
+
+class WorldOut(BaseModel):
+    """A stored floorplan and its facts."""
+
+    id: int
+    name: str
+    resolution: float = Field(description="metres per pixel")
+    origin: list[float] = Field(description="[x, y] of the image's lower-left corner, metres")
+    width_px: int
+    height_px: int
+    width_m: float
+    height_m: float
+    start_pose: list[float] = Field(description="[x, y, theta] in metres and radians")
+    facts: dict[str, Any]
+    created_at: datetime
+
+    @classmethod
+    def of(cls, w: World) -> WorldOut:
+        return cls(
+            id=w.id,
+            name=w.name,
+            resolution=w.resolution,
+            origin=[w.origin_x, w.origin_y],
+            width_px=w.width_px,
+            height_px=w.height_px,
+            width_m=w.width_px * w.resolution,
+            height_m=w.height_px * w.resolution,
+            start_pose=list(w.start_pose),
+            facts=w.facts,
+            created_at=w.created_at,
+        )
+
+
+class JobIn(BaseModel):
+    """A job: `runs` (a count, seeds 1..runs) or `seeds` (a list), and optional overrides."""
+
+    model_config = {"extra": "forbid"}
+
+    world_id: int
+    runs: int | None = Field(default=None, ge=1, le=MAX_RUNS_PER_JOB)
+    seeds: list[int] | None = Field(default=None, min_length=1, max_length=MAX_RUNS_PER_JOB)
+    slam: Literal["rbpf", "odometry", "oracle"] | None = None
+    params: dict[str, Any] = Field(
+        default_factory=dict,
+        description="Overrides by section: sim, slam, explore, eval (see RunParams).",
+    )
+
+    @model_validator(mode="after")
+    def _runs_or_seeds(self) -> JobIn:
+        if (self.runs is None) == (self.seeds is None):
+            raise ValueError("give exactly one of `runs` (a count) and `seeds` (a list)")
+        if self.seeds is not None and len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("`seeds` has duplicates")
+        if self.seeds is not None and any(s < 0 or s >= 2**63 for s in self.seeds):
+            raise ValueError("seeds are integers in [0, 2^63)")
+        return self
+
+    def seed_list(self) -> list[int]:
+        return list(self.seeds) if self.seeds is not None else list(range(1, self.runs + 1))
+
+
+class RunBrief(BaseModel):
+    """A run as listed in its job."""
+
+    id: int
+    seed: int
+    status: str
+    outcome: str | None
+    reason: str | None
+    coverage: float | None
+    b_mean_t: float | None
+    b_mean_r: float | None
+    progress: dict[str, Any]
+
+    @classmethod
+    def of(cls, r: Run) -> RunBrief:
+        return cls(
+            id=r.id,
+            seed=r.seed,
+            status=r.status,
+            outcome=r.outcome,
+            reason=r.reason,
+            coverage=r.coverage,
+            b_mean_t=r.b_mean_t,
+            b_mean_r=r.b_mean_r,
+            progress=r.progress or {},
+        )
+
+
+class JobOut(BaseModel):
+    """A job with its runs."""
+
+    id: int
+    world_id: int
+    status: str
+    slam: str
+    params: dict[str, Any]
+    created_at: datetime
+    updated_at: datetime
+    runs: list[RunBrief]
+
+    @classmethod
+    def of(cls, j: Job) -> JobOut:
+        return cls(
+            id=j.id,
+            world_id=j.world_id,
+            status=j.status,
+            slam=j.slam,
+            params=j.params,
+            created_at=j.created_at,
+            updated_at=j.updated_at,
+            runs=[RunBrief.of(r) for r in j.runs],
+        )
+
+
+class JobPage(BaseModel):
+    """One page of jobs, newest first."""
+
+    items: list[JobOut]
+    total: int
+    limit: int
+    offset: int
+
+
+class RunOut(RunBrief):
+    """A run with its full summary (the report's summary.json) once done."""
+
+    job_id: int
+    world_id: int
+    slam: str
+    params: dict[str, Any]
+    metrics: dict[str, Any]
+    summary: dict[str, Any]
+    error: str | None
+    sim_time: float | None
+    wall_time: float | None
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+
+    @classmethod
+    def of(cls, r: Run) -> RunOut:
+        brief = RunBrief.of(r).model_dump()
+        return cls(
+            **brief,
+            job_id=r.job_id,
+            world_id=r.world_id,
+            slam=r.slam,
+            params=r.params,
+            metrics=r.metrics or {},
+            summary=r.summary or {},
+            error=r.error,
+            sim_time=r.sim_time,
+            wall_time=r.wall_time,
+            created_at=r.created_at,
+            started_at=r.started_at,
+            finished_at=r.finished_at,
+        )
