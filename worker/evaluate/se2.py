@@ -9,13 +9,15 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | np.float64:
-    """Wrap angles [rad] to [-pi, pi).
+    """Wrap angles [rad] to [-pi, pi); angles already inside are returned bit for bit.
 
-    `np.mod` can round a tiny negative angle up to exactly 2*pi, which would map to +pi;
-    the final `where` folds that single case back to -pi so the interval stays half-open.
+    `np.mod` can round an angle just below -pi up to exactly 2*pi, which would map to +pi;
+    the `where` folds that case back to -pi so the interval stays half-open.
     """
-    w = np.mod(np.asarray(a, dtype=np.float64) + np.pi, TWO_PI) - np.pi
-    return np.where(w >= np.pi, w - TWO_PI, w)
+    a = np.asarray(a, dtype=np.float64)
+    w = np.mod(a + np.pi, TWO_PI) - np.pi
+    w = np.where(w >= np.pi, w - TWO_PI, w)
+    return np.where((a >= -np.pi) & (a < np.pi), a, w)
 
 
 def _as_poses(p: ArrayLike) -> NDArray[np.float64]:
