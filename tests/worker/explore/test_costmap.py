@@ -1,0 +1,150 @@
+"""Costmap: costmap_2d's inflation formula, incremental updates, footprint collision test."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from worker.explore import costmap_kernels as ck
+from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
+from worker.explore.params import ExploreParams
+
+RES = 0.05
+
+
+@pytest.mark.parametrize(
+    ("d", "expected"),
+    [
+        (0.0, 254),  # the obstacle cell itself
+        (0.05, 253),  # inside the 0.2 m inscribed radius
+        (0.2, 253),  # on it
+        (0.5, 26),  # 252 * exp(-7.5 * 0.3) = 26.56 -> 26
+        (0.3, 119),  # 252 * exp(-7.5 * 0.1) = 119.03 -> 119
+        (1.0, 0),  # 252 * exp(-6) = 0.62 -> 0
+        (2.3, 0),  # beyond the inflation radius
+    ],
+)
+def test_inflation_cost_matches_costmap_2d_formula(d, expected):
+    assert ck.inflation_cost(d, 0.2, 7.5, 2.25) == expected
+
+
+def test_effective_radius_is_where_cost_truncates_to_zero():
+    r = ck.effective_inflation_cells(RES, 0.2, 7.5, 2.25)
+    # 252 exp(-7.5 (d - 0.2)) < 1  <=>  d > 0.2 + ln(252) / 7.5 = 0.937 m -> 19 cells (+1 spare)
+    assert r == 20
+    assert ck.inflation_cost((r - 1) * RES, 0.2, 7.5, 2.25) == 0
+
+
+def _prob_with_wall(h=60, w=80):
+    prob = np.full((h, w), 0.05, dtype=np.float32)  # all known free
+    prob[:, 40] = 0.9  # a wall column at ix = 40
+    return prob
+
+
+def test_global_costmap_costs_by_distance_to_wall():
+    cm = GlobalCostmap(ExploreParams())
+    cm.update(_prob_with_wall(), RES, (0.0, 0.0))
+    row = cm.inflated[30]
+    assert row[40] == 254
+    for dx in range(1, 25):
+        expected = ck.inflation_cost(dx * RES, 0.2, 7.5, 2.25)
+        assert row[40 + dx] == expected
+        assert row[40 - dx] == expected
+    assert row[41] == 253 and row[44] == 253 and row[45] < 253
+
+
+def test_unknown_cells_are_no_information_unless_inscribed():
+    prob = _prob_with_wall()
+    prob[:, 42:] = np.nan
+    cm = GlobalCostmap(ExploreParams())
+    cm.update(prob, RES, (0.0, 0.0))
+    master = cm.master()
+    assert master[10, 41] == 253  # known, inscribed
+    assert master[10, 43] == 253  # unknown but within the inscribed radius: costmap_2d keeps 253
+    assert master[10, 50] == 255  # unknown, farther: NO_INFORMATION
+    assert master[10, 30] == cm.inflated[10, 30] < 253
+
+
+def test_incremental_update_equals_full_rebuild():
+    rng = np.random.default_rng(3)
+    prob = np.full((90, 110), np.nan, dtype=np.float32)
+    inc = GlobalCostmap(ExploreParams())
+    inc.update(prob, RES, (1.0, -2.0))
+    for _ in range(12):
+        y0, x0 = rng.integers(0, 80), rng.integers(0, 100)
+        patch = rng.choice([np.nan, 0.05, 0.9], size=(10, 10), p=[0.3, 0.5, 0.2])
+        prob[y0 : y0 + 10, x0 : x0 + 10] = patch
+        changed = inc.update(prob, RES, (1.0, -2.0), window=(y0, y0 + 10, x0, x0 + 10))
+        if changed[1] > changed[0]:  # the changes lie inside the window that was re-read
+            assert y0 <= changed[0] and changed[1] <= y0 + 10
+    full = GlobalCostmap(ExploreParams())
+    full.update(prob, RES, (1.0, -2.0))
+    np.testing.assert_array_equal(inc.lethal, full.lethal)
+    np.testing.assert_array_equal(inc.unknown, full.unknown)
+    np.testing.assert_array_equal(inc.inflated, full.inflated)
+
+
+def test_inflation_agrees_with_an_exact_distance_transform():
+    from scipy import ndimage
+
+    rng = np.random.default_rng(8)
+    prob = np.where(rng.random((70, 70)) < 0.02, 0.9, 0.05).astype(np.float32)
+    cm = GlobalCostmap(ExploreParams())
+    cm.update(prob, RES, (0.0, 0.0))
+    dist = ndimage.distance_transform_edt(prob < 0.25) * RES
+    expected = cost_from_distance(dist, 0.2, 7.5, 2.25)
+    # float32/float64 rounding can move a value across an integer by one
+    assert np.max(np.abs(expected.astype(int) - cm.inflated.astype(int))) <= 1
+    assert np.mean(expected == cm.inflated) > 0.99
+
+
+def test_map_resize_rebuilds():
+    cm = GlobalCostmap(ExploreParams())
+    cm.update(_prob_with_wall(), RES, (0.0, 0.0))
+    bigger = np.full((80, 100), np.nan, dtype=np.float32)
+    bigger[10:70, 10:90] = _prob_with_wall()
+    cm.update(bigger, RES, (-0.5, -0.5))
+    assert cm.shape == (80, 100)
+    assert cm.lethal[40, 50] and cm.unknown[5, 5] and not cm.unknown[40, 20]
+
+
+def _single_obstacle(cx, cy, n=40):
+    from scipy import ndimage
+
+    lethal = np.zeros((n, n), dtype=np.bool_)
+    lethal[cy, cx] = True
+    dist = (ndimage.distance_transform_edt(~lethal) * RES).astype(np.float32)
+    return lethal, dist
+
+
+def test_footprint_square_not_circle():
+    # Robot at the centre of cell (20, 20) = (1.025, 1.025); obstacle cell (26, 20) spans
+    # x in [1.3, 1.35], y in [1.0, 1.05].
+    lethal, dist = _single_obstacle(26, 20)
+    half, circ = 0.2, 0.2 * math.sqrt(2)
+    x, y = 1.025, 1.025
+    # facing +x: the front edge is at x = 1.225 < 1.3 -> free
+    assert not ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x, y, 0.0, half, circ)
+    # moved 0.1 m forwards: the front edge reaches 1.325 -> inside the obstacle cell
+    assert ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x + 0.1, y, 0.0, half, circ)
+    # rotated by 45 degrees the corner reaches 1.025 + 0.283 = 1.308 -> collides
+    assert ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x, y, math.pi / 4, half, circ)
+
+
+def test_local_costmap_marks_hits_only_and_clears():
+    p = ExploreParams()
+    local = LocalCostmap(p, RES)
+    angles = np.array([0.0, math.pi / 2])
+    local.add_scan(0.0, np.array([5.0, 5.0, 0.0]), np.array([1.0, 30.0]), angles, 30.0)
+    local.build(5.0, 5.0, np.zeros(2))
+    hx, hy = np.argwhere(local.lethal)[0][::-1]
+    assert local.lethal.sum() == 1  # the max-range beam marks nothing
+    assert abs(local.origin[0] + (hx + 0.5) * RES - 6.0) <= RES
+    assert abs(local.origin[1] + (hy + 0.5) * RES - 5.0) <= RES
+    assert local.cost[hy, hx] == 254 and local.cost[hy, hx - 4] == 253
+    # a second scan 2 s later: the first one has expired (persistence 1 s)
+    local.add_scan(2.0, np.array([5.0, 5.0, 0.0]), np.array([2.0, 30.0]), angles, 30.0)
+    local.build(5.0, 5.0, np.zeros(2))
+    assert local.lethal.sum() == 1

@@ -1,0 +1,123 @@
+"""DWA local planner: follows the path, avoids obstacles, turns in place, respects limits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore import dwa_kernels as dk
+from worker.explore.costmap import GlobalCostmap, LocalCostmap
+from worker.explore.costmap_kernels import footprint_collides
+from worker.explore.dwa import DwaPlanner
+from worker.explore.params import ExploreParams
+from worker.explore.planner import GlobalPlanner
+
+RES = 0.05
+
+
+def _wall(x0, x1, y0, y1, step=0.02):
+    xs = np.arange(x0, x1 + 1e-9, step)
+    ys = np.arange(y0, y1 + 1e-9, step)
+    return np.array([(x, y) for x in xs for y in ys])
+
+
+def _local(points, pose, p):
+    local = LocalCostmap(p, RES)
+    if len(points):
+        local.add_points(0.0, points)
+    local.build(pose[0], pose[1], np.zeros(2))
+    return local
+
+
+def _straight_path(x0, x1, y):
+    xs = np.arange(x0, x1, RES)
+    return np.column_stack((xs, np.full_like(xs, y)))
+
+
+def test_wavefront_is_manhattan_distance_around_obstacles():
+    cost = np.zeros((5, 7), dtype=np.uint8)
+    cost[0:4, 3] = 253  # a wall with a gap at the top row (iy = 4)
+    d = dk.wavefront(np.array([[0, 0]]), cost, 0.1)
+    assert math.isclose(d[0, 2], 0.2, rel_tol=1e-6)
+    assert d[0, 3] == np.inf
+    # to (0, 4): up 4, across 4, down 4 -> 12 steps
+    assert math.isclose(d[0, 4], 1.2, rel_tol=1e-6)
+
+
+def test_free_straight_path_accelerates_forwards_within_the_window():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    dwa = DwaPlanner(p)
+    dwa.set_plan(_straight_path(3.0, 8.0, 3.0))
+    cmd = dwa.command(pose, 0.0, 0.0, _local([], pose, p), None)
+    assert cmd.legal and cmd.kind == "forward"
+    assert math.isclose(cmd.v, 0.15)  # 0 + acc_lim_x (1.5) * 0.1 s: fastest in the window
+    assert abs(cmd.w) < 1e-9
+    cmd = dwa.command(pose, 0.85, 0.0, _local([], pose, p), None)
+    assert math.isclose(cmd.v, 0.85) and abs(cmd.w) < 1e-9
+
+
+def test_path_behind_makes_it_turn_in_place():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    dwa = DwaPlanner(p)
+    dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
+    cmd = dwa.command(pose, 0.0, 0.0, _local([], pose, p), None)
+    assert cmd.legal and cmd.kind == "rotate" and abs(cmd.w) >= p.min_in_place_vel_theta
+
+
+def test_wall_ahead_with_path_through_it_has_no_forward_command():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    wall = _wall(3.3, 3.32, 0.5, 5.5)  # across the whole window, 0.1 m in front of the robot
+    dwa = DwaPlanner(p)
+    dwa.set_plan(_straight_path(3.0, 8.0, 3.0))
+    cmd = dwa.command(pose, 0.0, 0.0, _local(wall, pose, p), None)
+    assert cmd.kind != "forward"
+
+
+def test_drives_around_a_post_along_the_global_plan_without_touching_it():
+    p = ExploreParams()
+    pose = np.array([1.0, 3.025, 0.0])
+    post = _wall(2.0, 2.1, 2.95, 3.1)  # a 0.1 m post 1 m ahead, on the straight line
+    prob = np.full((120, 160), 0.05, dtype=np.float32)
+    cells = np.floor(post / RES).astype(int)
+    prob[cells[:, 1], cells[:, 0]] = 0.9
+    cm = GlobalCostmap(p)
+    cm.update(prob, RES, (0.0, 0.0))
+    path = GlobalPlanner(p).plan(cm, pose[:2], (4.0, 3.025))
+    dwa = DwaPlanner(p)
+    dwa.set_plan(path)
+    x, v, w = pose.copy(), 0.0, 0.0
+    closest = np.inf
+    for _ in range(120):  # 12 s, integrating the unicycle with the commanded velocities
+        local = _local(post, x, p)
+        cmd = dwa.command(x, v, w, local, None)
+        assert cmd.legal
+        v, w = cmd.v, cmd.w
+        x[0] += v * math.cos(x[2]) * 0.1
+        x[1] += v * math.sin(x[2]) * 0.1
+        x[2] += w * 0.1
+        assert not footprint_collides(
+            local.lethal, local.dist_m, *local.origin, RES, *x, 0.2, 0.2 * math.sqrt(2)
+        )
+        closest = min(closest, float(np.min(np.hypot(*(post - x[:2]).T))))
+        if dwa.goal_reached(x, None):
+            break
+    assert dwa.goal_reached(x, None)
+    assert closest > 0.2  # the centre never came nearer than the footprint's half side
+
+
+def test_goal_alignment_then_reached():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    dwa = DwaPlanner(p)
+    dwa.set_plan(np.array([[3.0, 3.0], [3.1, 3.0]]))
+    local = _local([], pose, p)
+    cmd = dwa.command(pose, 0.0, 0.0, local, math.pi / 2)
+    assert cmd.kind == "align" and cmd.w > 0 and cmd.v == 0.0
+    assert not dwa.goal_reached(pose, math.pi / 2)
+    pose[2] = math.pi / 2 - 0.1
+    assert dwa.goal_reached(pose, math.pi / 2)
+    assert dwa.command(pose, 0.0, 0.0, local, math.pi / 2).kind == "aligned"

@@ -1,0 +1,113 @@
+"""Frontier search: frontier cells, clusters, min size, nearest by travel, blacklist, back-off."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worker.explore.costmap import GlobalCostmap
+from worker.explore.frontiers import FrontierSearch
+from worker.explore.params import ExploreParams
+
+RES = 0.05
+
+
+def _setup(prob, params=None):
+    p = params or ExploreParams()
+    cm = GlobalCostmap(p)
+    cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
+    fs = FrontierSearch(p)
+    fs.update(cm, None)
+    return cm, fs
+
+
+def test_frontier_cells_are_free_cells_touching_unknown():
+    prob = np.full((20, 30), np.nan)
+    prob[:, :10] = 0.05
+    prob[5, 9] = 0.9  # an obstacle on the boundary is not a frontier
+    cm, fs = _setup(prob)
+    expected = np.zeros((20, 30), dtype=bool)
+    expected[:, 9] = True
+    expected[5, 9] = False
+    np.testing.assert_array_equal(fs.frontier, expected)
+    assert fs.n_frontier_cells == 19
+
+
+def test_incremental_frontier_update_tracks_the_map():
+    prob = np.full((20, 30), np.nan)
+    prob[:, :10] = 0.05
+    cm, fs = _setup(prob)
+    prob[:, 10:15] = 0.05  # the robot saw 5 more columns
+    changed = cm.update(prob.astype(np.float32), RES, (0.0, 0.0), window=(0, 20, 8, 16))
+    fs.update(cm, changed)
+    assert fs.frontier[:, 14].all() and not fs.frontier[:, 9].any()
+    assert fs.n_frontier_cells == 20 == fs.frontier.sum()
+
+
+def test_clusters_and_minimum_size():
+    prob = np.full((60, 60), 0.9)
+    prob[5:55, 5:55] = 0.05
+    prob[20:40, 54] = np.nan  # a 1.0 m opening to the unknown on the right
+    prob[30:33, 5] = np.nan  # a 0.15 m gap on the left: too small (< 0.5 m)
+    cm, fs = _setup(prob)
+    cells, labels = fs.clusters()
+    sizes = sorted(np.bincount(labels))
+    # right: column 53 beside the opening (20) + the free cells above and below it in column 54;
+    # left: column 6 beside the gap (3) + the free cells above and below it in column 5
+    assert sizes == [5, 22]
+    goal = fs.choose(cm, (1.0, 1.5), [])
+    assert goal is not None and goal.n_clusters == 1
+    assert goal.goal_xy[0] > 2.0  # the big opening on the right, although the gap is nearer
+    assert abs(goal.cluster_size_m - 22 * RES) < 1e-9
+
+
+def _corridor_world():
+    # Known free U-shaped corridor; two openings into the unknown: A at the end of the lower
+    # branch (Euclidean-near the robot but far by travel), B just beyond a thin wall.
+    prob = np.full((80, 120), 0.9)
+    prob[10:30, 10:110] = 0.05  # lower branch
+    prob[50:70, 10:110] = 0.05  # upper branch
+    prob[10:70, 90:110] = 0.05  # the bend joining them on the right
+    prob[50:70, 9] = np.nan  # opening A at the upper branch's left end
+    prob[10:30, 110] = np.nan  # opening B at the lower branch's right end
+    return prob
+
+
+def test_nearest_frontier_by_travel_not_by_straight_line():
+    cm, fs = _setup(_corridor_world())
+    robot = (1.0, 1.0)  # lower branch, left end: A is 2.5 m away through the wall, B ~4.5 m
+    goal = fs.choose(cm, robot, [])
+    assert goal is not None and goal.goal_xy[0] > 4.5  # B, at the lower branch's right end
+    a_goal = fs.choose(cm, (1.0, 3.0), [])  # in the upper branch now: A is nearest
+    assert a_goal is not None and a_goal.goal_xy[0] < 1.5 and a_goal.goal_xy[1] > 2.4
+
+
+def test_blacklisted_frontier_is_skipped_and_goal_faces_the_frontier():
+    cm, fs = _setup(_corridor_world())
+    first = fs.choose(cm, (1.0, 1.0), [])
+    second = fs.choose(cm, (1.0, 1.0), [first.frontier_xy])
+    assert second is not None and second.goal_xy[0] < 1.5  # opening A instead
+    assert abs(abs(second.yaw) - np.pi) < 0.8  # A is to the goal's left (-x)
+    assert abs(first.yaw) < 0.8  # B is to the goal's right (+x)
+    none = fs.choose(cm, (1.0, 1.0), [first.frontier_xy, second.frontier_xy])
+    assert none is None
+
+
+def test_goal_is_backed_off_from_walls():
+    cm, fs = _setup(_corridor_world())
+    goal = fs.choose(cm, (1.0, 1.0), [])
+    ix, iy = cm.world_to_cell(*goal.goal_xy)
+    # the corridor is 1.0 m wide: its middle cells are 0.5 m from the walls (cost 252e^-2.25)
+    assert cm.inflated[iy, ix] <= 27
+    assert 0.9 < goal.goal_xy[1] < 1.1
+
+
+def test_unreachable_frontier_is_not_chosen():
+    prob = np.full((60, 100), 0.9)
+    prob[10:50, 5:45] = 0.05  # the robot's room, closed
+    prob[10:50, 55:95] = 0.05  # another room seen through the wall, open to the unknown
+    prob[20:40, 95] = np.nan
+    cm, fs = _setup(prob)
+    assert fs.n_frontier_cells > 0
+    assert fs.choose(cm, (1.0, 1.5), []) is None
+    assert fs.frontier_near(cm, (4.8, 1.5), 0.3)
+    assert not fs.frontier_near(cm, (1.0, 1.5), 0.3)

@@ -1,0 +1,44 @@
+"""Safety controller: obstacle ahead within 0.2 m of the footprint -> back off, turn away."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore.params import ExploreParams
+from worker.explore.safety import SafetyController, front_clearance
+
+ANGLES = -3 * math.pi / 4 + np.arange(541) * math.pi / 360
+
+
+def _scan_with_point(x, y):
+    """A scan seeing nothing but one point (x, y) in the robot frame."""
+    ranges = np.full(541, 30.0)
+    a = math.atan2(y, x)
+    k = int(round((a - ANGLES[0]) / (math.pi / 360)))
+    ranges[k] = math.hypot(x, y)
+    return ranges
+
+
+def test_front_clearance_measures_from_the_front_edge():
+    d, side = front_clearance(_scan_with_point(0.35, 0.0), ANGLES, 30.0, 0.2)
+    assert abs(d - 0.15) < 1e-3 and side < 0 or side > 0
+    d, side = front_clearance(_scan_with_point(0.3, 0.3), ANGLES, 30.0, 0.2)
+    assert abs(d - math.hypot(0.1, 0.1)) < 5e-3 and side == 1.0
+    d, _ = front_clearance(_scan_with_point(0.0, 0.25), ANGLES, 30.0, 0.2)
+    assert d == math.inf  # beside the robot, not ahead
+
+
+def test_safety_backs_off_and_turns_away_then_releases():
+    p = ExploreParams()
+    safety = SafetyController(p, ANGLES, 30.0)
+    assert safety.check(0.0, _scan_with_point(1.0, 0.0), 0.5) is None
+    v, w = safety.check(0.0, _scan_with_point(0.3, 0.1), 0.5)  # obstacle front-left
+    assert v == p.escape_vel < 0 and w < 0  # nose turns clockwise, away from the left
+    assert safety.n_triggers == 1 and safety.active(0.5)
+    assert safety.check(0.5, _scan_with_point(5.0, 0.0), 0.5) == (v, w)  # manoeuvre continues
+    assert safety.check(1.0, _scan_with_point(5.0, 0.0), 0.5) is None
+    assert safety.check(1.1, _scan_with_point(0.3, -0.1), 0.0) is None  # not moving forwards
+    _, w = safety.check(1.2, _scan_with_point(0.3, -0.1), 0.3)  # front-right: turn left
+    assert w > 0

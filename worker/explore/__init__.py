@@ -1,0 +1,1 @@
+"""Autonomous exploration: costmaps, frontiers, navfn-like planner, DWA, safety, stop rules."""

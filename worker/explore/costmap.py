@@ -1,0 +1,205 @@
+"""Global costmap from the SLAM map and local costmap from the latest scans (costmap_2d-like)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore import costmap_kernels as ck
+from worker.explore.params import ExploreParams
+
+
+class GlobalCostmap:
+    """Static layer (SLAM map) + inflation layer, updated only where the map changed.
+
+    Grids are `[iy, ix]`, row 0 at the bottom, in the SLAM map's frame: `lethal (H, W) bool`,
+    `unknown (H, W) bool`, `inflated (H, W) uint8` (costmap_2d values from obstacles only; the
+    master value of an unknown cell is NO_INFORMATION unless an obstacle is within the
+    inscribed radius, as costmap_2d's inflation layer writes it).
+    """
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        self.inscribed_radius = params.footprint_half_m
+        self.circumscribed_radius = params.footprint_half_m * math.sqrt(2.0)
+        self.resolution = 0.0
+        self.origin = np.zeros(2)
+        self.lethal = np.zeros((0, 0), dtype=np.bool_)
+        self.unknown = np.zeros((0, 0), dtype=np.bool_)
+        self.inflated = np.zeros((0, 0), dtype=np.uint8)
+        self._kernel = np.zeros((1, 1), dtype=np.uint8)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.lethal.shape
+
+    def world_to_cell(self, x: float, y: float) -> tuple[int, int]:
+        """(ix, iy) of the cell holding world point (x, y), possibly outside the grid."""
+        return (
+            int(math.floor((x - self.origin[0]) / self.resolution)),
+            int(math.floor((y - self.origin[1]) / self.resolution)),
+        )
+
+    def cell_to_world(self, ix, iy):
+        """Centre of cell (ix, iy) in metres (works on arrays too)."""
+        return (
+            self.origin[0] + (np.asarray(ix) + 0.5) * self.resolution,
+            self.origin[1] + (np.asarray(iy) + 0.5) * self.resolution,
+        )
+
+    def in_bounds(self, ix: int, iy: int) -> bool:
+        h, w = self.shape
+        return 0 <= ix < w and 0 <= iy < h
+
+    def master(self) -> np.ndarray:
+        """(H, W) uint8 combined costs: inflation, and NO_INFORMATION for unknown cells."""
+        out = self.inflated.copy()
+        out[self.unknown & (self.inflated < ck.INSCRIBED)] = ck.NO_INFORMATION
+        return out
+
+    def update(
+        self, prob: np.ndarray, resolution: float, origin, window=None
+    ) -> tuple[int, int, int, int]:
+        """Bring the layers up to date with the SLAM map `prob (H, W)` (NaN unknown).
+
+        window: `(y0, y1, x0, x1)` cells where the map can have changed since the last call,
+        or None for the whole map. A map of another size, origin or resolution is re-read
+        whole. Returns the bounding box of the cells whose lethal or unknown state changed
+        (empty when y1 == y0), which the frontier search uses to update itself.
+        """
+        origin = np.asarray(origin, dtype=float)[:2]
+        h, w = prob.shape
+        if (
+            (h, w) != self.shape
+            or resolution != self.resolution
+            or not np.array_equal(origin, self.origin)
+        ):
+            self._reset(prob.shape, resolution, origin)
+            window = None
+        if window is None:
+            window = (0, h, 0, w)
+        y0, y1, x0, x1 = (int(v) for v in window)
+        y0, y1, x0, x1 = max(0, y0), min(h, y1), max(0, x0), min(w, x1)
+        if y1 <= y0 or x1 <= x0:
+            return (0, 0, 0, 0)
+        ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
+            prob, self.params.occupied_thresh, self.lethal, self.unknown, y0, y1, x0, x1
+        )
+        if ly1 > ly0:
+            r = self._kernel.shape[0] // 2
+            ck.inflate_region(
+                self.lethal,
+                self._kernel,
+                self.inflated,
+                max(0, ly0 - r),
+                min(h, ly1 + r),
+                max(0, lx0 - r),
+                min(w, lx1 + r),
+            )
+        return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
+
+    def _reset(self, shape, resolution: float, origin: np.ndarray) -> None:
+        self.resolution = float(resolution)
+        self.origin = origin.copy()
+        self.lethal = np.zeros(shape, dtype=np.bool_)
+        self.unknown = np.ones(shape, dtype=np.bool_)
+        self.inflated = np.zeros(shape, dtype=np.uint8)
+        p = self.params
+        self._kernel = ck.inflation_kernel(
+            self.resolution, self.inscribed_radius, p.cost_scaling_factor, p.inflation_radius
+        )
+
+
+def _union(a, b):
+    """Union of two `(y0, y1, x0, x1)` boxes, either possibly empty."""
+    if a[1] <= a[0]:
+        return tuple(b)
+    if b[1] <= b[0]:
+        return tuple(a)
+    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+class LocalCostmap:
+    """Rolling window around the robot built from recent scans only (thesis: static_map false).
+
+    Aligned with the global grid (same resolution, cell edges on the same lattice) so that the
+    DWA can score trajectories against it directly. Arrays are `[iy, ix]`:
+    `lethal (n, n) bool`, `dist_m (n, n) float32` to the nearest scan obstacle,
+    `cost (n, n) uint8` inflated as costmap_2d does.
+    """
+
+    def __init__(self, params: ExploreParams, resolution: float):
+        from scipy import ndimage  # noqa: F401  (imported once here: warms the module)
+
+        self.params = params
+        self.resolution = float(resolution)
+        self.n = int(math.ceil(params.local_window_m / self.resolution))
+        self._kernel_params = (
+            params.footprint_half_m,
+            params.cost_scaling_factor,
+            params.inflation_radius,
+        )
+        self._marks: list[tuple[float, np.ndarray]] = []  # (t, (K, 2) obstacle points [m])
+        self.origin = np.zeros(2)
+        self.lethal = np.zeros((self.n, self.n), dtype=np.bool_)
+        self.dist_m = np.full((self.n, self.n), np.inf, dtype=np.float32)
+        self.cost = np.zeros((self.n, self.n), dtype=np.uint8)
+
+    def add_scan(
+        self, t: float, pose: np.ndarray, ranges_m: np.ndarray, angles: np.ndarray, range_max: float
+    ) -> None:
+        """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
+        hit = ranges_m < range_max * 0.999
+        r = ranges_m[hit]
+        a = angles[hit] + pose[2]
+        self.add_points(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
+
+    def add_points(self, t: float, pts: np.ndarray) -> None:
+        """Mark obstacle points `(K, 2) [x, y]` (map frame) observed at time t."""
+        self._marks.append((t, np.asarray(pts, dtype=float).reshape(-1, 2)))
+        keep_after = t - self.params.local_persistence
+        self._marks = [m for m in self._marks if m[0] > keep_after]
+
+    def clear(self) -> None:
+        """Recovery behaviour: forget all but the newest scan's obstacles."""
+        self._marks = self._marks[-1:]
+
+    def build(self, x: float, y: float, grid_origin: np.ndarray) -> None:
+        """Rasterise the kept scan obstacles into the window centred on (x, y) and inflate."""
+        from scipy import ndimage
+
+        res = self.resolution
+        half = self.n // 2
+        ix = math.floor((x - grid_origin[0]) / res)
+        iy = math.floor((y - grid_origin[1]) / res)
+        self.origin = np.array(
+            [grid_origin[0] + (ix - half) * res, grid_origin[1] + (iy - half) * res]
+        )
+        lethal = np.zeros((self.n, self.n), dtype=np.bool_)
+        if self._marks:
+            pts = np.concatenate([m[1] for m in self._marks])
+            cx = np.floor((pts[:, 0] - self.origin[0]) / res).astype(np.int64)
+            cy = np.floor((pts[:, 1] - self.origin[1]) / res).astype(np.int64)
+            ok = (cx >= 0) & (cx < self.n) & (cy >= 0) & (cy < self.n)
+            lethal[cy[ok], cx[ok]] = True
+        self.lethal = lethal
+        if lethal.any():
+            self.dist_m = (ndimage.distance_transform_edt(~lethal) * res).astype(np.float32)
+        else:
+            self.dist_m = np.full((self.n, self.n), np.inf, dtype=np.float32)
+        self.cost = cost_from_distance(self.dist_m, *self._kernel_params)
+
+
+def cost_from_distance(
+    dist_m: np.ndarray, inscribed_radius: float, cost_scaling_factor: float, inflation_radius: float
+) -> np.ndarray:
+    """Vectorised costmap_2d computeCost on a distance field `(H, W)` [m] -> `(H, W) uint8`."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        c = np.floor(
+            (ck.INSCRIBED - 1) * np.exp(-cost_scaling_factor * (dist_m - inscribed_radius))
+        )
+    c = np.where(dist_m > inflation_radius, 0.0, c)
+    c = np.where(dist_m <= inscribed_radius, ck.INSCRIBED, c)
+    c = np.where(dist_m == 0.0, ck.LETHAL, c)
+    return c.astype(np.uint8)

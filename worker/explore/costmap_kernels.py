@@ -1,0 +1,186 @@
+"""Numba kernels of the costmap: costmap_2d inflation cost, bounded re-inflation, footprint test."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# costmap_2d's cost values (costmap_2d/cost_values.h): one byte per cell.
+FREE_SPACE = 0
+INSCRIBED = 253  # the robot's centre here puts the footprint into an obstacle
+LETHAL = 254  # an obstacle cell
+NO_INFORMATION = 255  # unknown space
+
+
+def inflation_cost(
+    distance_m: float, inscribed_radius: float, cost_scaling_factor: float, inflation_radius: float
+) -> int:
+    """costmap_2d InflationLayer::computeCost for a cell `distance_m` from the nearest obstacle.
+
+    0 -> LETHAL; <= inscribed radius -> INSCRIBED; else (INSCRIBED - 1) * exp(-k (d - r_in)),
+    truncated to a byte as the C++ cast does; 0 beyond the inflation radius.
+    """
+    if distance_m == 0.0:
+        return LETHAL
+    if distance_m <= inscribed_radius:
+        return INSCRIBED
+    if distance_m > inflation_radius:
+        return FREE_SPACE
+    factor = math.exp(-cost_scaling_factor * (distance_m - inscribed_radius))
+    return int((INSCRIBED - 1) * factor)
+
+
+def effective_inflation_cells(
+    resolution: float, inscribed_radius: float, cost_scaling_factor: float, inflation_radius: float
+) -> int:
+    """Radius in cells beyond which the inflation cost truncates to 0 (or the inflation radius).
+
+    With the thesis's 7.5 scaling the cost is below 1 past ~0.94 m, well inside 2.25 m, so
+    stamping farther would only write zeros.
+    """
+    r_zero = inscribed_radius + math.log(INSCRIBED - 1) / cost_scaling_factor
+    r = min(inflation_radius, r_zero)
+    return int(math.ceil(r / resolution)) + 1
+
+
+def inflation_kernel(
+    resolution: float, inscribed_radius: float, cost_scaling_factor: float, inflation_radius: float
+) -> np.ndarray:
+    """Cost stamp `(2R+1, 2R+1) uint8` around one obstacle cell; distances between cell centres."""
+    r_cells = effective_inflation_cells(
+        resolution, inscribed_radius, cost_scaling_factor, inflation_radius
+    )
+    kernel = np.zeros((2 * r_cells + 1, 2 * r_cells + 1), dtype=np.uint8)
+    for dy in range(-r_cells, r_cells + 1):
+        for dx in range(-r_cells, r_cells + 1):
+            d = math.hypot(dx, dy) * resolution
+            kernel[dy + r_cells, dx + r_cells] = inflation_cost(
+                d, inscribed_radius, cost_scaling_factor, inflation_radius
+            )
+    return kernel
+
+
+@njit(cache=True)
+def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
+    """Recompute `cost[y0:y1, x0:x1]` from the lethal cells that can reach it (in place).
+
+    lethal: (H, W) bool; kernel: (2R+1, 2R+1) uint8 stamp; cost: (H, W) uint8 inflated costs.
+    Every obstacle within R cells of the region stamps the max of its kernel into the region,
+    which is what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Obstacle
+    cells whose 4 neighbours are all obstacles are skipped: a boundary cell is always nearer.
+    """
+    h, w = lethal.shape
+    r = kernel.shape[0] // 2
+    for iy in range(y0, y1):
+        for ix in range(x0, x1):
+            cost[iy, ix] = 0
+    sy0 = max(0, y0 - r)
+    sy1 = min(h, y1 + r)
+    sx0 = max(0, x0 - r)
+    sx1 = min(w, x1 + r)
+    for sy in range(sy0, sy1):
+        for sx in range(sx0, sx1):
+            if not lethal[sy, sx]:
+                continue
+            if (
+                0 < sy < h - 1
+                and 0 < sx < w - 1
+                and lethal[sy - 1, sx]
+                and lethal[sy + 1, sx]
+                and lethal[sy, sx - 1]
+                and lethal[sy, sx + 1]
+                and y0 <= sy < y1
+                and x0 <= sx < x1
+            ):
+                cost[sy, sx] = 254
+                continue
+            ky0 = max(y0, sy - r)
+            ky1 = min(y1, sy + r + 1)
+            kx0 = max(x0, sx - r)
+            kx1 = min(x1, sx + r + 1)
+            for iy in range(ky0, ky1):
+                krow = iy - sy + r
+                for ix in range(kx0, kx1):
+                    c = kernel[krow, ix - sx + r]
+                    if c > cost[iy, ix]:
+                        cost[iy, ix] = c
+
+
+@njit(cache=True)
+def footprint_collides(lethal, dist_m, origin_x, origin_y, resolution, x, y, theta, half, circ):
+    """True when the square footprint (half side `half` [m]) at (x, y, theta) covers an obstacle.
+
+    lethal: (H, W) bool obstacle cells; dist_m: (H, W) distance [m] from each cell centre to
+    the nearest obstacle cell centre. Far from obstacles (> circumscribed radius + a cell) the
+    answer is no without looking further; nearer, the footprint's outline is sampled at half
+    the cell size. Cells outside the grid count as free (the caller sizes the window).
+    """
+    h, w = lethal.shape
+    ix = int(math.floor((x - origin_x) / resolution))
+    iy = int(math.floor((y - origin_y) / resolution))
+    if 0 <= ix < w and 0 <= iy < h:
+        d = dist_m[iy, ix]
+        if d > circ + resolution:
+            return False
+        if lethal[iy, ix] or d < half:
+            return True  # on an obstacle, or an obstacle centre inside the inscribed circle
+    c = math.cos(theta)
+    s = math.sin(theta)
+    # The outline is enough: an obstacle can only get inside the square by crossing its edges
+    # (trajectory steps are a fraction of a cell), and one near the centre was caught above.
+    n = int(math.ceil(2.0 * half / (0.5 * resolution))) + 1
+    for i in range(n):
+        u = -half + 2.0 * half * i / (n - 1)
+        for k in range(4):
+            if k == 0:
+                a, b = u, -half
+            elif k == 1:
+                a, b = u, half
+            elif k == 2:
+                a, b = -half, u
+            else:
+                a, b = half, u
+            px = x + c * a - s * b
+            py = y + s * a + c * b
+            jx = int(math.floor((px - origin_x) / resolution))
+            jy = int(math.floor((py - origin_y) / resolution))
+            if 0 <= jx < w and 0 <= jy < h and lethal[jy, jx]:
+                return True
+    return False
+
+
+@njit(cache=True)
+def classify_region(prob, occupied_thresh, lethal, unknown, y0, y1, x0, x1):
+    """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
+
+    prob: (H, W) float32 occupancy probability, NaN unknown. A cell is lethal when its
+    probability reaches `occupied_thresh` (GMapping publishes 100 above its occ_thresh).
+    Returns the bounding boxes `(y0, y1, x0, x1)` of the lethal and of the unknown changes,
+    each empty (y1 == y0) when nothing changed.
+    """
+    ly0, ly1, lx0, lx1 = y1, y0, x1, x0
+    uy0, uy1, ux0, ux1 = y1, y0, x1, x0
+    for iy in range(y0, y1):
+        for ix in range(x0, x1):
+            p = prob[iy, ix]
+            unk = math.isnan(p)
+            let = (not unk) and p >= occupied_thresh
+            if let != lethal[iy, ix]:
+                lethal[iy, ix] = let
+                ly0 = min(ly0, iy)
+                ly1 = max(ly1, iy + 1)
+                lx0 = min(lx0, ix)
+                lx1 = max(lx1, ix + 1)
+            if unk != unknown[iy, ix]:
+                unknown[iy, ix] = unk
+                uy0 = min(uy0, iy)
+                uy1 = max(uy1, iy + 1)
+                ux0 = min(ux0, ix)
+                ux1 = max(ux1, ix + 1)
+    if ly1 <= ly0:
+        ly0 = ly1 = lx0 = lx1 = 0
+    if uy1 <= uy0:
+        uy0 = uy1 = ux0 = ux1 = 0
+    return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1

@@ -1,0 +1,159 @@
+"""DWA local planner (base_local_planner TrajectoryPlanner, dwa: true) following a global path."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from worker.explore import dwa_kernels as dk
+from worker.explore.costmap import LocalCostmap
+from worker.explore.params import ExploreParams
+
+
+def wrap_angle(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class Command:
+    """One controller output."""
+
+    v: float  # [m/s]
+    w: float  # [rad/s]
+    legal: bool  # False: no legal trajectory, the robot is told to stop
+    # "forward", "rotate", "escape"; "align" turning at the goal, "aligned" goal reached; "none"
+    kind: str
+
+
+class DwaPlanner:
+    """Scores forward-simulated (v, w) samples against the local costmap and the global path."""
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        p = params
+        prm = np.zeros(dk.N_PARAMS)
+        prm[dk.P_DT] = 1.0 / p.controller_frequency
+        prm[dk.P_MAX_VX] = p.max_vel_x
+        prm[dk.P_MIN_VX] = p.min_vel_x
+        prm[dk.P_MAX_VTH] = p.max_vel_theta
+        prm[dk.P_MIN_INPLACE_VTH] = p.min_in_place_vel_theta
+        prm[dk.P_ACC_X] = p.acc_lim_x
+        prm[dk.P_ACC_TH] = p.acc_lim_theta
+        prm[dk.P_SIM_TIME] = p.sim_time
+        prm[dk.P_SIM_GRAN] = p.sim_granularity
+        prm[dk.P_ANG_GRAN] = p.angular_sim_granularity
+        prm[dk.P_PDIST] = p.pdist_scale
+        prm[dk.P_GDIST] = p.gdist_scale
+        prm[dk.P_OCCDIST] = p.occdist_scale
+        prm[dk.P_LOOKAHEAD] = p.heading_lookahead
+        prm[dk.P_HALF] = p.footprint_half_m
+        prm[dk.P_CIRC] = p.footprint_half_m * math.sqrt(2.0)
+        prm[dk.P_ESCAPE_VX] = p.escape_vel
+        self.prm = prm
+        self.path_xy: np.ndarray | None = None
+        self.local_goal_xy: np.ndarray | None = None
+        self._rotating_left = self._rotating_right = False
+        self._stuck_left = self._stuck_right = False
+        self._prev_xy = (0.0, 0.0)
+
+    def set_plan(self, path_xy: np.ndarray | None) -> None:
+        """New global path `(K, 2) [x, y]` in the map frame (None: no path)."""
+        self.path_xy = None if path_xy is None or len(path_xy) == 0 else np.asarray(path_xy)
+
+    def command(
+        self, pose: np.ndarray, v0: float, w0: float, local: LocalCostmap, goal_yaw: float | None
+    ) -> Command:
+        """Velocity for this control period from pose `(3,)` [x, y, theta] and current (v0, w0).
+
+        Within xy_goal_tolerance of the path's end the robot only turns towards `goal_yaw`
+        (when given), as move_base does before declaring the goal reached.
+        """
+        if self.path_xy is None:
+            return Command(0.0, 0.0, False, "none")
+        p = self.params
+        goal = self.path_xy[-1]
+        if math.hypot(goal[0] - pose[0], goal[1] - pose[1]) <= p.xy_goal_tolerance:
+            return self._align(pose, w0, local, goal_yaw)
+        seeds, goal_cell = self._local_plan(pose, local)
+        if seeds is None:
+            return Command(0.0, 0.0, False, "none")
+        path_dist = dk.wavefront(seeds, local.cost, local.resolution)
+        goal_dist = dk.wavefront(goal_cell, local.cost, local.resolution)
+        goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        vx, vth, _, kind = dk.best_command(
+            float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
+            self._stuck_left, self._stuck_right, p.vx_samples, p.vtheta_samples,
+            local.lethal, local.dist_m, local.cost, path_dist, goal_dist,
+            float(local.origin[0]), float(local.origin[1]), local.resolution, self.prm,
+        )  # fmt: skip
+        self._track_oscillation(pose, kind, vth)
+        if kind < 0:
+            return Command(0.0, 0.0, False, "none")
+        return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
+
+    def _track_oscillation(self, pose, kind: int, vth: float) -> None:
+        """TrajectoryPlanner's flags: a second in-place turn the same way since the robot last
+        moved marks that way as stuck, until it travels oscillation_reset_dist."""
+        if kind == 1:
+            if vth < 0:
+                self._stuck_right |= self._rotating_right
+                self._rotating_right = True
+            else:
+                self._stuck_left |= self._rotating_left
+                self._rotating_left = True
+            self._prev_xy = (float(pose[0]), float(pose[1]))
+        moved = math.hypot(pose[0] - self._prev_xy[0], pose[1] - self._prev_xy[1])
+        if moved > self.params.oscillation_reset_dist:
+            self._rotating_left = self._rotating_right = False
+            self._stuck_left = self._stuck_right = False
+
+    def goal_reached(self, pose: np.ndarray, goal_yaw: float | None) -> bool:
+        """Within xy_goal_tolerance of the path's end and (if a yaw is given) yaw_goal_tolerance."""
+        if self.path_xy is None:
+            return False
+        goal = self.path_xy[-1]
+        if math.hypot(goal[0] - pose[0], goal[1] - pose[1]) > self.params.xy_goal_tolerance:
+            return False
+        return goal_yaw is None or abs(wrap_angle(goal_yaw - pose[2])) <= (
+            self.params.yaw_goal_tolerance
+        )
+
+    def _align(self, pose, w0: float, local: LocalCostmap, goal_yaw: float | None) -> Command:
+        p = self.params
+        if goal_yaw is None:
+            return Command(0.0, 0.0, True, "aligned")
+        err = wrap_angle(goal_yaw - pose[2])
+        if abs(err) <= p.yaw_goal_tolerance:
+            return Command(0.0, 0.0, True, "aligned")
+        # Proportional turn, at least min_in_place_vel, within what acc_lim_theta allows.
+        w = max(p.min_in_place_vel_theta, min(p.max_vel_theta, abs(err)))
+        w = math.copysign(w, err)
+        dt = 1.0 / p.controller_frequency
+        w = min(max(w, w0 - p.acc_lim_theta * dt), w0 + p.acc_lim_theta * dt)
+        if not dk.rotation_legal(
+            float(pose[0]), float(pose[1]), float(pose[2]), math.copysign(abs(w), err),
+            local.lethal, local.dist_m, float(local.origin[0]), float(local.origin[1]),
+            local.resolution, self.prm,
+        ):  # fmt: skip
+            return Command(0.0, 0.0, True, "aligned")  # turning would hit something: accept yaw
+        return Command(0.0, float(w), True, "align")
+
+    def _local_plan(self, pose, local: LocalCostmap):
+        """Path cells inside the local window from the point nearest the robot; local goal cell."""
+        path = self.path_xy
+        d = np.hypot(path[:, 0] - pose[0], path[:, 1] - pose[1])
+        i0 = int(np.argmin(d))
+        rest = path[i0:]
+        cx = np.floor((rest[:, 0] - local.origin[0]) / local.resolution).astype(np.int64)
+        cy = np.floor((rest[:, 1] - local.origin[1]) / local.resolution).astype(np.int64)
+        inside = (cx >= 1) & (cx < local.n - 1) & (cy >= 1) & (cy < local.n - 1)
+        if not inside[0]:
+            return None, None
+        out = np.flatnonzero(~inside)
+        k = int(out[0]) if out.size else len(rest)
+        seeds = np.column_stack((cy[:k], cx[:k]))
+        self.local_goal_xy = rest[k - 1]
+        return seeds, seeds[k - 1 : k].copy()

@@ -1,0 +1,199 @@
+"""Numba kernels of the DWA local planner: distance maps, trajectory roll-out and scoring."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from worker.explore.costmap_kernels import footprint_collides
+
+# Indices into the float64 parameter vector the kernel takes (numba has no dataclasses).
+P_DT = 0  # [s] control period: the dynamic window is what acc limits reach in one period
+P_MAX_VX = 1
+P_MIN_VX = 2
+P_MAX_VTH = 3
+P_MIN_INPLACE_VTH = 4
+P_ACC_X = 5
+P_ACC_TH = 6
+P_SIM_TIME = 7
+P_SIM_GRAN = 8
+P_ANG_GRAN = 9
+P_PDIST = 10
+P_GDIST = 11
+P_OCCDIST = 12
+P_LOOKAHEAD = 13
+P_HALF = 14  # [m] half side of the footprint
+P_CIRC = 15  # [m] circumscribed radius
+P_ESCAPE_VX = 16
+N_PARAMS = 17
+
+
+@njit(cache=True)
+def wavefront(seeds, cost, resolution):
+    """4-connected breadth-first distance [m] from seed cells through cells below INSCRIBED.
+
+    seeds: (K, 2) int64 [iy, ix] (seeded even when they lie in an obstacle); cost: (n, n) uint8.
+    Returns (n, n) float32, inf where unreachable: base_local_planner's MapGrid distances with
+    meter_scoring.
+    """
+    h, w = cost.shape
+    dist = np.full((h, w), np.inf, dtype=np.float32)
+    queue = np.empty(h * w, dtype=np.int64)
+    head = 0
+    tail = 0
+    for i in range(seeds.shape[0]):
+        iy = seeds[i, 0]
+        ix = seeds[i, 1]
+        if 0 <= iy < h and 0 <= ix < w and dist[iy, ix] == np.inf:
+            dist[iy, ix] = 0.0
+            queue[tail] = iy * w + ix
+            tail += 1
+    while head < tail:
+        idx = queue[head]
+        head += 1
+        iy = idx // w
+        ix = idx - iy * w
+        nd = dist[iy, ix] + resolution
+        for k in range(4):
+            jy = iy + (1 if k == 0 else (-1 if k == 1 else 0))
+            jx = ix + (1 if k == 2 else (-1 if k == 3 else 0))
+            if jy < 0 or jy >= h or jx < 0 or jx >= w:
+                continue
+            if cost[jy, jx] >= 253 or dist[jy, jx] != np.inf:  # BFS: first visit is final
+                continue
+            dist[jy, jx] = nd
+            queue[tail] = jy * w + jx
+            tail += 1
+    return dist
+
+
+@njit(cache=True)
+def score_trajectory(
+    x, y, th, vx, vth, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+):
+    """Roll out constant (vx, vth) for sim_time and score it; negative when illegal.
+
+    -1: the footprint hits an obstacle cell of the local costmap at some step; -2: a point has
+    no path or goal distance (off the window, or cut off by obstacles). Otherwise the score of
+    the end point, base_local_planner's (thesis eq. 5.1):
+    pdist * path_dist + gdist * goal_dist + occdist * max centre cost along the trajectory.
+    """
+    h, w = lethal.shape
+    dist_lin = abs(vx) * prm[P_SIM_TIME]
+    dist_ang = abs(vth) * prm[P_SIM_TIME]
+    n = int(max(dist_lin / prm[P_SIM_GRAN], dist_ang / prm[P_ANG_GRAN]) + 0.5)
+    n = max(n, 1)
+    dt = prm[P_SIM_TIME] / n
+    occ = 0.0
+    pd = 0.0
+    gd = 0.0
+    for _ in range(n):
+        x += vx * math.cos(th) * dt
+        y += vx * math.sin(th) * dt
+        th += vth * dt
+        ix = int(math.floor((x - ox) / res))
+        iy = int(math.floor((y - oy) / res))
+        if ix < 0 or ix >= w or iy < 0 or iy >= h:
+            return -2.0
+        if footprint_collides(lethal, dist_m, ox, oy, res, x, y, th, prm[P_HALF], prm[P_CIRC]):
+            return -1.0
+        c = float(cost[iy, ix])
+        if c > occ:
+            occ = c
+        pd = path_dist[iy, ix]
+        gd = goal_dist[iy, ix]
+        if pd == np.inf or gd == np.inf:
+            return -2.0
+    return prm[P_PDIST] * pd + prm[P_GDIST] * gd + prm[P_OCCDIST] * occ
+
+
+@njit(cache=True)
+def lookahead_goal_dist(x, y, th, vth, goal_dist, ox, oy, res, prm):
+    """Goal distance heading_lookahead ahead of where an in-place rotation ends (inf: off map)."""
+    th_end = th + vth * prm[P_SIM_TIME]
+    px = x + prm[P_LOOKAHEAD] * math.cos(th_end)
+    py = y + prm[P_LOOKAHEAD] * math.sin(th_end)
+    h, w = goal_dist.shape
+    ix = int(math.floor((px - ox) / res))
+    iy = int(math.floor((py - oy) / res))
+    if ix < 0 or ix >= w or iy < 0 or iy >= h:
+        return np.inf
+    return goal_dist[iy, ix]
+
+
+@njit(cache=True)
+def best_command(
+    x, y, th, v0, w0, goal_gap, stuck_left, stuck_right, n_vx, n_vth,
+    lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm,
+):  # fmt: skip
+    """Dynamic Window Approach as base_local_planner's TrajectoryPlanner (dwa: true) does it.
+
+    Forward samples: n_vx x n_vth velocities reachable within one control period, the top
+    speed capped by goal_gap / sim_time so the robot slows down at its goal. In-place
+    rotations (at least min_in_place_vel) replace the best forward trajectory when they score
+    no worse, preferring the one that looks most towards the goal, and not a direction flagged
+    as oscillating. If nothing is legal, back off at escape_vel. Returns (vx, vth, score, kind):
+    kind 0 forward, 1 rotation, 2 escape, -1 nothing legal.
+    """
+    dt = prm[P_DT]
+    top = min(prm[P_MAX_VX], goal_gap / prm[P_SIM_TIME])
+    vx_hi = max(min(top, v0 + prm[P_ACC_X] * dt), prm[P_MIN_VX])
+    vx_lo = max(prm[P_MIN_VX], v0 - prm[P_ACC_X] * dt)
+    if vx_hi < vx_lo:
+        vx_hi = vx_lo
+    vth_lo = max(-prm[P_MAX_VTH], w0 - prm[P_ACC_TH] * dt)
+    vth_hi = min(prm[P_MAX_VTH], w0 + prm[P_ACC_TH] * dt)
+    dvth = (vth_hi - vth_lo) / max(n_vth - 1, 1)
+    best = -1.0
+    bvx = 0.0
+    bvth = 0.0
+    kind = -1
+    # Fastest first and straight ahead first: on the grid many samples score the same and the
+    # first of equal scores wins (ROS starts from the slowest; we prefer progress).
+    for i in range(n_vx - 1, -1, -1):
+        vx = vx_lo if n_vx == 1 else vx_lo + (vx_hi - vx_lo) * i / (n_vx - 1)
+        for j in range(-1, n_vth):
+            vth = 0.0 if j < 0 else vth_lo + dvth * j
+            s = score_trajectory(
+                x, y, th, vx, vth, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+            )
+            if s >= 0.0 and (best < 0.0 or s < best):
+                best, bvx, bvth, kind = s, vx, vth, 0
+    heading_dist = np.inf
+    for j in range(n_vth):
+        vth = vth_lo + dvth * j
+        if abs(vth) <= dvth:
+            continue  # (almost) no rotation: nothing to gain in place
+        if (vth > 0.0 and stuck_left) or (vth < 0.0 and stuck_right):
+            continue
+        vlim = max(vth, prm[P_MIN_INPLACE_VTH]) if vth > 0 else min(vth, -prm[P_MIN_INPLACE_VTH])
+        s = score_trajectory(
+            x, y, th, 0.0, vlim, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+        )
+        if s >= 0.0 and (best < 0.0 or s <= best):
+            ahead = lookahead_goal_dist(x, y, th, vlim, goal_dist, ox, oy, res, prm)
+            if ahead < heading_dist:
+                heading_dist = ahead
+                best, bvx, bvth, kind = s, 0.0, vlim, 1
+    if kind < 0:
+        s = score_trajectory(
+            x, y, th, prm[P_ESCAPE_VX], 0.0, lethal, dist_m, cost, path_dist, goal_dist,
+            ox, oy, res, prm,
+        )  # fmt: skip
+        if s >= 0.0:
+            best, bvx, bvth, kind = s, prm[P_ESCAPE_VX], 0.0, 2
+    return bvx, bvth, best, kind
+
+
+@njit(cache=True)
+def rotation_legal(x, y, th, vth, lethal, dist_m, ox, oy, res, prm):
+    """True when rotating in place at vth for sim_time keeps the footprint clear."""
+    n = max(1, int(abs(vth) * prm[P_SIM_TIME] / prm[P_ANG_GRAN] + 0.5))
+    dt = prm[P_SIM_TIME] / n
+    for _ in range(n):
+        th += vth * dt
+        if footprint_collides(lethal, dist_m, ox, oy, res, x, y, th, prm[P_HALF], prm[P_CIRC]):
+            return False
+    return True

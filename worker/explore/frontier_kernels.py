@@ -1,0 +1,126 @@
+"""Numba kernels of the frontier search: frontier cells, clusters, goal candidate stamping."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def update_frontier_region(lethal, unknown, frontier, y0, y1, x0, x1):
+    """Recompute `frontier[y0:y1, x0:x1]` in place: known free cells with an unknown 4-neighbour.
+
+    lethal, unknown, frontier: (H, W) bool. Returns the change in the number of frontier cells.
+    """
+    h, w = lethal.shape
+    delta = 0
+    for iy in range(y0, y1):
+        for ix in range(x0, x1):
+            f = False
+            if not unknown[iy, ix] and not lethal[iy, ix]:
+                f = (
+                    (iy > 0 and unknown[iy - 1, ix])
+                    or (iy < h - 1 and unknown[iy + 1, ix])
+                    or (ix > 0 and unknown[iy, ix - 1])
+                    or (ix < w - 1 and unknown[iy, ix + 1])
+                )
+            if f != frontier[iy, ix]:
+                delta += 1 if f else -1
+                frontier[iy, ix] = f
+    return delta
+
+
+@njit(cache=True)
+def label_clusters(frontier, cells, labels_buf, stamp, run_id):
+    """8-connected clusters of frontier cells.
+
+    cells: (K, 2) int64 [iy, ix] of every frontier cell. labels_buf, stamp: (H, W) int64 reusable
+    buffers (valid where stamp == run_id). Returns `(K,) int64` cluster label per cell, 0-based.
+    """
+    h, w = frontier.shape
+    k = cells.shape[0]
+    for i in range(k):
+        iy = cells[i, 0]
+        ix = cells[i, 1]
+        stamp[iy, ix] = run_id
+        labels_buf[iy, ix] = -1
+    out = np.empty(k, dtype=np.int64)
+    queue = np.empty(k, dtype=np.int64)
+    n_labels = 0
+    for i in range(k):
+        sy = cells[i, 0]
+        sx = cells[i, 1]
+        if labels_buf[sy, sx] >= 0:
+            continue
+        labels_buf[sy, sx] = n_labels
+        head = 0
+        tail = 0
+        queue[tail] = sy * w + sx
+        tail += 1
+        while head < tail:
+            idx = queue[head]
+            head += 1
+            iy = idx // w
+            ix = idx - iy * w
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    jy = iy + dy
+                    jx = ix + dx
+                    if jy < 0 or jy >= h or jx < 0 or jx >= w:
+                        continue
+                    if stamp[jy, jx] == run_id and labels_buf[jy, jx] < 0:
+                        labels_buf[jy, jx] = n_labels
+                        queue[tail] = jy * w + jx
+                        tail += 1
+        n_labels += 1
+    for i in range(k):
+        out[i] = labels_buf[cells[i, 0], cells[i, 1]]
+    return out
+
+
+@njit(cache=True)
+def stamp_targets(cells, cell_cluster, cell_valid, offsets, inflated, unknown, target, owner):
+    """Mark goal candidates: passable known cells within the goal radius of a valid frontier cell.
+
+    cells: (K, 2) [iy, ix] frontier cells; cell_cluster: (K,) their cluster; cell_valid: (K,)
+    bool (cluster big enough, not blacklisted); offsets: (M, 2) [dy, dx] of the goal disc.
+    target (H, W) bool and owner (H, W) int64 (cluster of each candidate) are written; returns
+    the (N, 2) [iy, ix] cells marked, so that the caller can unmark them afterwards without
+    clearing the whole grid.
+    """
+    h, w = target.shape
+    marked = np.empty((1024, 2), dtype=np.int64)
+    n = 0
+    for i in range(cells.shape[0]):
+        c = cell_cluster[i]
+        if not cell_valid[i]:
+            continue
+        for m in range(offsets.shape[0]):
+            jy = cells[i, 0] + offsets[m, 0]
+            jx = cells[i, 1] + offsets[m, 1]
+            if jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
+                continue
+            if unknown[jy, jx] or inflated[jy, jx] >= 253:
+                continue
+            target[jy, jx] = True
+            owner[jy, jx] = c
+            if n == marked.shape[0]:
+                m2 = np.empty((2 * n, 2), dtype=np.int64)
+                m2[:n] = marked
+                marked = m2
+            marked[n, 0] = jy
+            marked[n, 1] = jx
+            n += 1
+    return marked[:n]
+
+
+@njit(cache=True)
+def any_in_disc(mask, iy, ix, offsets):
+    """True when some cell of `mask (H, W) bool` lies in the disc `offsets` around (iy, ix)."""
+    h, w = mask.shape
+    for m in range(offsets.shape[0]):
+        jy = iy + offsets[m, 0]
+        jx = ix + offsets[m, 1]
+        if 0 <= jy < h and 0 <= jx < w and mask[jy, jx]:
+            return True
+    return False

@@ -1,0 +1,152 @@
+"""Frontier search (explore_lite-like): clusters of free cells by unknown, nearest by travel."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from worker.explore import frontier_kernels as fk
+from worker.explore.costmap import GlobalCostmap
+from worker.explore.params import ExploreParams
+from worker.explore.planner import DijkstraSearch, cells_in_radius
+
+
+@dataclass(frozen=True)
+class FrontierGoal:
+    """A chosen exploration goal (map frame)."""
+
+    goal_xy: np.ndarray  # (2,) [m] where to drive: a low-cost cell near the frontier
+    yaw: float  # [rad] heading at the goal: looking at the frontier
+    frontier_xy: np.ndarray  # (2,) [m] the frontier cell nearest to the goal
+    cluster_size_m: float  # [m] frontier length (cells x resolution, as explore_lite)
+    travel_cost: float  # [-] navfn potential from the robot to the goal
+    n_clusters: int  # clusters big enough at the time of the choice
+
+
+class FrontierSearch:
+    """Keeps the frontier mask up to date and picks the nearest frontier cluster by travel cost."""
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        self.frontier = np.zeros((0, 0), dtype=np.bool_)
+        self.n_frontier_cells = 0
+        self.search = DijkstraSearch()
+        self._target = np.zeros((0, 0), dtype=np.bool_)
+        self._owner = np.zeros((0, 0), dtype=np.int64)
+        self._labels = np.zeros((0, 0), dtype=np.int64)
+        self._stamp = np.zeros((0, 0), dtype=np.int64)
+        self._run_id = 0
+        self._resolution = 0.0
+
+    def update(self, costmap: GlobalCostmap, bbox) -> None:
+        """Refresh the frontier cells in `bbox (y0, y1, x0, x1)` grown by one cell (None: all)."""
+        h, w = costmap.shape
+        if self.frontier.shape != (h, w) or costmap.resolution != self._resolution:
+            self.frontier = np.zeros((h, w), dtype=np.bool_)
+            self._target = np.zeros((h, w), dtype=np.bool_)
+            self._owner = np.zeros((h, w), dtype=np.int64)
+            self._labels = np.zeros((h, w), dtype=np.int64)
+            self._stamp = np.zeros((h, w), dtype=np.int64)
+            self._resolution = costmap.resolution
+            self.n_frontier_cells = 0
+            bbox = None
+        if bbox is None:
+            bbox = (0, h, 0, w)
+        y0, y1, x0, x1 = bbox
+        if y1 <= y0:
+            return
+        self.n_frontier_cells += fk.update_frontier_region(
+            costmap.lethal,
+            costmap.unknown,
+            self.frontier,
+            max(0, y0 - 1),
+            min(h, y1 + 1),
+            max(0, x0 - 1),
+            min(w, x1 + 1),
+        )
+
+    def clusters(self) -> tuple[np.ndarray, np.ndarray]:
+        """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
+        cells = np.argwhere(self.frontier).astype(np.int64)
+        self._run_id += 1
+        labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
+        return cells, labels
+
+    def choose(
+        self, costmap: GlobalCostmap, robot_xy, blacklist: list[np.ndarray]
+    ) -> FrontierGoal | None:
+        """Nearest frontier cluster by travel cost through known space, backed off from walls.
+
+        Clusters shorter than min_frontier_size and clusters with a cell within blacklist_radius
+        of a blacklisted point are ignored. None when no frontier can be reached.
+        """
+        p = self.params
+        res = costmap.resolution
+        sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
+        if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
+            return None
+        cells, labels = self.clusters()
+        sizes = np.bincount(labels) * res
+        cell_valid = sizes[labels] >= p.min_frontier_size
+        if blacklist:
+            # A cluster with a cell near a failed goal is dropped whole: a shifted goal on the
+            # same frontier would most likely fail the same way.
+            xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
+            near = np.zeros(len(cells), dtype=bool)
+            for b in blacklist:
+                near |= np.hypot(xs - b[0], ys - b[1]) <= p.blacklist_radius
+            cell_valid &= ~np.isin(labels, labels[near])
+        if not cell_valid.any():
+            return None
+        offsets = cells_in_radius(p.goal_radius, res)
+        marked = fk.stamp_targets(
+            cells,
+            labels,
+            cell_valid,
+            offsets,
+            costmap.inflated,
+            costmap.unknown,
+            self._target,
+            self._owner,
+        )
+        try:
+            # Look a little past the first candidate (two goal radii of free travel) so that
+            # the goal can be the lowest-cost cell of that cluster, not its nearest edge.
+            extra = p.neutral_cost * 2.0 * p.goal_radius / res
+            found = self.search.run(costmap, (sx, sy), self._target, p, extra, allow_unknown=False)
+        finally:
+            self._target[marked[:, 0], marked[:, 1]] = False
+        if found.size == 0:
+            return None
+        owners = self._owner.reshape(-1)[found]
+        pots = self.search.potential_at(found)
+        same = owners == owners[0]
+        cand, cand_pot = found[same], pots[same]
+        cand_cost = costmap.inflated.reshape(-1)[cand]
+        best = np.lexsort((cand_pot, cand_cost))[0]
+        gy, gx = divmod(int(cand[best]), costmap.shape[1])
+        goal_xy = np.array(costmap.cell_to_world(gx, gy), dtype=float)
+        members = cells[labels == owners[0]]
+        fxs, fys = costmap.cell_to_world(members[:, 1], members[:, 0])
+        k = int(np.argmin(np.hypot(fxs - goal_xy[0], fys - goal_xy[1])))
+        frontier_xy = np.array([fxs[k], fys[k]])
+        d = frontier_xy - goal_xy
+        if np.hypot(*d) < 1e-9:
+            d = goal_xy - np.asarray(robot_xy[:2], dtype=float)
+        return FrontierGoal(
+            goal_xy=goal_xy,
+            yaw=math.atan2(d[1], d[0]),
+            frontier_xy=frontier_xy,
+            cluster_size_m=float(sizes[owners[0]]),
+            travel_cost=float(cand_pot[best]),
+            n_clusters=int(np.count_nonzero(sizes >= p.min_frontier_size)),
+        )
+
+    def frontier_near(self, costmap: GlobalCostmap, xy, radius_m: float) -> bool:
+        """True while frontier cells remain within `radius_m` of a point (map frame)."""
+        ix, iy = costmap.world_to_cell(xy[0], xy[1])
+        return bool(
+            fk.any_in_disc(self.frontier, iy, ix, cells_in_radius(radius_m, costmap.resolution))
+        )

@@ -1,0 +1,87 @@
+"""ExploreParams: the navigation stack's settings, with the thesis's ROS values as defaults."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from worker.errors import InputError
+
+
+@dataclass(frozen=True)
+class ExploreParams:
+    """Exploration settings; defaults are the thesis's (Sec. 6.2) or the ROS packages' own.
+
+    Serialisable with `dataclasses.asdict`; read user values with `worker.params.from_dict`.
+    """
+
+    # --- robot and costmaps (costmap_2d; thesis pioneer3at_costmap_common_params) ---
+    footprint_half_m: float = 0.2  # [m] half side of the 0.4 m x 0.4 m square footprint
+    inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
+    cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
+    occupied_thresh: float = 0.25  # [-] SLAM cell probability from which a cell is an obstacle
+    global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
+    full_map_check_period: float = 10.0  # [s] whole-map re-read (catches SLAM map switches)
+    local_window_m: float = 6.0  # [m] local_costmap width = height (rolling window)
+    local_persistence: float = 1.0  # [s] how long scan obstacles stay in the local costmap
+    # --- frontiers (explore_lite) ---
+    min_frontier_size: float = 0.5  # [m] clusters smaller than this are ignored
+    goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
+    frontier_period: float = 3.0  # [s] re-choose the frontier this often
+    blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
+    progress_timeout: float = 30.0  # [s] a goal with no progress for this long is given up
+    # --- global planner (navfn; thesis base_local_planner_params) ---
+    planner_frequency: float = 0.2  # [Hz] replanning rate (also on every goal change)
+    neutral_cost: float = 50.0  # [-] navfn COST_NEUTRAL: cost of a free cell step
+    cost_factor: float = 0.8  # [-] navfn COST_FACTOR: costmap value -> step cost
+    allow_unknown: bool = True  # plan through unknown space
+    planner_patience: float = 5.0  # [s] planning may fail this long before recovery
+    # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
+    controller_frequency: float = 10.0  # [Hz]
+    max_vel_x: float = 0.85  # [m/s]
+    min_vel_x: float = 0.1  # [m/s]
+    max_vel_theta: float = 0.7  # [rad/s]
+    min_in_place_vel_theta: float = 0.4  # [rad/s]
+    acc_lim_x: float = 1.5  # [m/s^2]
+    acc_lim_theta: float = 2.5  # [rad/s^2]
+    escape_vel: float = -0.1  # [m/s] backing-off speed when nothing else is legal
+    sim_time: float = 1.5  # [s] forward simulation horizon
+    sim_granularity: float = 0.025  # [m] step between trajectory points
+    angular_sim_granularity: float = 0.025  # [rad] step between trajectory points in rotation
+    vx_samples: int = 10
+    vtheta_samples: int = 20
+    pdist_scale: float = 0.6  # weight of the distance to the global path [1/m]
+    gdist_scale: float = 0.8  # weight of the distance to the local goal [1/m]
+    occdist_scale: float = 0.05  # weight of the max obstacle cost along the trajectory
+    heading_lookahead: float = 0.325  # [m] distances are scored this far ahead of the robot
+    oscillation_reset_dist: float = 0.25  # [m] travel that clears the rotation-oscillation flags
+    xy_goal_tolerance: float = 0.3  # [m]
+    yaw_goal_tolerance: float = 0.2  # [rad]
+    controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
+    # --- safety controller (range_proximity_safety_controller) ---
+    safety_distance: float = 0.2  # [m] obstacle this near the footprint's front: back off
+    safety_backoff_time: float = 1.0  # [s] duration of one back-off manoeuvre
+    safety_turn_vel: float = 0.4  # [rad/s] turn away from the obstacle while backing off
+    # --- failure rules ---
+    max_goal_failures: int = 6  # consecutive given-up goals -> run aborted as `stuck`
+    stuck_timeout: float = 180.0  # [s] no 0.5 m of motion for this long -> `stuck`
+    slam_divergence: float = 3.0  # [m] SLAM pose this far from ground truth -> `slam_diverged`
+    # --- stop rules (thesis Sec. 4.x: g, e, m) ---
+    snapshot_period: float = 300.0  # [s] g: map snapshots this often
+    snapshot_mse: float = 5.0  # [-] e: stop when two snapshots differ by less (0..255 pixels)
+    time_limit: float = 7200.0  # [s] m: simulated-time limit
+    progress_period: float = 1.0  # [s] on_progress callback period
+
+    def __post_init__(self) -> None:
+        positive = [
+            f.name
+            for f in fields(self)
+            if f.name not in ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
+            and not isinstance(getattr(self, f.name), bool)
+            and getattr(self, f.name) <= 0
+        ]
+        if positive:
+            raise InputError(f"exploration parameters must be positive: {', '.join(positive)}")
+        if self.min_vel_x > self.max_vel_x:
+            raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
+        if self.escape_vel >= 0:
+            raise InputError("exploration parameter escape_vel must be negative (backwards)")

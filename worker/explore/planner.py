@@ -1,0 +1,107 @@
+"""navfn-like global planner: Dijkstra on the costmap, path from the robot to a goal cell."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore import planner_kernels as pk
+from worker.explore.costmap import GlobalCostmap
+from worker.explore.params import ExploreParams
+
+
+class DijkstraSearch:
+    """Reusable Dijkstra buffers sized to the costmap (valid cells are marked by a run stamp)."""
+
+    def __init__(self):
+        self.shape = (0, 0)
+        self.run_id = 0
+        self.potential = np.zeros((0, 0))
+        self.parent = np.zeros((0, 0), dtype=np.int64)
+        self.stamp = np.zeros((0, 0), dtype=np.int64)
+
+    def run(
+        self,
+        costmap: GlobalCostmap,
+        start_cell: tuple[int, int],
+        target: np.ndarray,
+        params: ExploreParams,
+        stop_extra: float = 0.0,
+        allow_unknown: bool | None = None,
+    ) -> np.ndarray:
+        """Search from `start_cell (ix, iy)`; settled target flat indices, nearest first."""
+        if costmap.shape != self.shape:
+            self.shape = costmap.shape
+            self.potential = np.zeros(self.shape)
+            self.parent = np.zeros(self.shape, dtype=np.int64)
+            self.stamp = np.zeros(self.shape, dtype=np.int64)
+            self.run_id = 0
+        self.run_id += 1
+        allow = params.allow_unknown if allow_unknown is None else allow_unknown
+        return pk.dijkstra(
+            costmap.inflated,
+            costmap.unknown,
+            start_cell[1],
+            start_cell[0],
+            target,
+            float(stop_extra),
+            params.neutral_cost,
+            params.cost_factor,
+            allow,
+            self.potential,
+            self.parent,
+            self.stamp,
+            self.run_id,
+        )
+
+    def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:
+        """Potentials of settled cells given as flat indices."""
+        return self.potential.reshape(-1)[flat_idx]
+
+    def path_to(self, flat_idx: int) -> np.ndarray:
+        """`(K, 2) int64 [iy, ix]` cells from the search start to a settled cell."""
+        return pk.trace_path(self.parent, int(flat_idx), self.shape[1])
+
+
+class GlobalPlanner:
+    """Plans on the global costmap with navfn's cost model, from the robot to one goal cell."""
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        self.search = DijkstraSearch()
+        self._target = np.zeros((0, 0), dtype=np.bool_)
+
+    def plan(self, costmap: GlobalCostmap, start_xy, goal_xy) -> np.ndarray | None:
+        """Path `(K, 2) [x, y]` (cell centres, map frame) from the robot to the goal, or None."""
+        sx, sy = costmap.world_to_cell(start_xy[0], start_xy[1])
+        gx, gy = costmap.world_to_cell(goal_xy[0], goal_xy[1])
+        if not (costmap.in_bounds(sx, sy) and costmap.in_bounds(gx, gy)):
+            return None
+        if self._target.shape != costmap.shape:
+            self._target = np.zeros(costmap.shape, dtype=np.bool_)
+        self._target[gy, gx] = True
+        try:
+            found = self.search.run(costmap, (sx, sy), self._target, self.params)
+        finally:
+            self._target[gy, gx] = False
+        if found.size == 0:
+            return None
+        cells = self.search.path_to(found[0])
+        xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
+        return np.column_stack((xs, ys))
+
+
+def path_length(path_xy: np.ndarray) -> float:
+    """Length [m] of a polyline `(K, 2)`."""
+    if path_xy is None or len(path_xy) < 2:
+        return 0.0
+    return float(np.sum(np.hypot(*np.diff(path_xy, axis=0).T)))
+
+
+def cells_in_radius(radius_m: float, resolution: float) -> np.ndarray:
+    """Offsets `(K, 2) int64 [dy, dx]` of the cells whose centres lie within `radius_m`."""
+    r = int(math.ceil(radius_m / resolution))
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    keep = np.hypot(dx, dy) * resolution <= radius_m
+    return np.column_stack((dy[keep], dx[keep])).astype(np.int64)

@@ -1,0 +1,170 @@
+"""Numba kernels of the navfn-like planner: Dijkstra navigation function on the costmap."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_SQRT2 = math.sqrt(2.0)
+_DY = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
+_DX = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
+_DL = np.array([1.0, 1.0, 1.0, 1.0, _SQRT2, _SQRT2, _SQRT2, _SQRT2])
+
+
+@njit(cache=True, inline="always")
+def _cell_cost(inflated, unknown, iy, ix, neutral, factor, allow_unknown, escaping):
+    """navfn's step cost of entering a cell (NavFn::setCostmap); inf when not traversable.
+
+    Costs below INSCRIBED become neutral + factor * cost; unknown cells cost COST_OBS - 1 (253)
+    when planning through unknown space is allowed. An INSCRIBED cell may only be entered while
+    escaping from one (a robot that starts too near a wall must be able to leave).
+    """
+    c = inflated[iy, ix]
+    if c >= 254:
+        return math.inf
+    if c == 253:
+        return 253.0 if escaping else math.inf
+    if unknown[iy, ix]:
+        return 253.0 if allow_unknown else math.inf
+    return neutral + factor * c
+
+
+@njit(cache=True, inline="always")
+def _push(keys, vals, n, key, val):
+    if n == keys.shape[0]:
+        k2 = np.empty(2 * n, dtype=keys.dtype)
+        v2 = np.empty(2 * n, dtype=vals.dtype)
+        k2[:n] = keys
+        v2[:n] = vals
+        keys = k2
+        vals = v2
+    i = n
+    keys[i] = key
+    vals[i] = val
+    while i > 0:
+        p = (i - 1) >> 1
+        if keys[p] <= keys[i]:
+            break
+        keys[p], keys[i] = keys[i], keys[p]
+        vals[p], vals[i] = vals[i], vals[p]
+        i = p
+    return keys, vals, n + 1
+
+
+@njit(cache=True, inline="always")
+def _pop(keys, vals, n):
+    key = keys[0]
+    val = vals[0]
+    n -= 1
+    keys[0] = keys[n]
+    vals[0] = vals[n]
+    i = 0
+    while True:
+        a = 2 * i + 1
+        if a >= n:
+            break
+        b = a + 1
+        m = b if (b < n and keys[b] < keys[a]) else a
+        if keys[i] <= keys[m]:
+            break
+        keys[m], keys[i] = keys[i], keys[m]
+        vals[m], vals[i] = vals[i], vals[m]
+        i = m
+    return key, val, n
+
+
+@njit(cache=True)
+def dijkstra(
+    inflated,
+    unknown,
+    start_iy,
+    start_ix,
+    target,
+    stop_extra,
+    neutral,
+    factor,
+    allow_unknown,
+    potential,
+    parent,
+    stamp,
+    run_id,
+):
+    """Dijkstra navigation function from the start cell (8-connected), with early exit.
+
+    inflated: (H, W) uint8 costmap values from obstacles; unknown: (H, W) bool; target: (H, W)
+    bool cells to reach. The search stops once a target cell is settled and the frontier of the
+    search has gone `stop_extra` potential units past it (0: stop at the first). potential
+    (H, W) float64, parent (H, W) int64 (flat index) and stamp (H, W) int64 are reusable
+    buffers: a cell's entries are valid only where stamp == run_id, so no buffer is cleared.
+    Returns `(K,) int64` flat indices of the target cells settled, nearest first.
+    """
+    h, w = inflated.shape
+    keys = np.empty(4096, dtype=np.float64)
+    vals = np.empty(4096, dtype=np.int64)
+    found = np.empty(64, dtype=np.int64)
+    n_found = 0
+    first = math.inf
+    s = start_iy * w + start_ix
+    potential[start_iy, start_ix] = 0.0
+    parent[start_iy, start_ix] = -1
+    stamp[start_iy, start_ix] = run_id
+    keys, vals, n = _push(keys, vals, 0, 0.0, s)
+    while n > 0:
+        d, idx, n = _pop(keys, vals, n)
+        iy = idx // w
+        ix = idx - iy * w
+        if d > potential[iy, ix]:
+            continue  # stale heap entry
+        if d > first + stop_extra:
+            break
+        if target[iy, ix]:
+            if n_found == found.shape[0]:
+                f2 = np.empty(2 * n_found, dtype=np.int64)
+                f2[:n_found] = found
+                found = f2
+            found[n_found] = idx
+            n_found += 1
+            if first == math.inf:
+                first = d
+                if stop_extra <= 0.0:
+                    break
+        escaping = inflated[iy, ix] >= 253
+        for k in range(8):
+            jy = iy + _DY[k]
+            jx = ix + _DX[k]
+            if jy < 0 or jy >= h or jx < 0 or jx >= w:
+                continue
+            c = _cell_cost(inflated, unknown, jy, jx, neutral, factor, allow_unknown, escaping)
+            if c == math.inf:
+                continue
+            nd = d + c * _DL[k]
+            if stamp[jy, jx] != run_id or nd < potential[jy, jx]:
+                stamp[jy, jx] = run_id
+                potential[jy, jx] = nd
+                parent[jy, jx] = idx
+                keys, vals, n = _push(keys, vals, n, nd, jy * w + jx)
+    return found[:n_found]
+
+
+@njit(cache=True)
+def trace_path(parent, goal_idx, width):
+    """Cells `(K, 2) int64 [iy, ix]` from the start to `goal_idx` by following parents."""
+    n = 0
+    idx = goal_idx
+    while idx >= 0:
+        n += 1
+        iy = idx // width
+        idx = parent[iy, idx - iy * width]
+        if n > parent.size:
+            break
+    out = np.empty((n, 2), dtype=np.int64)
+    idx = goal_idx
+    for i in range(n - 1, -1, -1):
+        iy = idx // width
+        ix = idx - iy * width
+        out[i, 0] = iy
+        out[i, 1] = ix
+        idx = parent[iy, ix]
+    return out

@@ -1,0 +1,71 @@
+"""Safety controller (range_proximity_safety_controller): back off, turn away from obstacles."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore.params import ExploreParams
+
+
+def front_clearance(
+    ranges_m: np.ndarray, angles: np.ndarray, range_max: float, half: float
+) -> tuple[float, float]:
+    """Distance [m] from the footprint's front edge to the nearest scan hit ahead, and its side.
+
+    The laser sits at the robot's centre; a hit at (x, y) in the robot frame with x > half and
+    |y| <= half + the returned distance counts as ahead. Returns (inf, 0) when nothing is near;
+    side is +1 for an obstacle on the left (y > 0), -1 on the right.
+    """
+    hit = ranges_m < range_max * 0.999
+    if not hit.any():
+        return math.inf, 0.0
+    r = ranges_m[hit]
+    a = angles[hit]
+    x = r * np.cos(a)
+    y = r * np.sin(a)
+    ahead = x > half
+    if not ahead.any():
+        return math.inf, 0.0
+    # Distance from the point to the front half of the square footprint.
+    dx = x[ahead] - half
+    dy = np.maximum(np.abs(y[ahead]) - half, 0.0)
+    d = np.hypot(dx, dy)
+    k = int(np.argmin(d))
+    return float(d[k]), (1.0 if y[ahead][k] > 0 else -1.0)
+
+
+class SafetyController:
+    """Overrides the planner for a short manoeuvre when an obstacle is too close in front."""
+
+    def __init__(self, params: ExploreParams, angles: np.ndarray, range_max: float):
+        self.params = params
+        self.angles = angles
+        self.range_max = range_max
+        self._until = -math.inf
+        self._turn = 0.0
+        self.n_triggers = 0
+
+    def active(self, t: float) -> bool:
+        return t < self._until
+
+    def check(self, t: float, ranges_m: np.ndarray, v_cmd: float) -> tuple[float, float] | None:
+        """The override (v, w) for this period, or None to let the planner drive.
+
+        Triggers only while moving forwards (v_cmd > 0) with a hit closer than safety_distance
+        to the footprint's front: backs off at escape_vel, turning away from the obstacle's side.
+        """
+        p = self.params
+        if t < self._until:
+            return (p.escape_vel, self._turn)
+        if v_cmd <= 0.0:
+            return None
+        d, side = front_clearance(ranges_m, self.angles, self.range_max, p.footprint_half_m)
+        if d >= p.safety_distance:
+            return None
+        self.n_triggers += 1
+        self._until = t + p.safety_backoff_time
+        # Obstacle on the left (side +1): turn clockwise so that the nose points away from it.
+        self._turn = -side * p.safety_turn_vel
+        return (p.escape_vel, self._turn)
