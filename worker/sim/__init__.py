@@ -1,0 +1,1 @@
+"""The robot simulator: laser ray casting, differential drive, odometry, CARMEN logs."""

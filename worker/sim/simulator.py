@@ -1,0 +1,220 @@
+"""Stage-like 2D simulator: differential drive with limits, collisions, laser, odometry."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from worker.errors import InputError
+from worker.sim import odometry
+from worker.sim.collision import advance, footprint_collides
+from worker.sim.laser import LaserSpec
+from worker.sim.raycast import cast_scan_skip, safe_distance_cells
+from worker.world.world import World
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Simulator parameters (Pioneer 3-AT class robot, Hokuyo UTM-30LX laser, Stage odometry)."""
+
+    dt: float = 0.1  # [s] public step; ground truth, odometry and laser at 1/dt = 10 Hz
+    v_max: float = 1.0  # [m/s] forward speed limit (above the DWA's max_vel_x 0.85)
+    v_min: float = -0.5  # [m/s] reverse speed limit (the safety controller backs off)
+    w_max: float = 2.0  # [rad/s] turn rate limit (above the DWA's max_vel_theta 0.7)
+    acc_lin: float = 1.5  # [m/s^2] the DWA's acc_lim_x
+    acc_ang: float = 2.5  # [rad/s^2] the DWA's acc_lim_theta
+    footprint: float = 0.4  # [m] side of the square footprint
+    laser: LaserSpec = field(default_factory=LaserSpec)
+    laser_noise_sigma: float = 0.0  # [m] Gaussian range noise (thesis: 0, 0.1, 0.3)
+    odom_model: Literal["stage", "gaussian"] = "stage"
+    odom_error: tuple[float, float, float] = (0.01, 0.01, 0.02)  # Stage E for x, y, theta [-]
+    # Gaussian model: [m/m] x/y error per metre, [rad/rad] theta per radian, [rad/m] theta per m
+    odom_sigmas: tuple[float, float, float] = (0.02, 0.02, 0.01)
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.dt > 0, "dt must be > 0"),
+            (self.v_max > 0 and self.w_max > 0, "v_max and w_max must be > 0"),
+            (self.v_min <= 0, "v_min must be <= 0"),
+            (self.acc_lin > 0 and self.acc_ang > 0, "acceleration limits must be > 0"),
+            (self.footprint > 0, "footprint must be > 0"),
+            (self.laser_noise_sigma >= 0, "laser noise sigma must be >= 0"),
+            (self.odom_model in ("stage", "gaussian"), "odom_model must be stage or gaussian"),
+            (min(self.odom_error) >= 0 and min(self.odom_sigmas) >= 0, "odometry errors >= 0"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise InputError(f"simulator parameters: {message}")
+
+
+@dataclass(frozen=True)
+class Collision:
+    """The robot was blocked by an obstacle at time `t` [s], pose [x, y, theta] (last free)."""
+
+    t: float
+    x: float
+    y: float
+    theta: float
+
+
+class Simulator:
+    """Steps a differential-drive robot through a World in simulated time.
+
+    `pose_gt` and `pose_odom` are `(3,)` [x, y, theta]; the odometry frame coincides with the
+    world frame at t = 0. A collision stops the robot (velocities zeroed) and is recorded once
+    per contact; the robot may drive away from the obstacle afterwards.
+    """
+
+    def __init__(
+        self,
+        world: World,
+        params: SimParams | None = None,
+        rng: np.random.Generator | None = None,
+        start_pose=None,
+    ):
+        self.world = world
+        self.params = params or SimParams()
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self._occ = world.occ
+        self._res = float(world.resolution)
+        self._ox = float(world.origin[0])
+        self._oy = float(world.origin[1])
+        self._half = 0.5 * self.params.footprint
+        self._angles = self.params.laser.angles
+        self._safe = safe_distance_cells(world.clearance, self._res)
+        pose = np.asarray(world.start_pose if start_pose is None else start_pose, dtype=float)
+        self._x, self._y, self._th = float(pose[0]), float(pose[1]), odometry.wrap_angle(pose[2])
+        if self._collides(self._x, self._y, self._th):
+            raise InputError(
+                f"{world.name}: the robot's {self.params.footprint:.2f} m footprint at the start "
+                f"pose ({self._x:.2f}, {self._y:.2f}) overlaps an obstacle"
+            )
+        self._ox_odom, self._oy_odom, self._oth_odom = self._x, self._y, self._th
+        self._v = 0.0  # [m/s] actual velocities
+        self._w = 0.0  # [rad/s]
+        self._steps = 0
+        self._in_contact = False
+        self.collisions: list[Collision] = []
+        p = self.params
+        if p.odom_model == "stage":
+            # Stage: one error factor per axis per run, uniform in [-E/2, E/2].
+            e = np.asarray(p.odom_error, dtype=float)
+            self.odom_error_factors = self.rng.uniform(-0.5 * e, 0.5 * e)
+        else:
+            self.odom_error_factors = np.zeros(3)
+
+    def _collides(self, x: float, y: float, th: float) -> bool:
+        return bool(
+            footprint_collides(self._occ, self._res, self._ox, self._oy, x, y, th, self._half)
+        )
+
+    @property
+    def t(self) -> float:
+        """Simulated time [s] (an integer number of steps times dt, no drift)."""
+        return self._steps * self.params.dt
+
+    @property
+    def pose_gt(self) -> np.ndarray:
+        """True pose `(3,)` [x, y, theta] in the world frame."""
+        return np.array([self._x, self._y, self._th])
+
+    @property
+    def pose_odom(self) -> np.ndarray:
+        """Odometry pose `(3,)` [x, y, theta] in the odom frame."""
+        return np.array([self._ox_odom, self._oy_odom, self._oth_odom])
+
+    @property
+    def velocity(self) -> tuple[float, float]:
+        """Actual (v [m/s], w [rad/s])."""
+        return self._v, self._w
+
+    @property
+    def collided(self) -> bool:
+        """Whether any collision happened so far."""
+        return bool(self.collisions)
+
+    @property
+    def in_contact(self) -> bool:
+        """Whether the last step was blocked by an obstacle."""
+        return self._in_contact
+
+    def step(self, v_cmd: float, w_cmd: float) -> bool:
+        """Advance one dt towards the commanded velocities; returns False if blocked."""
+        p = self.params
+        dt = p.dt
+        v_target = min(max(float(v_cmd), p.v_min), p.v_max)
+        w_target = min(max(float(w_cmd), -p.w_max), p.w_max)
+        dv = p.acc_lin * dt
+        dw = p.acc_ang * dt
+        v = self._v + min(max(v_target - self._v, -dv), dv)
+        w = self._w + min(max(w_target - self._w, -dw), dw)
+        x0, y0, th0 = self._x, self._y, self._th
+        x, y, th, blocked, t_hit = advance(
+            self._occ, self._res, self._ox, self._oy, x0, y0, th0, v, w, dt, self._half
+        )
+        self._x, self._y, self._th = float(x), float(y), odometry.wrap_angle(float(th))
+        if blocked:
+            self._v = 0.0
+            self._w = 0.0
+            if not self._in_contact:
+                self.collisions.append(Collision(self.t + t_hit, self._x, self._y, self._th))
+            self._in_contact = True
+        else:
+            self._v, self._w = v, w
+            # A contact lasts until the robot is clear of the obstacle by a cell, so pushing
+            # against a wall is one collision, not one per step.
+            if self._in_contact:
+                self._in_contact = bool(
+                    footprint_collides(
+                        self._occ,
+                        self._res,
+                        self._ox,
+                        self._oy,
+                        self._x,
+                        self._y,
+                        self._th,
+                        self._half + self._res,
+                    )
+                )
+        self._update_odometry(x0, y0, th0)
+        self._steps += 1
+        return not blocked
+
+    def _update_odometry(self, x0: float, y0: float, th0: float) -> None:
+        """Apply the true increment of this step, corrupted by the odometry model."""
+        d = odometry.relative_motion(x0, y0, th0, self._x, self._y, self._th)
+        if self.params.odom_model == "stage":
+            d = odometry.stage_increment(d, self.odom_error_factors)
+        else:
+            d = odometry.gaussian_increment(d, self.params.odom_sigmas, self.rng)
+        self._ox_odom, self._oy_odom, self._oth_odom = odometry.compose(
+            self._ox_odom, self._oy_odom, self._oth_odom, *d
+        )
+
+    def scan(self) -> np.ndarray:
+        """Laser ranges `(B,)` float64 [m] at the true pose, with the configured range noise.
+
+        Beams that hit nothing read exactly `range_max`; noisy readings are clipped to
+        [0, range_max].
+        """
+        laser = self.params.laser
+        ranges = cast_scan_skip(
+            self._occ,
+            self._safe,
+            self._res,
+            self._ox,
+            self._oy,
+            self._x,
+            self._y,
+            self._th,
+            self._angles,
+            laser.range_max,
+        )
+        sigma = self.params.laser_noise_sigma
+        if sigma > 0.0:
+            hit = ranges < laser.range_max
+            noisy = ranges + sigma * self.rng.standard_normal(ranges.shape[0])
+            ranges = np.where(hit, np.clip(noisy, 0.0, laser.range_max), ranges)
+        return ranges

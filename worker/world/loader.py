@@ -1,0 +1,214 @@
+"""Load a World from an image + resolution, a ROS map_server YAML, or a Stage `.world` file."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from worker.errors import InputError
+from worker.world.image_io import MAX_PIXELS, read_grey
+from worker.world.stage import read_stage_world
+from worker.world.world import FOOTPRINT_M, World
+
+FREE_GREY_MIN = 250.0  # default rule: grey >= 250 is free, anything else is an obstacle
+IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".pbm", ".bmp", ".gif", ".tif", ".tiff", ".jpg", ".jpeg"}
+
+
+def load_world(
+    path: str | Path,
+    resolution: float | None = None,
+    *,
+    start_pose: tuple[float, float, float] | None = None,
+    segmentation: str | Path | None = None,
+    max_pixels: int = MAX_PIXELS,
+    footprint_m: float = FOOTPRINT_M,
+) -> World:
+    """Load a floorplan: `.yaml` (map_server), `.world` (Stage) or an image plus `resolution`.
+
+    `resolution` [m/pixel] overrides the file's own. A `segmentation` image (Bormann's
+    gt_segmentation style) adds a room count; a map_server YAML may name one with the extra
+    key `segmentation:`. Raises InputError on any bad input.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("no such file", path=path)
+    if path.is_dir():
+        raise InputError("is a folder, not a floorplan file", path=path)
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint_m)
+    if suffix == ".world":
+        return _load_stage(path, resolution, start_pose, segmentation, max_pixels, footprint_m)
+    if resolution is None:
+        raise InputError("an image needs its resolution in m/pixel (--resolution)", path=path)
+    grey, alpha = read_grey(path, max_pixels)
+    notes = []
+    free = grey >= FREE_GREY_MIN
+    if alpha is not None:
+        free &= alpha >= 128
+        notes.append("transparent pixels count as obstacles")
+    return _build(
+        path.stem,
+        free,
+        resolution,
+        (0.0, 0.0),
+        start_pose,
+        segmentation,
+        path,
+        max_pixels,
+        footprint_m,
+        notes,
+    )
+
+
+def _build(
+    name,
+    free_img,
+    resolution,
+    origin,
+    start_pose,
+    segmentation,
+    source,
+    max_pixels,
+    footprint_m,
+    notes,
+) -> World:
+    """Flip the image rows to the grid's bottom-first order, count rooms, build the World."""
+    _check_resolution(resolution, source)
+    occ = np.flipud(~free_img)
+    n_rooms = None
+    if segmentation is not None:
+        from worker.world.segmentation import count_rooms
+
+        n_rooms = count_rooms(Path(segmentation), float(resolution), occ.shape, max_pixels)
+    try:
+        return World.from_array(
+            occ,
+            float(resolution),
+            origin,
+            start_pose,
+            name,
+            footprint_m=footprint_m,
+            n_rooms=n_rooms,
+            warnings=tuple(notes),
+            source=str(source),
+        )
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise InputError(str(exc), path=source) from None
+
+
+def _check_resolution(resolution, source) -> None:
+    """Resolution must be a finite number in (0.005, 1] m/pixel."""
+    try:
+        r = float(resolution)
+    except (TypeError, ValueError):
+        raise InputError(f"resolution must be a number, got {resolution!r}", path=source) from None
+    if not math.isfinite(r) or not (0.005 < r <= 1.0):
+        raise InputError(f"resolution {r:g} m/pixel is outside (0.005, 1] m", path=source)
+
+
+def _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint_m) -> World:
+    """ROS map_server YAML: image, resolution, origin, negate, occupied_thresh, free_thresh."""
+    try:
+        meta = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read: {exc}", path=path) from None
+    except yaml.YAMLError as exc:
+        line = getattr(getattr(exc, "problem_mark", None), "line", None)
+        raise InputError(
+            "not valid YAML", path=path, line=None if line is None else line + 1
+        ) from None
+    if not isinstance(meta, dict) or "image" not in meta:
+        raise InputError("not a map_server YAML (no `image:` key)", path=path)
+    if resolution is None:
+        if "resolution" not in meta:
+            raise InputError("no `resolution:` key (or give --resolution)", path=path)
+        resolution = meta["resolution"]
+    _check_resolution(resolution, path)
+    origin = meta.get("origin", [0.0, 0.0, 0.0])
+    try:
+        origin = [float(v) for v in origin]
+        negate = int(meta.get("negate", 0))
+        occupied_thresh = float(meta.get("occupied_thresh", 0.65))
+        free_thresh = float(meta.get("free_thresh", 0.196))
+    except (TypeError, ValueError):
+        raise InputError(
+            "origin/negate/occupied_thresh/free_thresh must be numbers", path=path
+        ) from None
+    if not (0.0 <= free_thresh <= occupied_thresh <= 1.0):
+        raise InputError(
+            f"need 0 <= free_thresh ({free_thresh:g}) <= occupied_thresh "
+            f"({occupied_thresh:g}) <= 1",
+            path=path,
+        )
+    if len(origin) < 2 or not all(math.isfinite(v) for v in origin):
+        raise InputError("origin must be [x, y, yaw]", path=path)
+    notes = []
+    if len(origin) > 2 and origin[2] != 0.0:
+        notes.append("the YAML origin's yaw is ignored (as most map_server users do)")
+    grey, alpha = read_grey(path.parent / str(meta["image"]), max_pixels)
+    # map_server: p = (255 - grey) / 255 is the occupancy probability (grey inverted if negate);
+    # free if p < free_thresh, occupied if p > occupied_thresh, unknown between. Unknown is not
+    # free space for the robot, so it counts as an obstacle here.
+    if negate:
+        grey = 255.0 - grey
+    p_occ = (255.0 - grey) / 255.0
+    free = p_occ < free_thresh
+    if alpha is not None:
+        free &= alpha >= 128
+        notes.append("transparent pixels count as obstacles")
+    if segmentation is None and meta.get("segmentation"):
+        segmentation = path.parent / str(meta["segmentation"])
+    return _build(
+        path.stem,
+        free,
+        resolution,
+        (origin[0], origin[1]),
+        start_pose,
+        segmentation,
+        path,
+        max_pixels,
+        footprint_m,
+        notes,
+    )
+
+
+def _load_stage(path, resolution, start_pose, segmentation, max_pixels, footprint_m) -> World:
+    """Stage `.world`: bitmap scaled to `size`, centred on the block's `pose`; robot pose."""
+    stage = read_stage_world(path)
+    grey, alpha = read_grey(stage.bitmap, max_pixels)
+    h, w = grey.shape
+    res_x, res_y = stage.size[0] / w, stage.size[1] / h
+    if resolution is None:
+        if abs(res_x - res_y) > 0.02 * max(res_x, res_y):
+            raise InputError(
+                f"size {stage.size[0]:g} x {stage.size[1]:g} m over {w} x {h} pixels gives "
+                f"non-square pixels ({res_x:.4f} vs {res_y:.4f} m)",
+                path=path,
+            )
+        resolution = 0.5 * (res_x + res_y)
+    free = grey >= FREE_GREY_MIN
+    notes = []
+    if alpha is not None:
+        free &= alpha >= 128
+        notes.append("transparent pixels count as obstacles")
+    origin = (stage.center[0] - 0.5 * w * resolution, stage.center[1] - 0.5 * h * resolution)
+    if start_pose is None:
+        start_pose = stage.robot_pose
+    return _build(
+        path.stem,
+        free,
+        resolution,
+        origin,
+        start_pose,
+        segmentation,
+        path,
+        max_pixels,
+        footprint_m,
+        notes,
+    )

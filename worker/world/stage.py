@@ -1,0 +1,173 @@
+"""Parse the parts of a Stage `.world` file that describe the map and the robot's pose."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from worker.errors import InputError
+
+# Tokens of Stage's world-file syntax: strings, brackets, parentheses, bare words/numbers.
+_TOKEN = re.compile(r'"([^"]*)"|([()\[\]])|([^\s()\[\]"]+)')
+# Entity types that are never the robot (they carry a `pose` too).
+_NOT_ROBOT = {"window", "floorplan", "map", "zone", "include", "define", "model"}
+
+
+@dataclass(frozen=True)
+class StageEntity:
+    """One `type( key value ... )` block: its line, properties and nested blocks."""
+
+    kind: str
+    line: int
+    props: dict
+    children: tuple[StageEntity, ...]
+
+
+@dataclass(frozen=True)
+class StageMap:
+    """What mapqual needs from a `.world` file."""
+
+    bitmap: Path  # the image, resolved against the file's folder
+    size: tuple[float, float]  # [m] width, height of the bitmap in the world
+    center: tuple[float, float]  # [m] where the bitmap's centre sits in the world
+    robot_pose: tuple[float, float, float] | None  # [m, m, rad] if a robot is placed
+
+
+def _tokens(text: str) -> list[tuple[str, str, int]]:
+    """`(kind, value, line)` tokens; kind is 'str', 'sym' or 'word'. Comments (#) dropped."""
+    out = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        for m in _TOKEN.finditer(_strip_comment(raw)):
+            if m.group(1) is not None:
+                out.append(("str", m.group(1), lineno))
+            elif m.group(2) is not None:
+                out.append(("sym", m.group(2), lineno))
+            else:
+                out.append(("word", m.group(3), lineno))
+    return out
+
+
+def _strip_comment(raw: str) -> str:
+    """Drop a `#` comment that is not inside a quoted string."""
+    in_str = False
+    for i, ch in enumerate(raw):
+        if ch == '"':
+            in_str = not in_str
+        elif ch == "#" and not in_str:
+            return raw[:i]
+    return raw
+
+
+def parse_entities(text: str, path: Path) -> list[StageEntity]:
+    """Top-level entity blocks of a world file (`define` blocks are skipped)."""
+    toks = _tokens(text)
+    pos = 0
+
+    def block(kind: str, line: int) -> StageEntity:
+        nonlocal pos
+        props: dict = {}
+        children = []
+        while pos < len(toks):
+            k, v, ln = toks[pos]
+            if k == "sym" and v == ")":
+                pos += 1
+                return StageEntity(kind, line, props, tuple(children))
+            if k != "word":
+                raise InputError(f"unexpected {v!r}", path=path, line=ln)
+            pos += 1
+            if pos < len(toks) and toks[pos][:2] == ("sym", "("):
+                pos += 1
+                children.append(block(v, ln))
+            else:
+                props[v] = value(ln)
+        raise InputError(f"block {kind!r} is never closed", path=path, line=line)
+
+    def value(line: int):
+        nonlocal pos
+        if pos >= len(toks):
+            raise InputError("missing value at end of file", path=path, line=line)
+        k, v, ln = toks[pos]
+        pos += 1
+        if k == "sym" and v == "[":
+            items = []
+            while pos < len(toks) and toks[pos][:2] != ("sym", "]"):
+                items.append(toks[pos][1])
+                pos += 1
+            if pos >= len(toks):
+                raise InputError("'[' is never closed", path=path, line=ln)
+            pos += 1
+            return items
+        if k == "sym":
+            raise InputError(f"unexpected {v!r}", path=path, line=ln)
+        return v
+
+    entities = []
+    while pos < len(toks):
+        k, v, ln = toks[pos]
+        pos += 1
+        if k != "word":
+            raise InputError(f"unexpected {v!r}", path=path, line=ln)
+        if v == "define":
+            # `define name parent ( ... )`: a type definition, not an instance; skip it.
+            pos += 2
+            if pos >= len(toks) or toks[pos][:2] != ("sym", "("):
+                raise InputError("malformed define", path=path, line=ln)
+            pos += 1
+            block("define", ln)
+        elif pos < len(toks) and toks[pos][:2] == ("sym", "("):
+            pos += 1
+            entities.append(block(v, ln))
+        else:
+            value(ln)  # a global setting such as `resolution 0.02`
+    return entities
+
+
+def _floats(values, n_min: int, what: str, path: Path, line: int) -> list[float]:
+    """Parse a `[a b c]` list of at least n_min numbers."""
+    if not isinstance(values, list) or len(values) < n_min:
+        raise InputError(f"{what} needs at least {n_min} numbers", path=path, line=line)
+    try:
+        return [float(v) for v in values]
+    except ValueError:
+        raise InputError(f"{what} must be numbers, got {values}", path=path, line=line) from None
+
+
+def read_stage_world(path: Path) -> StageMap:
+    """The bitmap, its size and placement, and the robot's pose from a Stage `.world` file."""
+    import math
+
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    entities = parse_entities(text, path)
+    maps = [e for e in entities if "bitmap" in e.props]
+    if not maps:
+        raise InputError("no floorplan/model block with a `bitmap` in this .world file", path=path)
+    floor = maps[0]
+    if "size" not in floor.props:
+        raise InputError("the bitmap's block has no `size [w h z]`", path=path, line=floor.line)
+    size = _floats(floor.props["size"], 2, "size", path, floor.line)
+    if size[0] <= 0 or size[1] <= 0:
+        raise InputError(f"size must be positive, got {size[:2]}", path=path, line=floor.line)
+    center = (0.0, 0.0)
+    if "pose" in floor.props:
+        p = _floats(floor.props["pose"], 2, "pose", path, floor.line)
+        center = (p[0], p[1])
+    robot_pose = None
+    for ent in entities:
+        if ent is floor or ent.kind in _NOT_ROBOT or "pose" not in ent.props:
+            continue
+        p = _floats(ent.props["pose"], 3, "pose", path, ent.line)
+        # Stage 4 writes [x y z a], Stage 3 [x y a]; the angle is in degrees.
+        yaw_deg = p[3] if len(p) >= 4 else p[2]
+        robot_pose = (p[0], p[1], math.radians(yaw_deg))
+        break
+    bitmap = str(floor.props["bitmap"])
+    return StageMap(
+        bitmap=(path.parent / bitmap),
+        size=(size[0], size[1]),
+        center=center,
+        robot_pose=robot_pose,
+    )
