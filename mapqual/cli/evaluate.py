@@ -42,7 +42,7 @@ class Message(StrEnum):
 FmtOpt = Annotated[Fmt, typer.Option("--format", help="Trajectory file format.")]
 MaxGapOpt = Annotated[
     float,
-    typer.Option(help="Interpolate only between estimates within this many seconds [s]."),
+    typer.Option(help="Interpolate only between poses within this many seconds."),
 ]
 
 # Which --kind each kind-specific option applies to (given for another kind: an error).
@@ -95,7 +95,7 @@ def _params(kind: str, given: dict[str, Any]) -> Any:
 @app.command("relations")
 def relations_cmd(
     gt: Annotated[Path, typer.Argument(help="Ground-truth trajectory (CARMEN log or TUM).")],
-    kind: Annotated[Kind, typer.Option(help="Relation generator.", case_sensitive=False)],
+    kind: Annotated[Kind, typer.Option(help="Relation generator.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Relations file to write.")],
     est: Annotated[Path | None, typer.Option(help="Estimate (needed by --kind B).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed (B).")] = 0,
@@ -106,15 +106,15 @@ def relations_cmd(
     est_message: Annotated[Message, typer.Option(help="CARMEN message of the estimate.")] = (
         Message.auto
     ),
-    dt: Annotated[float | None, typer.Option(help="A/S/SM: seconds between poses.")] = None,
-    distance: Annotated[float | None, typer.Option(help="M: step; SM: min distance [m].")] = None,
-    radius: Annotated[float | None, typer.Option(help="L: return radius [m].")] = None,
-    away: Annotated[float | None, typer.Option(help="L: distance to leave first [m].")] = None,
-    z: Annotated[float | None, typer.Option(help="B: critical value z.")] = None,
-    margin: Annotated[float | None, typer.Option(help="B: margin of error E [m].")] = None,
-    pilot: Annotated[int | None, typer.Option(help="B: pilot relations for s.")] = None,
-    max_relations: Annotated[int | None, typer.Option(help="B: cap; SM: limit.")] = None,
-    min_relations: Annotated[int | None, typer.Option(help="B: floor on N.")] = None,
+    dt: Annotated[float | None, typer.Option(help="A/S/SM: step, s (0.5/10/2).")] = None,
+    distance: Annotated[float | None, typer.Option(help="M: step, SM: gap, m (2/5).")] = None,
+    radius: Annotated[float | None, typer.Option(help="L: return radius, m (0.2).")] = None,
+    away: Annotated[float | None, typer.Option(help="L: distance to leave first, m (0.5).")] = None,
+    z: Annotated[float | None, typer.Option(help="B: critical value z (1.96).")] = None,
+    margin: Annotated[float | None, typer.Option(help="B: margin of error E, m (0.05).")] = None,
+    pilot: Annotated[int | None, typer.Option(help="B: pilot relations for s (500).")] = None,
+    max_relations: Annotated[int | None, typer.Option(help="B: cap (1e6); SM: limit.")] = None,
+    min_relations: Annotated[int | None, typer.Option(help="B: floor on N (0).")] = None,
     max_gap: MaxGapOpt = 0.1,
 ) -> None:
     """Generate ground-truth relations of one kind and write them (t1 t2 x y z roll pitch yaw)."""

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from worker.errors import InputError
 from worker.evaluate.se2 import interpolate
@@ -100,3 +102,23 @@ def test_poses_at_on_empty_and_single_sample():
     p, ok = one.poses_at([2.0, 2.05])
     np.testing.assert_array_equal(ok, [True, False])
     np.testing.assert_array_equal(p[0], [1.0, 2.0, 0.5])
+
+
+@given(
+    st.lists(st.floats(0.001, 5.0), min_size=2, max_size=60),
+    st.lists(st.floats(-1.0, 1.0), min_size=1, max_size=30),
+)
+def test_lookup_finds_the_bracketing_samples_on_any_spacing(steps, fractions):
+    # uneven spacing defeats the even-sampling guess; the gallop must still bracket q
+    t = np.cumsum(steps)
+    tr = Trajectory(t, np.column_stack([t, 2 * t, np.zeros_like(t)]))
+    span = t[-1] - t[0]
+    q = t[0] + (np.asarray(fractions) * 0.6 + 0.5) * span  # some before, some after
+    p, ok = tr.poses_at(q, max_gap=10.0)
+    inside = (q >= t[0] - 1e-5) & (q <= t[-1] + 1e-5)
+    np.testing.assert_array_equal(ok, inside)
+    # x = t along the path, so a correct bracket + linear interpolation returns q itself
+    np.testing.assert_allclose(p[ok, 0], np.clip(q[ok], t[0], t[-1]), atol=2e-5)
+    np.testing.assert_allclose(p[ok, 1], 2 * p[ok, 0], atol=1e-9)
+    exact, ok_exact = tr.poses_at(t, max_gap=0.0)
+    assert ok_exact.all() and (exact[:, 0] == t).all()

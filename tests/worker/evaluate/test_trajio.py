@@ -136,9 +136,13 @@ def test_relations_round_trip_with_comments(tmp_path, rng):
     write_relations(tmp_path / "r.txt", rel)
     line = (tmp_path / "r.txt").read_text().splitlines()[0].split()
     assert len(line) == 8 and line[4:7] == ["0.0", "0.0", "0.0"]
-    back = read_relations(tmp_path / "r.txt")
-    np.testing.assert_allclose(back.t1, rel.t1, atol=1e-6)
-    np.testing.assert_allclose(back.delta, rel.delta, atol=1e-8)
+    for name in ("r.txt", "r.txt.gz"):
+        write_relations(tmp_path / name, rel)
+        back = read_relations(tmp_path / name)
+        np.testing.assert_allclose(back.t1, rel.t1, atol=1e-6)
+        np.testing.assert_allclose(back.t2, rel.t2, atol=1e-6)
+        np.testing.assert_allclose(back.delta, rel.delta, atol=1e-8)
+    assert (tmp_path / "r.txt.gz").read_bytes()[:2] == b"\x1f\x8b"
     (tmp_path / "c.txt").write_text(
         "# Kuemmerle relations\n\n90.239599 90.719599 0.422330 -0.000750 0.000000 0.000000 "
         "0.000000 0.017260\n"
