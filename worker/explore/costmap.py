@@ -25,6 +25,7 @@ class GlobalCostmap:
         self.circumscribed_radius = params.footprint_half_m * math.sqrt(2.0)
         self.resolution = 0.0
         self.origin = np.zeros(2)
+        self.frame_id = 0  # changes whenever the grid is reallocated (users resize with it)
         self.lethal = np.zeros((0, 0), dtype=np.bool_)
         self.unknown = np.zeros((0, 0), dtype=np.bool_)
         self.inflated = np.zeros((0, 0), dtype=np.uint8)
@@ -58,50 +59,52 @@ class GlobalCostmap:
         out[self.unknown & (self.inflated < ck.INSCRIBED)] = ck.NO_INFORMATION
         return out
 
-    def update(
-        self, prob: np.ndarray, resolution: float, origin, window=None
-    ) -> tuple[int, int, int, int]:
-        """Bring the layers up to date with the SLAM map `prob (H, W)` (NaN unknown).
+    def update(self, prob: np.ndarray, resolution: float, origin, window_m=None):
+        """Bring the layers up to date with the SLAM map `prob (h, w)` (NaN unknown).
 
-        window: `(y0, y1, x0, x1)` cells where the map can have changed since the last call,
-        or None for the whole map. A map of another size, origin or resolution is re-read
-        whole. Returns the bounding box of the cells whose lethal or unknown state changed
-        (empty when y1 == y0), which the frontier search uses to update itself.
+        The SLAM map may be cropped and grow between calls: the costmap keeps its own frame,
+        enlarged by `growth_margin` whenever the map leaves it (old layers are copied, not
+        recomputed). window_m: `(x0, y0, x1, y1)` [m] where the map can have changed since the
+        last call (None: everywhere). Returns the bounding box `(y0, y1, x0, x1)` of the cells
+        whose lethal or unknown state changed (empty when y1 == y0), in the costmap's frame.
         """
         origin = np.asarray(origin, dtype=float)[:2]
-        h, w = prob.shape
-        if (
-            (h, w) != self.shape
-            or resolution != self.resolution
-            or not np.array_equal(origin, self.origin)
-        ):
-            self._reset(prob.shape, resolution, origin)
-            window = None
-        if window is None:
-            window = (0, h, 0, w)
-        y0, y1, x0, x1 = (int(v) for v in window)
-        y0, y1, x0, x1 = max(0, y0), min(h, y1), max(0, x0), min(w, x1)
+        ph, pw = prob.shape
+        if float(resolution) != self.resolution:
+            self._reset(resolution, origin, (ph, pw))
+            window_m = None
+        off_x = int(round((origin[0] - self.origin[0]) / self.resolution))
+        off_y = int(round((origin[1] - self.origin[1]) / self.resolution))
+        h, w = self.shape
+        if off_x < 0 or off_y < 0 or off_x + pw > w or off_y + ph > h:
+            self._grow(off_y, off_x, ph, pw)
+            off_x = int(round((origin[0] - self.origin[0]) / self.resolution))
+            off_y = int(round((origin[1] - self.origin[1]) / self.resolution))
+            h, w = self.shape
+        if window_m is None:
+            y0, y1, x0, x1 = 0, h, 0, w
+        else:
+            x0, y0 = self.world_to_cell(window_m[0], window_m[1])
+            x1, y1 = self.world_to_cell(window_m[2], window_m[3])
+            y0, y1, x0, x1 = max(0, y0), min(h, y1 + 1), max(0, x0), min(w, x1 + 1)
         if y1 <= y0 or x1 <= x0:
             return (0, 0, 0, 0)
         ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
-            prob, self.params.occupied_thresh, self.lethal, self.unknown, y0, y1, x0, x1
-        )
+            prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
+            y0, y1, x0, x1,
+        )  # fmt: skip
         if ly1 > ly0:
             r = self._kernel.shape[0] // 2
             ck.inflate_region(
-                self.lethal,
-                self._kernel,
-                self.inflated,
-                max(0, ly0 - r),
-                min(h, ly1 + r),
-                max(0, lx0 - r),
-                min(w, lx1 + r),
-            )
+                self.lethal, self._kernel, self.inflated,
+                max(0, ly0 - r), min(h, ly1 + r), max(0, lx0 - r), min(w, lx1 + r),
+            )  # fmt: skip
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
 
-    def _reset(self, shape, resolution: float, origin: np.ndarray) -> None:
+    def _reset(self, resolution: float, origin: np.ndarray, shape) -> None:
         self.resolution = float(resolution)
         self.origin = origin.copy()
+        self.frame_id += 1
         self.lethal = np.zeros(shape, dtype=np.bool_)
         self.unknown = np.ones(shape, dtype=np.bool_)
         self.inflated = np.zeros(shape, dtype=np.uint8)
@@ -109,6 +112,35 @@ class GlobalCostmap:
         self._kernel = ck.inflation_kernel(
             self.resolution, self.inscribed_radius, p.cost_scaling_factor, p.inflation_radius
         )
+
+    def _grow(self, off_y: int, off_x: int, ph: int, pw: int) -> None:
+        """Enlarge the frame to hold the incoming map plus a margin, keeping the old layers."""
+        h, w = self.shape
+        m = int(math.ceil(self.params.growth_margin / self.resolution))
+        ny0 = min(0, off_y - m) if off_y < 0 else 0
+        nx0 = min(0, off_x - m) if off_x < 0 else 0
+        ny1 = max(h, off_y + ph + m) if off_y + ph > h else h
+        nx1 = max(w, off_x + pw + m) if off_x + pw > w else w
+        shape = (ny1 - ny0, nx1 - nx0)
+        lethal = np.zeros(shape, dtype=np.bool_)
+        unknown = np.ones(shape, dtype=np.bool_)
+        inflated = np.zeros(shape, dtype=np.uint8)
+        lethal[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.lethal
+        unknown[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.unknown
+        inflated[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.inflated
+        self.lethal, self.unknown, self.inflated = lethal, unknown, inflated
+        self.origin = self.origin + np.array([nx0, ny0]) * self.resolution
+        self.frame_id += 1
+        # Old obstacles near the old border inflate into the new ring around it.
+        r = self._kernel.shape[0] // 2
+        H, W = shape
+        oy0, oy1, ox0, ox1 = -ny0, -ny0 + h, -nx0, -nx0 + w
+        ry0, ry1, rx0, rx1 = max(0, oy0 - r), min(H, oy1 + r), max(0, ox0 - r), min(W, ox1 + r)
+        for y0, y1, x0, x1 in (
+            (ry0, oy0, rx0, rx1), (oy1, ry1, rx0, rx1), (oy0, oy1, rx0, ox0), (oy0, oy1, ox1, rx1)
+        ):  # fmt: skip
+            if y1 > y0 and x1 > x0:
+                ck.inflate_region(self.lethal, self._kernel, self.inflated, y0, y1, x0, x1)
 
 
 def _union(a, b):

@@ -152,21 +152,25 @@ def footprint_collides(lethal, dist_m, origin_x, origin_y, resolution, x, y, the
 
 
 @njit(cache=True)
-def classify_region(prob, occupied_thresh, lethal, unknown, y0, y1, x0, x1):
+def classify_region(prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1):
     """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
 
-    prob: (H, W) float32 occupancy probability, NaN unknown. A cell is lethal when its
-    probability reaches `occupied_thresh` (GMapping publishes 100 above its occ_thresh).
-    Returns the bounding boxes `(y0, y1, x0, x1)` of the lethal and of the unknown changes,
-    each empty (y1 == y0) when nothing changed.
+    prob: (h, w) float32 occupancy probability, NaN unknown, whose cell (0, 0) is cell
+    (off_y, off_x) of the layers; layer cells outside it are unknown. A cell is lethal above
+    `occupied_thresh` (GMapping publishes 100 above its occ_thresh). Returns the bounding boxes
+    `(y0, y1, x0, x1)` of the lethal and of the unknown changes, each empty (y1 == y0) when
+    nothing changed.
     """
+    ph, pw = prob.shape
     ly0, ly1, lx0, lx1 = y1, y0, x1, x0
     uy0, uy1, ux0, ux1 = y1, y0, x1, x0
     for iy in range(y0, y1):
+        sy = iy - off_y
         for ix in range(x0, x1):
-            p = prob[iy, ix]
+            sx = ix - off_x
+            p = prob[sy, sx] if (0 <= sy < ph and 0 <= sx < pw) else np.nan
             unk = math.isnan(p)
-            let = (not unk) and p >= occupied_thresh
+            let = (not unk) and p > occupied_thresh
             if let != lethal[iy, ix]:
                 lethal[iy, ix] = let
                 ly0 = min(ly0, iy)

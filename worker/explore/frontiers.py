@@ -38,18 +38,18 @@ class FrontierSearch:
         self._labels = np.zeros((0, 0), dtype=np.int64)
         self._stamp = np.zeros((0, 0), dtype=np.int64)
         self._run_id = 0
-        self._resolution = 0.0
+        self._frame_id = -1
 
     def update(self, costmap: GlobalCostmap, bbox) -> None:
         """Refresh the frontier cells in `bbox (y0, y1, x0, x1)` grown by one cell (None: all)."""
         h, w = costmap.shape
-        if self.frontier.shape != (h, w) or costmap.resolution != self._resolution:
+        if self.frontier.shape != (h, w) or costmap.frame_id != self._frame_id:
             self.frontier = np.zeros((h, w), dtype=np.bool_)
             self._target = np.zeros((h, w), dtype=np.bool_)
             self._owner = np.zeros((h, w), dtype=np.int64)
             self._labels = np.zeros((h, w), dtype=np.int64)
             self._stamp = np.zeros((h, w), dtype=np.int64)
-            self._resolution = costmap.resolution
+            self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0
             bbox = None
         if bbox is None:

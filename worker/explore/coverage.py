@@ -1,0 +1,88 @@
+"""Explored coverage: share of the floorplan's reachable free area the SLAM map marks free."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from worker.evaluate.ate import align_se2
+
+_FOUR = ndimage.generate_binary_structure(2, 1)
+
+
+def reachable_free(
+    occ: np.ndarray, resolution: float, start_cell: tuple[int, int], half_side: float
+) -> np.ndarray:
+    """`(H, W) bool` free cells the robot can map: near where its centre can go.
+
+    occ: (H, W) bool world grid (True obstacle), start_cell (ix, iy). The robot's centre can
+    reach the 4-connected cells of clearance above the footprint's half side that contain the
+    start; a free cell counts when it lies within the circumscribed radius plus a cell of that
+    set (the robot's body sweeps it). Free space behind gaps narrower than the robot is left
+    out: the robot cannot get there, whatever it glimpses through the gap.
+    """
+    free = ~occ
+    dist = ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
+    centre_ok = (dist - 0.5) * resolution > half_side
+    labels, _ = ndimage.label(centre_ok, structure=_FOUR)
+    ix, iy = start_cell
+    lab = labels[iy, ix] if (0 <= iy < occ.shape[0] and 0 <= ix < occ.shape[1]) else 0
+    if lab == 0:
+        # start cell too tight (hugging a wall): take the nearest centre-reachable component
+        if not centre_ok.any():
+            return np.zeros_like(occ)
+        _, (ny, nx) = ndimage.distance_transform_edt(~centre_ok, return_indices=True)
+        lab = labels[ny[iy, ix], nx[iy, ix]]
+    reach = labels == lab
+    to_reach = ndimage.distance_transform_edt(~reach) * resolution
+    return free & (to_reach <= half_side * math.sqrt(2.0) + resolution)
+
+
+def align_map_to_world(pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
+    """T_world_map `(3,)` [x, y, theta] aligning the estimated path onto the ground truth.
+
+    Least squares over all positions (both `(N, 3)`, same timestamps); with fewer than two
+    distinct positions, the transform that maps the first estimated pose onto the first
+    ground-truth pose.
+    """
+    if len(pose_est) >= 2 and np.ptp(pose_gt[:, :2], axis=0).max() > 0.5:
+        return align_se2(pose_est[:, :2], pose_gt[:, :2])
+    th = pose_gt[0, 2] - pose_est[0, 2]
+    c, s = math.cos(th), math.sin(th)
+    x = pose_gt[0, 0] - (c * pose_est[0, 0] - s * pose_est[0, 1])
+    y = pose_gt[0, 1] - (s * pose_est[0, 0] + c * pose_est[0, 1])
+    return np.array([x, y, th])
+
+
+def coverage(
+    reachable: np.ndarray,
+    world_resolution: float,
+    world_origin: np.ndarray,
+    prob: np.ndarray,
+    map_resolution: float,
+    map_origin: np.ndarray,
+    occ_thresh: float,
+    T_world_map: np.ndarray,
+) -> float:
+    """Share of `reachable (H, W)` world cells whose centre falls on a free cell of the map.
+
+    prob: (h, w) SLAM probabilities (NaN unknown; free at or below occ_thresh), in the map
+    frame placed in the world by T_world_map `(3,)`.
+    """
+    iy, ix = np.nonzero(reachable)
+    if iy.size == 0:
+        return 0.0
+    xw = world_origin[0] + (ix + 0.5) * world_resolution - T_world_map[0]
+    yw = world_origin[1] + (iy + 0.5) * world_resolution - T_world_map[1]
+    c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
+    xm = c * xw + s * yw  # R^T (p_world - t)
+    ym = -s * xw + c * yw
+    mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
+    my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
+    h, w = prob.shape
+    inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
+    p = prob[my[inside], mx[inside]]
+    free = np.count_nonzero(~np.isnan(p) & (p <= occ_thresh))
+    return free / iy.size

@@ -1,0 +1,225 @@
+"""The robot's navigation stack: explore_lite goals + move_base (planners, recovery, safety)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from worker.explore.costmap import GlobalCostmap, LocalCostmap
+from worker.explore.dwa import DwaPlanner
+from worker.explore.frontiers import FrontierGoal, FrontierSearch
+from worker.explore.params import ExploreParams
+from worker.explore.planner import GlobalPlanner
+from worker.explore.safety import SafetyController
+
+
+@dataclass(frozen=True)
+class GoalRecord:
+    """One exploration goal and how it ended (map frame)."""
+
+    t_start: float  # [s]
+    t_end: float  # [s]
+    x: float  # [m]
+    y: float  # [m]
+    # "reached" (arrived and turned to the frontier), "explored" (its frontier vanished on
+    # the way), "failed" (no plan, no legal command or no progress for too long), "replaced"
+    # (a nearer frontier came up), "dropped" (no frontier reachable any more)
+    status: str
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class NavCommand:
+    """The velocity to send and what the stack is doing."""
+
+    v: float  # [m/s]
+    w: float  # [rad/s]
+    status: str  # "driving", "aligning", "safety", "recovering", "planning", "no_frontier"
+
+
+@dataclass
+class NavStats:
+    """Counters of one run."""
+
+    goals: list[GoalRecord] = field(default_factory=list)
+    recoveries: int = 0  # local costmap clearings + replans after the controller failed
+    plan_failures: int = 0
+    consecutive_failures: int = 0  # given-up goals since the last success
+
+
+class Navigator:
+    """Chooses frontier goals, plans, follows the plan with the DWA, recovers, stays safe.
+
+    Fed only with the SLAM map (`update_map`) and the SLAM pose plus the latest scan (`step`).
+    """
+
+    def __init__(self, params: ExploreParams, angles: np.ndarray, range_max: float):
+        self.params = params
+        self.angles = np.asarray(angles, dtype=float)
+        self.range_max = float(range_max)
+        self.costmap = GlobalCostmap(params)
+        self.frontiers = FrontierSearch(params)
+        self.planner = GlobalPlanner(params)
+        self.dwa = DwaPlanner(params)
+        self.safety = SafetyController(params, self.angles, self.range_max)
+        self.local: LocalCostmap | None = None
+        self.stats = NavStats()
+        self.blacklist: list[np.ndarray] = []
+        self.goal: FrontierGoal | None = None
+        self.path: np.ndarray | None = None
+        self._goal_t0 = 0.0
+        self._next_choice_t = 0.0
+        self._next_plan_t = 0.0
+        self._plan_fail_since: float | None = None
+        self._ctrl_fail_since: float | None = None
+        self._recovered = False
+        self._best_gap = math.inf
+        self._progress_t = 0.0
+        self._frontier_changed = False
+
+    # --- map ---
+    def update_map(self, prob, resolution: float, origin, robot_xy, full: bool) -> None:
+        """Refresh costmap and frontiers from the SLAM map (only around the robot unless full)."""
+        window = None
+        if not full and self.costmap.resolution == resolution:
+            r = self.range_max + resolution
+            window = (robot_xy[0] - r, robot_xy[1] - r, robot_xy[0] + r, robot_xy[1] + r)
+        changed = self.costmap.update(prob, resolution, origin, window)
+        self.frontiers.update(self.costmap, changed)
+        if changed[1] > changed[0]:
+            self._frontier_changed = True
+        if self.local is None:
+            self.local = LocalCostmap(self.params, resolution)
+
+    # --- control ---
+    def step(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
+        """One control period: the command for pose `(3,)` [x, y, theta] (map frame)."""
+        p = self.params
+        if self.local is None:
+            return NavCommand(0.0, 0.0, "planning")
+        self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
+        self.local.build(pose[0], pose[1], self.costmap.origin)
+        if self.safety.active(t):
+            v, w = self.safety.check(t, ranges, 0.0)
+            return NavCommand(v, w, "safety")
+        self._check_goal_still_open(t)
+        if self.goal is None or t >= self._next_choice_t:
+            self._choose(t, pose)
+            if self.goal is None:
+                return NavCommand(0.0, 0.0, "no_frontier")
+        if self.path is None or t >= self._next_plan_t:
+            self._plan(t, pose)
+        if self.path is None:
+            if t - self._plan_fail_since >= p.planner_patience:
+                self._give_up(t, "no plan")
+            return NavCommand(0.0, 0.0, "planning")
+        cmd = self.dwa.command(pose, v0, w0, self.local, self.goal.yaw)
+        if cmd.kind == "aligned":
+            self._finish(t, "reached")
+            return NavCommand(0.0, 0.0, "aligning")
+        if not cmd.legal:
+            return self._controller_failed(t)
+        self._ctrl_fail_since = None
+        self._recovered = False
+        if self._no_progress(t, pose):
+            self._give_up(t, "no progress")
+            return NavCommand(0.0, 0.0, "recovering")
+        override = self.safety.check(t, ranges, cmd.v)
+        if override is not None:
+            return NavCommand(override[0], override[1], "safety")
+        return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+
+    def _check_goal_still_open(self, t: float) -> None:
+        """A goal whose frontier disappeared (the robot saw the place on the way) is done."""
+        if (
+            self.goal is not None
+            and self._frontier_changed
+            and not self.frontiers.frontier_near(
+                self.costmap, self.goal.frontier_xy, self.params.blacklist_radius
+            )
+        ):
+            self._finish(t, "explored")
+        self._frontier_changed = False
+
+    def _choose(self, t: float, pose: np.ndarray) -> None:
+        p = self.params
+        self._next_choice_t = t + p.frontier_period
+        new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist)
+        if new is None:
+            if self.goal is not None:
+                self._end_goal(t, "dropped", "no reachable frontier left")
+            self.goal = None
+            return
+        if self.goal is not None:
+            if np.hypot(*(new.goal_xy - self.goal.goal_xy)) <= 1.0:
+                return  # same goal, keep its plan and progress timers
+            self._end_goal(t, "replaced", "a nearer frontier")
+        self.goal = new
+        self._goal_t0 = t
+        self.path = None
+        self._plan_fail_since = None
+        self._ctrl_fail_since = None
+        self._best_gap = math.inf
+        self._progress_t = t
+
+    def _plan(self, t: float, pose: np.ndarray) -> None:
+        self._next_plan_t = t + 1.0 / self.params.planner_frequency
+        path = self.planner.plan(self.costmap, pose[:2], self.goal.goal_xy)
+        if path is None:
+            self.stats.plan_failures += 1
+            if self._plan_fail_since is None:
+                self._plan_fail_since = t
+            self.path = None
+            self._next_plan_t = t + 1.0 / self.params.controller_frequency
+        else:
+            self._plan_fail_since = None
+            self.path = path
+        self.dwa.set_plan(self.path)
+
+    def _controller_failed(self, t: float) -> NavCommand:
+        """move_base: no legal command -> clear the local costmap and replan; later give up."""
+        if self._ctrl_fail_since is None:
+            self._ctrl_fail_since = t
+        elapsed = t - self._ctrl_fail_since
+        if elapsed >= self.params.controller_patience:
+            self._give_up(t, "no legal command")
+        elif not self._recovered and elapsed >= 1.0:
+            self._recovered = True
+            self.stats.recoveries += 1
+            self.local.clear()
+            self._next_plan_t = t  # replan now
+        return NavCommand(0.0, 0.0, "recovering")
+
+    def _no_progress(self, t: float, pose: np.ndarray) -> bool:
+        """explore_lite's progress_timeout: the goal got no nearer for too long."""
+        gap = float(np.hypot(*(self.goal.goal_xy - pose[:2])))
+        if gap < self._best_gap - 0.1:
+            self._best_gap = gap
+            self._progress_t = t
+        return t - self._progress_t >= self.params.progress_timeout
+
+    def _finish(self, t: float, status: str) -> None:
+        """Goal done: when its frontier is still there after arriving, do not come back to it."""
+        if status == "reached" and self.frontiers.frontier_near(
+            self.costmap, self.goal.frontier_xy, self.params.blacklist_radius
+        ):
+            self.blacklist.append(self.goal.frontier_xy.copy())
+        self.stats.consecutive_failures = 0
+        self._end_goal(t, status)
+
+    def _give_up(self, t: float, why: str) -> None:
+        self.blacklist.append(self.goal.frontier_xy.copy())
+        self.stats.consecutive_failures += 1
+        self._end_goal(t, "failed", why)
+
+    def _end_goal(self, t: float, status: str, detail: str = "") -> None:
+        g = self.goal
+        self.stats.goals.append(
+            GoalRecord(self._goal_t0, t, float(g.goal_xy[0]), float(g.goal_xy[1]), status, detail)
+        )
+        self.goal = None
+        self.path = None
+        self.dwa.set_plan(None)
+        self._next_choice_t = t
