@@ -142,20 +142,11 @@ def relations_cmd(
     if k == "B":
         params = dataclasses.replace(params, max_gap=max_gap)
     traj_gt = read_trajectory(gt, fmt.value, message.value)
+    traj_est = None if est is None else read_trajectory(est, fmt.value, est_message.value)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", r.RelationsCapWarning)
-        if k == "B":
-            traj_est = read_trajectory(est, fmt.value, est_message.value)
-            rel = r.relations_B(traj_gt, traj_est, np.random.default_rng(seed), params)
-        else:
-            generator = {
-                "A": r.relations_A,
-                "S": r.relations_S,
-                "M": r.relations_M,
-                "SM": r.relations_SM,
-                "L": r.relations_L,
-            }[k]
-            rel = generator(traj_gt, params)
+        rng = np.random.default_rng(seed)
+        rel = r.generate_relations(k, traj_gt, params, est=traj_est, rng=rng)
     for w in caught:
         print(f"mapqual: warning: {w.message}", file=sys.stderr)
     write_relations(output, rel)

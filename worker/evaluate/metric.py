@@ -73,6 +73,6 @@ def evaluate_relations(
     error |d.xy - d*.xy| and rotational |wrap(d.theta - d*.theta)|, i.e. the norms of
     inv(d*) d (SPEC, Evaluation)."""
     err_t, err_r, ok = relation_errors(
-        est.t, est.poses, rel.t1, rel.t2, rel.delta, float(max_gap), TIME_TOL_S
+        est.packed, rel.t1, rel.t2, rel.delta, float(max_gap), TIME_TOL_S
     )
     return RelationErrors(rel.t1, rel.t2, err_t, err_r, ok)

@@ -24,7 +24,7 @@ from worker.evaluate.trajectory import Trajectory
 RelationKind = Literal["A", "B", "SM", "L", "M", "S"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: identity equality, hashable
 class Relations:
     """Relative motions between ground-truth poses, d*_ij = inv(X*_i) X*_j.
 
@@ -233,7 +233,7 @@ def b_sample_size(
         raise InputError("B relations need a ground truth of at least 2 poses")
     pilot = _from_indices(gt, *_random_pairs(len(gt), params.pilot, rng))
     err_t, _, ok = relation_errors(
-        est.t, est.poses, pilot.t1, pilot.t2, pilot.delta, float(params.max_gap), TIME_TOL_S
+        est.packed, pilot.t1, pilot.t2, pilot.delta, float(params.max_gap), TIME_TOL_S
     )
     used = int(ok.sum())
     if used < 2:
@@ -250,6 +250,9 @@ def relations_B(
 ) -> Relations:
     """B: N random pairs of ground-truth poses, N from the pilot (`b_sample_size`), capped
     at max_relations with a `RelationsCapWarning`."""
+    for name in ("max_relations", "min_relations"):
+        if getattr(params, name) < 0:
+            raise InputError(f"{name} must be >= 0, got {getattr(params, name)}")
     n_wanted, s, _ = b_sample_size(gt, est, rng, params)
     n_rel = max(n_wanted, params.min_relations)
     if n_rel > params.max_relations:
@@ -262,3 +265,41 @@ def relations_B(
         )
         n_rel = params.max_relations
     return _from_indices(gt, *_random_pairs(len(gt), n_rel, rng))
+
+
+KindParams = AParams | BParams | SMParams | LParams | MParams | SParams
+DEFAULT_PARAMS: dict[str, type] = {
+    "A": AParams,
+    "B": BParams,
+    "SM": SMParams,
+    "L": LParams,
+    "M": MParams,
+    "S": SParams,
+}
+
+
+def generate_relations(
+    kind: RelationKind,
+    gt: Trajectory,
+    params: KindParams | None = None,
+    est: Trajectory | None = None,
+    rng: np.random.Generator | None = None,
+) -> Relations:
+    """Relations of one kind; B needs the estimate and the run's random generator."""
+    if kind not in DEFAULT_PARAMS:
+        raise InputError(f"unknown relation kind {kind!r}, expected one of {list(DEFAULT_PARAMS)}")
+    params = DEFAULT_PARAMS[kind]() if params is None else params
+    if not isinstance(params, DEFAULT_PARAMS[kind]):
+        raise TypeError(f"{kind} relations take {DEFAULT_PARAMS[kind].__name__}")
+    if kind == "B":
+        if est is None or rng is None:
+            raise InputError("B relations need the estimate and a random generator")
+        return relations_B(gt, est, rng, params)
+    generator = {
+        "A": relations_A,
+        "S": relations_S,
+        "M": relations_M,
+        "SM": relations_SM,
+        "L": relations_L,
+    }[kind]
+    return generator(gt, params)

@@ -15,7 +15,7 @@ from worker.evaluate.se2 import wrap_angle
 DEFAULT_MAX_GAP_S = 0.1  # [s] the farthest a neighbour may be from a looked-up time
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: identity equality, hashable
 class Trajectory:
     """Poses over time.
 
@@ -49,10 +49,17 @@ class Trajectory:
             )
         poses = poses.copy()
         poses[:, 2] = wrap_angle(poses[:, 2])
-        t.setflags(write=False)
-        poses.setflags(write=False)
+        packed = np.column_stack([t, poses]) if t.shape[0] else np.zeros((0, 4))
+        for arr in (t, poses, packed):
+            arr.setflags(write=False)
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "poses", poses)
+        object.__setattr__(self, "_packed", packed)
+
+    @property
+    def packed(self) -> NDArray[np.float64]:
+        """`(N, 4) [t, x, y, theta]`, the row-per-sample layout the lookup kernels use."""
+        return self._packed
 
     @classmethod
     def from_samples(
@@ -97,4 +104,4 @@ class Trajectory:
         both lie within `max_gap` [s]. Rows that cannot be looked up are 0 with ok False.
         """
         q = np.ascontiguousarray(times, dtype=np.float64).reshape(-1)
-        return lookup_poses(self.t, self.poses, q, float(max_gap), TIME_TOL_S)
+        return lookup_poses(self._packed, q, float(max_gap), TIME_TOL_S)

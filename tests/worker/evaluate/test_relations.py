@@ -18,6 +18,7 @@ from worker.evaluate.relations import (
     SMParams,
     SParams,
     b_sample_size,
+    generate_relations,
     relations_A,
     relations_B,
     relations_L,
@@ -213,3 +214,19 @@ def test_B_needs_an_estimate_that_covers_the_ground_truth(rng):
 def test_bad_parameters_are_input_errors(fn, params):
     with pytest.raises(InputError, match="must be a positive number"):
         fn(line(), params)
+
+
+def test_generate_relations_dispatches_and_checks(rng):
+    gt = wander(rng, 600)
+    a = generate_relations("A", gt)
+    assert a.t1.tobytes() == relations_A(gt).t1.tobytes()
+    sm = generate_relations("SM", gt, SMParams(min_distance=1.0))
+    assert len(sm) == len(relations_SM(gt, SMParams(min_distance=1.0)))
+    with pytest.raises(InputError, match="need the estimate"):
+        generate_relations("B", gt)
+    with pytest.raises(InputError, match="unknown relation kind"):
+        generate_relations("Q", gt)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="take LParams"):
+        generate_relations("L", gt, AParams())
+    with pytest.raises(InputError, match="max_relations must be >= 0"):
+        relations_B(gt, gt, np.random.default_rng(0), BParams(max_relations=-1))
