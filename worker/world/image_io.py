@@ -40,7 +40,7 @@ def read_grey(path: Path, max_pixels: int = MAX_PIXELS) -> tuple[np.ndarray, np.
     except (OSError, SyntaxError, ValueError) as exc:
         if isinstance(exc, InputError):
             raise
-        raise InputError(f"cannot read the image: {exc}", path=path) from None
+        raise InputError(f"not a readable image: {exc}", path=path) from None
 
 
 def _to_grey(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]:

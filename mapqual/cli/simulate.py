@@ -1,0 +1,132 @@
+"""`mapqual simulate`: drive a simulated robot through a floorplan and write its CARMEN log."""
+
+from __future__ import annotations
+
+import json
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mapqual.cli import app
+
+
+class Drive(StrEnum):
+    wander = "wander"
+    path = "path"
+
+
+class OdomModel(StrEnum):
+    stage = "stage"
+    gaussian = "gaussian"
+
+
+@app.command("simulate")
+def simulate(
+    world: Annotated[Path, typer.Argument(help="Image, map_server YAML or Stage .world file.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
+    seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes out.")] = 0,
+    duration: Annotated[float, typer.Option(help="Simulated time [s].")] = 600.0,
+    drive: Annotated[Drive, typer.Option(help="Reactive wanderer or waypoint follower.")] = (
+        Drive.wander
+    ),
+    path: Annotated[
+        Path | None, typer.Option("--path", help="Waypoints file, `x y` [m] per line.")
+    ] = None,
+    laser_noise: Annotated[float, typer.Option(help="Range noise sigma [m].")] = 0.0,
+    odom_model: Annotated[OdomModel, typer.Option(help="Odometry error model.")] = (
+        OdomModel.stage
+    ),
+    resolution: Annotated[
+        float | None, typer.Option(help="Metres per pixel (for a bare image).")
+    ] = None,
+    plot: Annotated[
+        bool, typer.Option(help="Also draw DIR/sim.png: paths and the last scan on the map.")
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Simulate a robot (laser, odometry, ground truth) and write DIR/sim.log (CARMEN: ODOM,
+    ROBOTLASER1, TRUEPOS), DIR/gt.tum, DIR/odom.tum and DIR/sim.json."""
+    from worker.errors import InputError
+    from worker.sim.drivers import read_waypoints
+    from worker.sim.run import run_simulation
+    from worker.sim.simulator import SimParams
+    from worker.world import load_world
+
+    if drive == Drive.path and path is None:
+        raise InputError("--drive path needs --path FILE")
+    if drive == Drive.wander and path is not None:
+        raise InputError("--path is only used with --drive path")
+    params = SimParams(laser_noise_sigma=laser_noise, odom_model=odom_model.value)
+    waypoints = read_waypoints(path) if path is not None else None
+    w = load_world(world, resolution)
+    result = run_simulation(
+        w,
+        out,
+        seed=seed,
+        duration_s=duration,
+        drive=drive.value,
+        waypoints=waypoints,
+        params=params,
+    )
+    if plot:
+        plot_run(w, out, out / "sim.png", params)
+    if as_json:
+        print(json.dumps(result.to_json()))
+        return
+    rtf = result.sim_time_s / max(result.wall_time_s, 1e-9)
+    print(
+        f"{result.world}: {result.n_ticks} scans over {result.sim_time_s:.1f} s simulated, "
+        f"{result.distance_m:.1f} m driven, in {result.wall_time_s:.2f} s ({rtf:.0f}x real time)"
+    )
+    if result.path_completed is not None:
+        print("path: all waypoints reached" if result.path_completed else "path: NOT completed")
+    for c in result.collisions:
+        print(f"collision at t = {c.t:.2f} s, x = {c.x:.3f} m, y = {c.y:.3f} m")
+    for f in result.files + ((str(out / "sim.png"),) if plot else ()):
+        print(f"wrote {f}")
+
+
+def plot_run(world, out_dir: Path, png: Path, params) -> None:
+    """Floorplan, true path (green), odometry path (red) and the last scan's endpoints."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from worker.sim.carmen import read_laser_log
+
+    log = read_laser_log(out_dir / "sim.log")
+    extent = (
+        world.origin[0],
+        world.origin[0] + world.width_m,
+        world.origin[1],
+        world.origin[1] + world.height_m,
+    )
+    aspect = world.height_m / world.width_m
+    fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect)), dpi=120)
+    ax.imshow(~world.occ, origin="lower", extent=extent, cmap="gray", vmin=0, vmax=1)
+    ax.plot(log.pose_gt[:, 0], log.pose_gt[:, 1], color="tab:green", lw=1, label="ground truth")
+    ax.plot(log.pose_odom[:, 0], log.pose_odom[:, 1], color="tab:red", lw=1, label="odometry")
+    x, y, th = log.pose_gt[-1]
+    r = log.ranges[-1].astype(float)
+    hit = r < log.laser.range_max
+    a = th + log.laser.angles
+    ax.scatter(
+        x + r[hit] * np.cos(a[hit]),
+        y + r[hit] * np.sin(a[hit]),
+        s=2,
+        color="tab:blue",
+        label="last scan",
+        zorder=3,
+    )
+    ax.plot([x], [y], marker="o", color="tab:orange", ms=5)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{world.name}: {log.t[-1]:.0f} s simulated")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png)
+    plt.close(fig)

@@ -1,0 +1,105 @@
+"""`mapqual world info|list`: facts as text and JSON, one-line errors with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from mapqual.cli import main
+
+WORLDS = Path(__file__).resolve().parents[2] / "worlds"
+
+
+@pytest.fixture
+def run(monkeypatch, capsys):
+    def _run(*argv) -> tuple[int, str, str]:
+        monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
+        try:
+            main()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return _run
+
+
+@pytest.fixture
+def plan(tmp_path) -> Path:
+    img = np.zeros((40, 80), dtype=np.uint8)
+    img[1:-1, 1:-1] = 255  # 78 x 38 free pixels
+    path = tmp_path / "plan.png"
+    Image.fromarray(img).save(path)
+    return path
+
+
+def test_info_json_on_a_bundled_yaml_needs_no_flags(run):
+    code, out, err = run("world", "info", WORLDS / "bormann" / "office_a.yaml", "--json")
+    assert code == 0, err
+    facts = json.loads(out)
+    w, h = Image.open(WORLDS / "bormann" / "no_furniture" / "office_a.png").size
+    assert facts["width_m"] == pytest.approx(w * 0.05)
+    assert facts["height_m"] == pytest.approx(h * 0.05)
+    assert facts["resolution"] == 0.05
+    assert len(facts["start_pose"]) == 3 and facts["free_area_m2"] > 0
+    assert facts["n_rooms"] > 0
+
+
+def test_info_on_an_image_with_resolution(run, plan):
+    code, out, err = run("world", "info", plan, "--resolution", "0.1", "--json")
+    assert code == 0, err
+    facts = json.loads(out)
+    assert facts["width_m"] == pytest.approx(8.0) and facts["height_m"] == pytest.approx(4.0)
+    assert facts["free_area_m2"] == pytest.approx(78 * 38 * 0.01)
+    code, out, _ = run("world", "info", plan, "--resolution", "0.1")
+    assert code == 0 and "free area: 29.6 m^2" in out and "start pose" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--resolution", "5"], "outside (0.005, 1]"),
+        ([], "needs its resolution"),
+        (["--resolution", "0.1", "--max-pixels", "100"], "more than the limit"),
+    ],
+)
+def test_info_errors_are_one_line_with_exit_2(run, plan, args, message):
+    code, out, err = run("world", "info", plan, *args)
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and err.startswith("mapqual: error: ")
+
+
+def test_info_on_a_missing_or_broken_file(run, tmp_path):
+    code, _, err = run("world", "info", tmp_path / "nope.yaml")
+    assert code == 2 and "no such file" in err and err.count("\n") == 1
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    code, _, err = run("world", "info", bad, "--resolution", "0.05")
+    assert code == 2 and "not a readable image" in err and err.count("\n") == 1
+    cramped = tmp_path / "cramped.png"
+    img = np.zeros((20, 20), dtype=np.uint8)
+    img[5:15, 5:10] = 255  # 0.25 m wide at 0.05 m/px: no room for the 0.4 m robot
+    Image.fromarray(img).save(cramped)
+    code, _, err = run("world", "info", cramped, "--resolution", "0.05")
+    assert code == 2 and "no free space wide enough" in err and err.count("\n") == 1
+
+
+def test_list_a_folder(run, tmp_path, plan):
+    (tmp_path / "plan.yaml").write_text("image: plan.png\nresolution: 0.1\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "other.yaml").write_text("image: ../plan.png\nresolution: 0.05\n")
+    code, out, err = run("world", "list", tmp_path, "--json")
+    assert code == 0, err
+    rows = json.loads(out)
+    assert [r["name"] for r in rows] == ["plan", "other"]
+    assert rows[1]["width_m"] == pytest.approx(4.0)
+    code, out, _ = run("world", "list", tmp_path)
+    assert code == 0 and "2 worlds in" in out and "plan" in out
+    code, _, err = run("world", "list", tmp_path / "missing")
+    assert code == 2 and "no such folder" in err
