@@ -3,6 +3,7 @@ and Kuemmerle relations `t1 t2 x y z roll pitch yaw`."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Literal
 
@@ -132,7 +133,7 @@ def _read_tum(text: str, path: Path) -> Trajectory:
 
 
 def _detect_format(text: str) -> Literal["carmen", "tum"]:
-    for line in text.splitlines():
+    for line in io.StringIO(text):  # lazily: only the first data line matters
         body = line.split("#", 1)[0].split()
         if body:
             try:
