@@ -27,12 +27,12 @@ class WanderParams:
     k_side: float = 1.5  # [rad/s per m] gain of that push
     wander_sigma: float = 0.3  # [rad/s] std of the random turn-rate component
     wander_tau: float = 3.0  # [s] its correlation time (Ornstein-Uhlenbeck)
-    turn_min: float = 0.8  # [s] shortest turn in place once started
 
 
 class Wanderer:
-    """Drives forward, slows near obstacles, turns in place towards the more open side when
-    blocked, and meanders at random in open space. Deterministic for its Generator."""
+    """Drives forward, slows near obstacles, keeps off the walls at its sides, turns on the spot
+    towards the most open direction when blocked, and meanders at random in open space.
+    Deterministic for its Generator."""
 
     def __init__(
         self, laser: LaserSpec, rng: np.random.Generator, params: WanderParams | None = None
@@ -47,6 +47,10 @@ class Wanderer:
         self._bias = 0.0  # [rad/s] the random turn-rate component
         self._turn_dir = 0.0  # +1 left, -1 right, 0 not turning in place
         self._turn_left_s = 0.0  # [s] time left in the current turn
+        self._cand = angles[::10]  # candidate headings when blocked (every 5 degrees)
+        self._cand_cos = np.cos(self._cand)
+        self._cand_sin = np.sin(self._cand)
+        self._range_max = laser.range_max
 
     def command(self, ranges_m: np.ndarray, dt: float) -> tuple[float, float]:
         """(v [m/s], w [rad/s]) from the current scan `(B,)` [m]."""
@@ -62,14 +66,17 @@ class Wanderer:
         )
         if self._turn_dir != 0.0:
             self._turn_left_s -= dt
-            if self._turn_left_s > 0.0 or front < p.stop_dist + 0.3:
+            if self._turn_left_s > 0.0:
                 return 0.0, self._turn_dir * p.w_max
             self._turn_dir = 0.0
         if front < p.stop_dist:
-            left = float(ranges_m[self._left].mean())
-            right = float(ranges_m[self._right].mean())
-            self._turn_dir = 1.0 if left >= right else -1.0
-            self._turn_left_s = p.turn_min * (1.0 + float(self.rng.uniform()))
+            # Blocked: turn on the spot towards the most open visible direction, or turn
+            # around to look behind (the laser's blind sector) when nothing visible is open.
+            phi, clear = self._most_open(xs, ys)
+            if clear < p.stop_dist + 0.3:
+                phi = math.copysign(math.pi, phi)
+            self._turn_dir = 1.0 if phi >= 0.0 else -1.0
+            self._turn_left_s = abs(phi) / p.w_max + 0.2 * float(self.rng.uniform())
             return 0.0, self._turn_dir * p.w_max
         scale = min(1.0, max(0.25, (front - p.stop_dist) / (p.slow_dist - p.stop_dist)))
         left_min = float(np.abs(ys[self._left]).min()) if self._left.any() else p.side_dist
@@ -77,6 +84,20 @@ class Wanderer:
         push = p.k_side * (max(0.0, p.side_dist - right_min) - max(0.0, p.side_dist - left_min))
         w = min(p.w_max, max(-p.w_max, push + self._bias))
         return p.v_max * scale, w
+
+    def _most_open(self, xs: np.ndarray, ys: np.ndarray) -> tuple[float, float]:
+        """The candidate heading (every 5 degrees of the field of view, relative [rad]) with
+        the longest free lane of the robot's width, and that lane's length [m]."""
+        p = self.p
+        c = self._cand_cos[:, None]
+        s = self._cand_sin[:, None]
+        along = xs[None, :] * c + ys[None, :] * s
+        lateral = np.abs(ys[None, :] * c - xs[None, :] * s)
+        blocking = (along > 0.0) & (lateral < p.half_width + p.margin)
+        lane = np.where(blocking, along, np.inf).min(axis=1)
+        lane = np.minimum(lane, self._range_max)
+        best = int(np.argmax(lane))
+        return float(self._cand[best]), float(lane[best])
 
 
 @dataclass(frozen=True)
