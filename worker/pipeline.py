@@ -2,14 +2,39 @@
 
 from __future__ import annotations
 
+import gzip
+import io
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from pathlib import Path
+from typing import Any, Literal, TextIO
 
-from worker.evaluate.relations import AParams, BParams, SMParams
+import numpy as np
+
+from worker.evaluate.ate import AteResult, absolute_trajectory_error
+from worker.evaluate.metric import RelationErrors, evaluate_relations
+from worker.evaluate.relations import (
+    AParams,
+    BParams,
+    Relations,
+    RelationsCapWarning,
+    SMParams,
+    relations_A,
+    relations_B,
+    relations_SM,
+)
+from worker.evaluate.trajectory import Trajectory
+from worker.explore.loop import ExplorationResult, ExploreProgress, explore
 from worker.explore.params import ExploreParams
 from worker.params import from_dict, to_dict
-from worker.sim.simulator import SimParams
+from worker.sim.carmen import CarmenWriter
+from worker.sim.simulator import SimParams, Simulator
+from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
+from worker.world.world import World
 
 Algorithm = Literal["rbpf", "odometry", "oracle"]
 ALGORITHMS: tuple[str, ...] = ("rbpf", "odometry", "oracle")
@@ -43,3 +68,187 @@ class RunParams:
     def from_json(cls, data: dict[str, Any]) -> RunParams:
         """Strictly validated: unknown keys, wrong types and bad values raise InputError."""
         return from_dict(cls, data)
+
+
+class RunCancelled(Exception):
+    """Raised from an `on_progress` callback to stop a run at its next step."""
+
+
+@dataclass(frozen=True)
+class RunProgress:
+    """What a running run reports about once per simulated second."""
+
+    t: float  # [s] simulated time
+    coverage: float  # [0, 1] latest coverage estimate
+    pose_gt: np.ndarray  # (3,) [x, y, theta]
+    pose_est: np.ndarray  # (3,) [x, y, theta]
+    status: str  # what the navigation stack is doing
+    goals_reached: int
+    wall_s: float  # [s] since the run started
+    rtf: float  # simulated seconds per wall second so far
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """A finished run: its exploration, its relations and errors, and the summary.json."""
+
+    world: World
+    seed: int
+    params: RunParams
+    exploration: ExplorationResult
+    gt: Trajectory  # ground truth at 10 Hz
+    est: Trajectory  # SLAM estimate at the same timestamps
+    relations: dict[str, Relations]  # "B", "A", "SM"
+    errors: dict[str, RelationErrors]
+    ate: AteResult | None
+    summary: dict[str, Any]
+
+
+class _LoggingSimulator:
+    """The simulator as the exploration sees it, writing one CARMEN tick per scan taken.
+
+    The exploration loop takes exactly one scan per 0.1 s step, at the top of the step, so the
+    log holds every scan with the odometry and ground truth of the same instant.
+    """
+
+    def __init__(self, sim: Simulator, writer: CarmenWriter):
+        self._sim = sim
+        self._writer = writer
+
+    def scan(self) -> np.ndarray:
+        ranges = self._sim.scan()
+        v, w = self._sim.velocity
+        self._writer.write_tick(self._sim.t, self._sim.pose_gt, self._sim.pose_odom, v, w, ranges)
+        return ranges
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sim, name)
+
+
+def run_one(
+    world: World,
+    params: RunParams,
+    seed: int,
+    on_progress: Callable[[RunProgress], None] | None = None,
+    *,
+    sim_log: str | Path | None = None,
+) -> RunResult:
+    """Simulate, explore with SLAM in closed loop, and evaluate one run of `world`.
+
+    One Generator from `seed` is split into independent streams for the simulator, SLAM and
+    the relation sampling, so the same inputs give the same result bit for bit. `sim_log`
+    (optional; `.gz` compresses) receives the full CARMEN log with every scan, for replaying
+    other SLAM algorithms on the same data. `on_progress` may raise `RunCancelled`.
+    """
+    wall0 = time.perf_counter()
+    rng_sim, rng_slam, rng_eval = np.random.default_rng(seed).spawn(3)
+    sim = Simulator(world, params.sim, rng_sim)
+    oracle = params.algorithm == "oracle"
+    slam = make_slam(
+        "odometry" if oracle else params.algorithm, params.sim.laser, params.slam, rng_slam
+    )
+
+    def progress(p: ExploreProgress) -> None:
+        wall = time.perf_counter() - wall0
+        on_progress(
+            RunProgress(
+                p.t,
+                p.coverage,
+                p.pose_gt,
+                p.pose_est,
+                p.status,
+                p.goals_reached,
+                wall,
+                p.t / wall if wall > 0 else 0.0,
+            )
+        )
+
+    callback = progress if on_progress is not None else None
+    with _open_log(sim_log) as stream:
+        if stream is not None:
+            header = f"mapqual run: world {world.name}, seed {seed}, {params.algorithm}"
+            sim = _LoggingSimulator(sim, CarmenWriter(stream, params.sim.laser, comment=header))
+        exploration = explore(world, sim, slam, params.explore, oracle=oracle, on_progress=callback)
+    wall_explore = time.perf_counter() - wall0
+    gt = Trajectory(exploration.t, exploration.pose_gt)
+    est = Trajectory(exploration.t, exploration.pose_est)
+    relations, errors = _evaluate(gt, est, params.eval, rng_eval)
+    ate = absolute_trajectory_error(gt, est, params.eval.max_gap) if len(gt) > 1 else None
+    wall = time.perf_counter() - wall0
+    summary = _summary(world, seed, params, exploration, errors, ate, wall_explore, wall)
+    return RunResult(world, seed, params, exploration, gt, est, relations, errors, ate, summary)
+
+
+@contextmanager
+def _open_log(path: str | Path | None) -> Iterator[TextIO | None]:
+    if path is None:
+        yield None
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".gz":
+        # mtime=0: the same run gives the same bytes
+        with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
+            yield io.TextIOWrapper(gz, encoding="utf-8", newline="\n")
+    else:
+        with open(path, "w", encoding="utf-8", newline="\n") as fh:
+            yield fh
+
+
+def _evaluate(
+    gt: Trajectory, est: Trajectory, p: EvalParams, rng: np.random.Generator
+) -> tuple[dict[str, Relations], dict[str, RelationErrors]]:
+    """B (the score), A and SM relations of the run and the estimate's errors on them."""
+    relations: dict[str, Relations] = {}
+    if len(gt) >= 2:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RelationsCapWarning)  # the count is in the summary
+            relations["B"] = relations_B(gt, est, rng, p.b)
+        relations["A"] = relations_A(gt, p.a)
+        relations["SM"] = relations_SM(gt, p.sm)
+    errors = {k: evaluate_relations(r, est, p.max_gap) for k, r in relations.items()}
+    return relations, errors
+
+
+def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[str, Any]:
+    """summary.json: outcome and coverage at the top level, each relation kind's figures in
+    exactly the shape `mapqual evaluate --json` prints."""
+    failed = ex.outcome != "completed"
+    sim_time = float(ex.t[-1]) if len(ex.t) else 0.0
+    return {
+        "outcome": ex.outcome,
+        "reason": ex.reason if failed else None,
+        "stop": ex.reason,
+        "stop_detail": ex.stop_detail,
+        "coverage": ex.coverage,
+        "world": world.name,
+        "seed": seed,
+        "algorithm": params.algorithm,
+        "relations": {k: e.summary() for k, e in errors.items()},
+        "ate": None if ate is None else ate.summary(),
+        "path_length_m": ex.path_length_m,
+        "collision": None
+        if ex.collision is None
+        else dict(zip(("t", "x", "y", "theta"), ex.collision, strict=True)),
+        "goals": {"reached": ex.goals_reached, "failed": ex.goals_failed, "total": len(ex.goals)},
+        "safety_triggers": ex.safety_triggers,
+        "recoveries": ex.recoveries,
+        "timings": {
+            "sim_time_s": sim_time,
+            "wall_time_s": wall,
+            "explore_wall_s": wall_explore,
+            "evaluate_wall_s": wall - wall_explore,
+            "navigation_wall_s": float(np.sum(ex.nav_wall_s)),
+            "real_time_factor": sim_time / wall if wall > 0 else None,
+        },
+        "params": params.to_json(),
+        "versions": _versions(),
+    }
+
+
+def _versions() -> dict[str, str]:
+    import numba
+
+    from mapqual import __version__
+
+    return {"mapqual": __version__, "numpy": np.__version__, "numba": numba.__version__}

@@ -89,7 +89,7 @@ def trajectories_png(
     fig_w = 9.0
     fig, ax = plt.subplots(figsize=(fig_w, max(3.0, fig_w * h / max(w, 1))), dpi=110)
     _floorplan_axes(ax, occ, resolution, origin)
-    ax.plot(pose_gt[:, 0], pose_gt[:, 1], color="#1a9e1a", lw=1.4, label="ground truth")
+    ax.plot(pose_gt[:, 0], pose_gt[:, 1], color="#1a9e1a", lw=2.8, label="ground truth")
     ax.plot(pose_est[:, 0], pose_est[:, 1], color="#d62020", lw=1.3, label="estimate")
     if len(pose_gt):
         ax.plot(*pose_gt[0, :2], "o", color="black", ms=5, label="start")

@@ -1,0 +1,97 @@
+"""run_one end to end on small purpose-built worlds: real simulator, SLAM and exploration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worker.errors import InputError
+from worker.pipeline import RunCancelled, RunParams, run_one
+from worker.world.world import World
+
+
+def two_rooms() -> World:
+    """10 m x 6 m, two rooms joined by a 1 m door, a short wall in the left room."""
+    occ = np.zeros((120, 200), bool)
+    occ[[0, -1], :] = True
+    occ[:, [0, -1]] = True
+    occ[:, 100] = True
+    occ[50:70, 100] = False
+    occ[60, 30:60] = True
+    return World.from_array(occ, 0.05, name="two_rooms")
+
+
+def _strip_wall_times(summary: dict) -> dict:
+    s = dict(summary)
+    s.pop("timings")
+    return s
+
+
+def test_oracle_run_completes_covers_the_rooms_and_scores_zero(tmp_path):
+    p = RunParams.from_json({"algorithm": "oracle", "explore": {"time_limit": 600.0}})
+    r = run_one(two_rooms(), p, seed=3, sim_log=tmp_path / "sim.log")
+    s = r.summary
+    assert (s["outcome"], s["reason"], s["collision"]) == ("completed", None, None)
+    assert s["coverage"] >= 0.95
+    # the oracle's estimate is the ground truth: every relation error is zero
+    assert np.array_equal(r.gt.poses, r.est.poses)
+    assert s["relations"]["A"]["translation"]["max"] == 0.0
+    assert s["relations"]["A"]["translation"]["n"] == pytest.approx(r.gt.t[-1] / 0.5, abs=1)
+    # thesis rule: a pilot standard deviation of 0 asks for N = 0 B relations
+    assert s["relations"]["B"]["translation"]["n"] == 0
+    # the CARMEN log has one ODOM, ROBOTLASER1 and TRUEPOS line per 10 Hz step
+    lines = (tmp_path / "sim.log").read_text().splitlines()
+    n = len(r.gt.t)
+    assert sum(ln.startswith("ROBOTLASER1 ") for ln in lines) == n
+    assert sum(ln.startswith("TRUEPOS ") for ln in lines) == n
+
+
+def test_same_seed_same_run_bit_for_bit(tmp_path):
+    p = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 120.0}})
+    a = run_one(two_rooms(), p, seed=11, sim_log=tmp_path / "a.log")
+    b = run_one(two_rooms(), p, seed=11, sim_log=tmp_path / "b.log")
+    assert _strip_wall_times(a.summary) == _strip_wall_times(b.summary)
+    assert (tmp_path / "a.log").read_bytes() == (tmp_path / "b.log").read_bytes()
+    c = run_one(two_rooms(), p, seed=12)
+    assert not np.array_equal(a.gt.poses, c.gt.poses) or not np.array_equal(
+        a.est.poses, c.est.poses
+    )
+
+
+def test_more_odometry_noise_gives_larger_b_errors():
+    # dead reckoning with Gaussian odometry noise; 500 B relations at least, for stable means
+    def b_mean(sigma: float) -> float:
+        p = RunParams.from_json(
+            {
+                "algorithm": "odometry",
+                "sim": {"odom_model": "gaussian", "odom_sigmas": [sigma, sigma, sigma]},
+                "explore": {"time_limit": 300.0},
+                "eval": {"b": {"min_relations": 500}},
+            }
+        )
+        b = run_one(two_rooms(), p, seed=2).summary["relations"]["B"]["translation"]
+        assert b["n"] >= 500
+        return b["mean"]
+
+    low, high = b_mean(0.02), b_mean(0.2)
+    assert 0 < low < high
+
+
+def test_cancel_from_the_progress_callback_stops_the_run():
+    seen = []
+
+    def stop_after_5_s(prog):
+        seen.append(prog.t)
+        if prog.t >= 5.0:
+            raise RunCancelled
+
+    with pytest.raises(RunCancelled):
+        run_one(two_rooms(), RunParams(algorithm="oracle"), 1, stop_after_5_s)
+    assert 5.0 <= seen[-1] < 7.0
+
+
+def test_bad_parameters_are_input_errors():
+    with pytest.raises(InputError, match="algorithm"):
+        RunParams.from_json({"algorithm": "ekf"})
+    with pytest.raises(InputError, match="time_limit"):
+        RunParams.from_json({"explore": {"time_limit": -5}})
