@@ -153,30 +153,31 @@ def _union(a, b):
 
 
 class LocalCostmap:
-    """Rolling window around the robot built from recent scans only (thesis: static_map false).
+    """Rolling window around the robot: the recent scans' obstacles over the SLAM map's.
 
-    Aligned with the global grid (same resolution, cell edges on the same lattice) so that the
-    DWA can score trajectories against it directly. Arrays are `[iy, ix]`:
-    `lethal (n, n) bool`, `dist_m (n, n) float32` to the nearest scan obstacle,
-    `cost (n, n) uint8` inflated as costmap_2d does.
+    Aligned with the global grid (same resolution, cell edges on the same lattice) so that
+    the DWA scores trajectories against it directly. ROS's local costmap held scan obstacles
+    only; ours adds the map's obstacles, so that walls in the laser's blind 90 degrees behind
+    the robot still count when it turns. Arrays `(n, n)`, `[iy, ix]`: `lethal`, `near`,
+    `inner` bool (see costmap_kernels.local_layers) and `cost` uint8.
     """
 
     def __init__(self, params: ExploreParams, resolution: float):
-        from scipy import ndimage  # noqa: F401  (imported once here: warms the module)
-
         self.params = params
         self.resolution = float(resolution)
         self.n = int(math.ceil(params.local_window_m / self.resolution))
-        self._kernel_params = (
-            params.footprint_half_m,
-            params.cost_scaling_factor,
-            params.inflation_radius,
-        )
+        half = (params.footprint_half_m + params.footprint_padding) / self.resolution
+        # A footprint corner reaches half*sqrt(2) from the centre, and both the robot and the
+        # obstacle may sit anywhere in their cells: centre cells up to (half + 1) sqrt(2) apart.
+        self._near = ck.disc_offsets((half + 1.0) * math.sqrt(2.0) + 0.01)
+        self._inner = ck.disc_offsets(half)
         self._marks: list[tuple[float, np.ndarray]] = []  # (t, (K, 2) obstacle points [m])
         self.origin = np.zeros(2)
-        self.lethal = np.zeros((self.n, self.n), dtype=np.bool_)
-        self.dist_m = np.full((self.n, self.n), np.inf, dtype=np.float32)
-        self.cost = np.zeros((self.n, self.n), dtype=np.uint8)
+        shape = (self.n, self.n)
+        self.lethal = np.zeros(shape, dtype=np.bool_)
+        self.near = np.zeros(shape, dtype=np.bool_)
+        self.inner = np.zeros(shape, dtype=np.bool_)
+        self.cost = np.zeros(shape, dtype=np.uint8)
 
     def add_scan(
         self, t: float, pose: np.ndarray, ranges_m: np.ndarray, angles: np.ndarray, range_max: float
@@ -197,30 +198,26 @@ class LocalCostmap:
         """Recovery behaviour: forget all but the newest scan's obstacles."""
         self._marks = self._marks[-1:]
 
-    def build(self, x: float, y: float, grid_origin: np.ndarray) -> None:
-        """Rasterise the kept scan obstacles into the window centred on (x, y) and inflate."""
-        from scipy import ndimage
-
+    def build(self, x: float, y: float, costmap: GlobalCostmap | None = None) -> None:
+        """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given)."""
         res = self.resolution
         half = self.n // 2
-        ix = math.floor((x - grid_origin[0]) / res)
-        iy = math.floor((y - grid_origin[1]) / res)
-        self.origin = np.array(
-            [grid_origin[0] + (ix - half) * res, grid_origin[1] + (iy - half) * res]
-        )
-        lethal = np.zeros((self.n, self.n), dtype=np.bool_)
-        if self._marks:
-            pts = np.concatenate([m[1] for m in self._marks])
-            cx = np.floor((pts[:, 0] - self.origin[0]) / res).astype(np.int64)
-            cy = np.floor((pts[:, 1] - self.origin[1]) / res).astype(np.int64)
-            ok = (cx >= 0) & (cx < self.n) & (cy >= 0) & (cy < self.n)
-            lethal[cy[ok], cx[ok]] = True
-        self.lethal = lethal
-        if lethal.any():
-            self.dist_m = (ndimage.distance_transform_edt(~lethal) * res).astype(np.float32)
+        g_origin = costmap.origin if costmap is not None else np.zeros(2)
+        ix = math.floor((x - g_origin[0]) / res)
+        iy = math.floor((y - g_origin[1]) / res)
+        self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
+        pts = np.concatenate([m[1] for m in self._marks]) if self._marks else np.zeros((0, 2))
+        if costmap is None or costmap.shape[0] == 0:
+            g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
+            g_oy = g_ox = -(10**6)
         else:
-            self.dist_m = np.full((self.n, self.n), np.inf, dtype=np.float32)
-        self.cost = cost_from_distance(self.dist_m, *self._kernel_params)
+            g_lethal, g_cost = costmap.lethal, costmap.inflated
+            g_oy, g_ox = iy - half, ix - half
+        self.lethal, self.near, self.inner, self.cost = ck.local_layers(
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+            float(self.origin[0]), float(self.origin[1]), res, self.n,
+            self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox),
+        )  # fmt: skip
 
 
 def cost_from_distance(

@@ -109,45 +109,45 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
 
 
 @njit(cache=True)
-def footprint_collides(lethal, dist_m, origin_x, origin_y, resolution, x, y, theta, half, circ):
-    """True when the square footprint (half side `half` [m]) at (x, y, theta) covers an obstacle.
+def footprint_collides(lethal, near, inner, origin_x, origin_y, resolution, x, y, theta, half):
+    """True when the square footprint (half side `half` [m]) at (x, y, theta) overlaps an
+    obstacle cell.
 
-    lethal: (H, W) bool obstacle cells; dist_m: (H, W) distance [m] from each cell centre to
-    the nearest obstacle cell centre. Far from obstacles (> circumscribed radius + a cell) the
-    answer is no without looking further; nearer, the footprint's outline is sampled at half
-    the cell size. Cells outside the grid count as free (the caller sizes the window).
+    lethal, near, inner: (H, W) bool layers of `local_layers`. A centre cell away from every
+    obstacle (not near) is free without looking further; next to one (inner) it collides; in
+    between, each obstacle cell under the footprint's bounding box gets an exact
+    separating-axis test. Cells outside the grid count as free (the caller sizes the window).
     """
     h, w = lethal.shape
     ix = int(math.floor((x - origin_x) / resolution))
     iy = int(math.floor((y - origin_y) / resolution))
     if 0 <= ix < w and 0 <= iy < h:
-        d = dist_m[iy, ix]
-        if d > circ + resolution:
+        if not near[iy, ix]:
             return False
-        if lethal[iy, ix] or d < half:
-            return True  # on an obstacle, or an obstacle centre inside the inscribed circle
+        if lethal[iy, ix] or inner[iy, ix]:
+            return True
     c = math.cos(theta)
     s = math.sin(theta)
-    # The outline is enough: an obstacle can only get inside the square by crossing its edges
-    # (trajectory steps are a fraction of a cell), and one near the centre was caught above.
-    n = int(math.ceil(2.0 * half / (0.5 * resolution))) + 1
-    for i in range(n):
-        u = -half + 2.0 * half * i / (n - 1)
-        for k in range(4):
-            if k == 0:
-                a, b = u, -half
-            elif k == 1:
-                a, b = u, half
-            elif k == 2:
-                a, b = -half, u
-            else:
-                a, b = half, u
-            px = x + c * a - s * b
-            py = y + s * a + c * b
-            jx = int(math.floor((px - origin_x) / resolution))
-            jy = int(math.floor((py - origin_y) / resolution))
-            if 0 <= jx < w and 0 <= jy < h and lethal[jy, jx]:
-                return True
+    ac = abs(c)
+    as_ = abs(s)
+    extent = half * (ac + as_)  # half side of the footprint's axis-aligned bounding box
+    half_cell = 0.5 * resolution
+    cell_on_axis = half_cell * (ac + as_)  # a cell's half extent along the footprint's axes
+    x0 = max(0, int(math.floor((x - extent - origin_x) / resolution)))
+    x1 = min(w - 1, int(math.floor((x + extent - origin_x) / resolution)))
+    y0 = max(0, int(math.floor((y - extent - origin_y) / resolution)))
+    y1 = min(h - 1, int(math.floor((y + extent - origin_y) / resolution)))
+    for jy in range(y0, y1 + 1):
+        dy = origin_y + (jy + 0.5) * resolution - y
+        for jx in range(x0, x1 + 1):
+            if not lethal[jy, jx]:
+                continue
+            dx = origin_x + (jx + 0.5) * resolution - x
+            if abs(dx * c + dy * s) >= half + cell_on_axis:
+                continue
+            if abs(-dx * s + dy * c) >= half + cell_on_axis:
+                continue
+            return True
     return False
 
 
@@ -188,3 +188,77 @@ def classify_region(prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1
     if uy1 <= uy0:
         uy0 = uy1 = ux0 = ux1 = 0
     return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1
+
+
+def disc_offsets(radius_cells: float) -> np.ndarray:
+    """`(K, 2) int64 [dy, dx]` of the cells whose centres are within radius_cells of a centre."""
+    r = int(math.floor(radius_cells))
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    keep = dx * dx + dy * dy <= radius_cells * radius_cells + 1e-9
+    return np.column_stack((dy[keep], dx[keep])).astype(np.int64)
+
+
+@njit(cache=True)
+def local_layers(
+    px, py, ox, oy, resolution, n, near_offsets, inner_offsets, g_lethal, g_cost, g_oy, g_ox
+):
+    """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
+
+    px, py: (K,) [m] obstacle points (map frame) from the recent scans; the global costmap's
+    obstacles `g_lethal` and inflation `g_cost` are read through the window (its cell (0, 0)
+    is global cell (g_oy, g_ox)). Returns `(lethal, near, inner, cost)`, all (n, n): lethal
+    bool cells holding an obstacle (scan or map); near bool within the circumscribed radius
+    (plus a cell) of one, where the footprint test must look closer; inner bool within the
+    inscribed radius; cost uint8: the map's inflation, LETHAL / INSCRIBED where the layers say.
+    """
+    lethal = np.zeros((n, n), dtype=np.bool_)
+    near = np.zeros((n, n), dtype=np.bool_)
+    inner = np.zeros((n, n), dtype=np.bool_)
+    cells = np.empty((px.shape[0], 2), dtype=np.int64)
+    k = 0
+    for i in range(px.shape[0]):
+        ix = int(math.floor((px[i] - ox) / resolution))
+        iy = int(math.floor((py[i] - oy) / resolution))
+        if 0 <= ix < n and 0 <= iy < n and not lethal[iy, ix]:
+            lethal[iy, ix] = True
+            cells[k, 0] = iy
+            cells[k, 1] = ix
+            k += 1
+    gh, gw = g_cost.shape
+    for iy in range(max(0, -g_oy), min(n, gh - g_oy)):
+        for ix in range(max(0, -g_ox), min(n, gw - g_ox)):
+            if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix]:
+                lethal[iy, ix] = True
+                if k == cells.shape[0]:
+                    c2 = np.empty((2 * k + 16, 2), dtype=np.int64)
+                    c2[:k] = cells[:k]
+                    cells = c2
+                cells[k, 0] = iy
+                cells[k, 1] = ix
+                k += 1
+    for i in range(k):
+        cy = cells[i, 0]
+        cx = cells[i, 1]
+        for m in range(near_offsets.shape[0]):
+            jy = cy + near_offsets[m, 0]
+            jx = cx + near_offsets[m, 1]
+            if 0 <= jy < n and 0 <= jx < n:
+                near[jy, jx] = True
+        for m in range(inner_offsets.shape[0]):
+            jy = cy + inner_offsets[m, 0]
+            jx = cx + inner_offsets[m, 1]
+            if 0 <= jy < n and 0 <= jx < n:
+                inner[jy, jx] = True
+    cost = np.zeros((n, n), dtype=np.uint8)
+    for iy in range(n):
+        gy = g_oy + iy
+        for ix in range(n):
+            if lethal[iy, ix]:
+                cost[iy, ix] = LETHAL
+            elif inner[iy, ix]:
+                cost[iy, ix] = INSCRIBED
+            else:
+                gx = g_ox + ix
+                if 0 <= gy < gh and 0 <= gx < gw:
+                    cost[iy, ix] = min(g_cost[gy, gx], INSCRIBED - 1)
+    return lethal, near, inner, cost

@@ -49,9 +49,10 @@ class DwaPlanner:
         prm[dk.P_GDIST] = p.gdist_scale
         prm[dk.P_OCCDIST] = p.occdist_scale
         prm[dk.P_LOOKAHEAD] = p.heading_lookahead
-        prm[dk.P_HALF] = p.footprint_half_m
+        prm[dk.P_HALF] = p.footprint_half_m + p.footprint_padding
         prm[dk.P_CIRC] = p.footprint_half_m * math.sqrt(2.0)
         prm[dk.P_ESCAPE_VX] = p.escape_vel
+        prm[dk.P_HALF_RAW] = p.footprint_half_m
         self.prm = prm
         self.path_xy: np.ndarray | None = None
         self.local_goal_xy: np.ndarray | None = None
@@ -86,7 +87,7 @@ class DwaPlanner:
         vx, vth, _, kind = dk.best_command(
             float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
             self._stuck_left, self._stuck_right, p.vx_samples, p.vtheta_samples,
-            local.lethal, local.dist_m, local.cost, path_dist, goal_dist,
+            local.lethal, local.near, local.inner, local.cost, path_dist, goal_dist,
             float(local.origin[0]), float(local.origin[1]), local.resolution, self.prm,
         )  # fmt: skip
         self._track_oscillation(pose, kind, vth)
@@ -135,7 +136,7 @@ class DwaPlanner:
         w = min(max(w, w0 - p.acc_lim_theta * dt), w0 + p.acc_lim_theta * dt)
         if not dk.rotation_legal(
             float(pose[0]), float(pose[1]), float(pose[2]), math.copysign(abs(w), err),
-            local.lethal, local.dist_m, float(local.origin[0]), float(local.origin[1]),
+            local.lethal, local.near, local.inner, float(local.origin[0]), float(local.origin[1]),
             local.resolution, self.prm,
         ):  # fmt: skip
             return Command(0.0, 0.0, True, "aligned")  # turning would hit something: accept yaw

@@ -27,7 +27,8 @@ P_LOOKAHEAD = 13
 P_HALF = 14  # [m] half side of the footprint
 P_CIRC = 15  # [m] circumscribed radius
 P_ESCAPE_VX = 16
-N_PARAMS = 17
+P_HALF_RAW = 17  # [m] half side without padding
+N_PARAMS = 18
 
 
 @njit(cache=True)
@@ -71,7 +72,7 @@ def wavefront(seeds, cost, resolution):
 
 @njit(cache=True)
 def score_trajectory(
-    x, y, th, vx, vth, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+    x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm, half=-1.0
 ):
     """Roll out constant (vx, vth) for sim_time and score it; negative when illegal.
 
@@ -81,6 +82,8 @@ def score_trajectory(
     pdist * path_dist + gdist * goal_dist + occdist * max centre cost along the trajectory.
     """
     h, w = lethal.shape
+    if half < 0.0:
+        half = prm[P_HALF]
     dist_lin = abs(vx) * prm[P_SIM_TIME]
     dist_ang = abs(vth) * prm[P_SIM_TIME]
     n = int(max(dist_lin / prm[P_SIM_GRAN], dist_ang / prm[P_ANG_GRAN]) + 0.5)
@@ -97,7 +100,7 @@ def score_trajectory(
         iy = int(math.floor((y - oy) / res))
         if ix < 0 or ix >= w or iy < 0 or iy >= h:
             return -2.0
-        if footprint_collides(lethal, dist_m, ox, oy, res, x, y, th, prm[P_HALF], prm[P_CIRC]):
+        if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, half):
             return -1.0
         c = float(cost[iy, ix])
         if c > occ:
@@ -126,7 +129,7 @@ def lookahead_goal_dist(x, y, th, vth, goal_dist, ox, oy, res, prm):
 @njit(cache=True)
 def best_command(
     x, y, th, v0, w0, goal_gap, stuck_left, stuck_right, n_vx, n_vth,
-    lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm,
+    lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm,
 ):  # fmt: skip
     """Dynamic Window Approach as base_local_planner's TrajectoryPlanner (dwa: true) does it.
 
@@ -150,6 +153,15 @@ def best_command(
     bvx = 0.0
     bvth = 0.0
     kind = -1
+    # Keeping the current velocities is a sample too: the trajectory chosen a period ago
+    # stays available (the grid of samples alone need not contain it).
+    vk = min(max(v0, vx_lo), vx_hi)
+    wk = min(max(w0, vth_lo), vth_hi)
+    s = score_trajectory(
+        x, y, th, vk, wk, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
+    )
+    if s >= 0.0:
+        best, bvx, bvth, kind = s, vk, wk, 0
     # Fastest first and straight ahead first: on the grid many samples score the same and the
     # first of equal scores wins (ROS starts from the slowest; we prefer progress).
     for i in range(n_vx - 1, -1, -1):
@@ -157,7 +169,7 @@ def best_command(
         for j in range(-1, n_vth):
             vth = 0.0 if j < 0 else vth_lo + dvth * j
             s = score_trajectory(
-                x, y, th, vx, vth, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+                x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
             )
             if s >= 0.0 and (best < 0.0 or s < best):
                 best, bvx, bvth, kind = s, vx, vth, 0
@@ -170,7 +182,7 @@ def best_command(
             continue
         vlim = max(vth, prm[P_MIN_INPLACE_VTH]) if vth > 0 else min(vth, -prm[P_MIN_INPLACE_VTH])
         s = score_trajectory(
-            x, y, th, 0.0, vlim, lethal, dist_m, cost, path_dist, goal_dist, ox, oy, res, prm
+            x, y, th, 0.0, vlim, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
         )
         if s >= 0.0 and (best < 0.0 or s <= best):
             ahead = lookahead_goal_dist(x, y, th, vlim, goal_dist, ox, oy, res, prm)
@@ -178,9 +190,11 @@ def best_command(
                 heading_dist = ahead
                 best, bvx, bvth, kind = s, 0.0, vlim, 1
     if kind < 0:
+        # base_local_planner backs off even when the padded footprint is already touching;
+        # we back off when the unpadded one stays clear.
         s = score_trajectory(
-            x, y, th, prm[P_ESCAPE_VX], 0.0, lethal, dist_m, cost, path_dist, goal_dist,
-            ox, oy, res, prm,
+            x, y, th, prm[P_ESCAPE_VX], 0.0, lethal, near, inner, cost, path_dist, goal_dist,
+            ox, oy, res, prm, prm[P_HALF_RAW],
         )  # fmt: skip
         if s >= 0.0:
             best, bvx, bvth, kind = s, prm[P_ESCAPE_VX], 0.0, 2
@@ -188,12 +202,12 @@ def best_command(
 
 
 @njit(cache=True)
-def rotation_legal(x, y, th, vth, lethal, dist_m, ox, oy, res, prm):
+def rotation_legal(x, y, th, vth, lethal, near, inner, ox, oy, res, prm):
     """True when rotating in place at vth for sim_time keeps the footprint clear."""
     n = max(1, int(abs(vth) * prm[P_SIM_TIME] / prm[P_ANG_GRAN] + 0.5))
     dt = prm[P_SIM_TIME] / n
     for _ in range(n):
         th += vth * dt
-        if footprint_collides(lethal, dist_m, ox, oy, res, x, y, th, prm[P_HALF], prm[P_CIRC]):
+        if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, prm[P_HALF]):
             return False
     return True

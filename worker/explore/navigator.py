@@ -100,7 +100,7 @@ class Navigator:
         if self.local is None:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
-        self.local.build(pose[0], pose[1], self.costmap.origin)
+        self.local.build(pose[0], pose[1], self.costmap)
         if self.safety.active(t):
             v, w = self.safety.check(t, ranges, 0.0)
             return NavCommand(v, w, "safety")

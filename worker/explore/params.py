@@ -16,6 +16,9 @@ class ExploreParams:
 
     # --- robot and costmaps (costmap_2d; thesis pioneer3at_costmap_common_params) ---
     footprint_half_m: float = 0.2  # [m] half side of the 0.4 m x 0.4 m square footprint
+    # [m] added to the half side in the local planner's collision test (ROS footprint_padding;
+    # the thesis had 0: ours covers the 2.5 cm between trajectory samples and map rounding)
+    footprint_padding: float = 0.02
     inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
     cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
     occupied_thresh: float = 0.25  # [-] SLAM cell probability from which a cell is an obstacle
@@ -76,7 +79,14 @@ class ExploreParams:
         positive = [
             f.name
             for f in fields(self)
-            if f.name not in ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
+            if f.name
+            not in (
+                "escape_vel",
+                "occdist_scale",
+                "pdist_scale",
+                "gdist_scale",
+                "footprint_padding",
+            )
             and not isinstance(getattr(self, f.name), bool)
             and getattr(self, f.name) <= 0
         ]
@@ -84,5 +94,7 @@ class ExploreParams:
             raise InputError(f"exploration parameters must be positive: {', '.join(positive)}")
         if self.min_vel_x > self.max_vel_x:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
+        if self.footprint_padding < 0:
+            raise InputError("exploration parameter footprint_padding must be >= 0")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")

@@ -76,7 +76,13 @@ def test_incremental_update_equals_full_rebuild():
         y0, x0 = rng.integers(0, 80), rng.integers(0, 100)
         patch = rng.choice([np.nan, 0.05, 0.9], size=(10, 10), p=[0.3, 0.5, 0.2])
         prob[y0 : y0 + 10, x0 : x0 + 10] = patch
-        changed = inc.update(prob, RES, (1.0, -2.0), window=(y0, y0 + 10, x0, x0 + 10))
+        window_m = (
+            1.0 + x0 * RES,
+            -2.0 + y0 * RES,
+            1.0 + (x0 + 9.5) * RES,
+            -2.0 + (y0 + 9.5) * RES,
+        )
+        changed = inc.update(prob, RES, (1.0, -2.0), window_m=window_m)
         if changed[1] > changed[0]:  # the changes lie inside the window that was re-read
             assert y0 <= changed[0] and changed[1] <= y0 + 10
     full = GlobalCostmap(ExploreParams())
@@ -100,37 +106,62 @@ def test_inflation_agrees_with_an_exact_distance_transform():
     assert np.mean(expected == cm.inflated) > 0.99
 
 
-def test_map_resize_rebuilds():
-    cm = GlobalCostmap(ExploreParams())
+def test_growing_cropped_map_keeps_one_frame_and_matches_a_fresh_costmap():
+    p = ExploreParams(growth_margin=1.0)
+    cm = GlobalCostmap(p)
     cm.update(_prob_with_wall(), RES, (0.0, 0.0))
+    frame = cm.frame_id
     bigger = np.full((80, 100), np.nan, dtype=np.float32)
     bigger[10:70, 10:90] = _prob_with_wall()
+    bigger[:, 95] = 0.9  # a new wall beyond the old frame
     cm.update(bigger, RES, (-0.5, -0.5))
-    assert cm.shape == (80, 100)
-    assert cm.lethal[40, 50] and cm.unknown[5, 5] and not cm.unknown[40, 20]
+    assert cm.frame_id != frame
+    # grown by the incoming map plus a 1 m (20 cell) margin on the sides it outgrew
+    assert cm.shape == (60 + 10 + 20 + 10 + 20, 80 + 10 + 20 + 10 + 20)
+    fresh = GlobalCostmap(p)
+    fresh.update(bigger, RES, (-0.5, -0.5))
+    oy, ox = (np.round((fresh.origin - cm.origin) / RES).astype(int))[::-1]
+    sub = (slice(oy, oy + 80), slice(ox, ox + 100))
+    np.testing.assert_array_equal(cm.lethal[sub], fresh.lethal)
+    np.testing.assert_array_equal(cm.unknown[sub], fresh.unknown)
+    np.testing.assert_array_equal(cm.inflated[sub], fresh.inflated)
+    assert cm.unknown.sum() - cm.unknown[sub].sum() == cm.unknown.size - 80 * 100
+    # the same map again, cropped smaller: fits, so the frame stays
+    frame = cm.frame_id
+    cm.update(bigger[10:70, 10:90], RES, (0.0, 0.0))
+    assert cm.frame_id == frame
 
 
-def _single_obstacle(cx, cy, n=40):
-    from scipy import ndimage
-
-    lethal = np.zeros((n, n), dtype=np.bool_)
-    lethal[cy, cx] = True
-    dist = (ndimage.distance_transform_edt(~lethal) * RES).astype(np.float32)
-    return lethal, dist
+def _single_obstacle_layers(cx, cy, n=40):
+    """Local layers of a window (origin 0, 0) with one obstacle cell (cx, cy)."""
+    pts = np.array([[(cx + 0.5) * RES, (cy + 0.5) * RES]])
+    lethal, near, inner, _ = ck.local_layers(
+        pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
+        ck.disc_offsets(5 * math.sqrt(2) + 0.01), ck.disc_offsets(4.0),
+        np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6),
+    )  # fmt: skip
+    return lethal, near, inner
 
 
 def test_footprint_square_not_circle():
     # Robot at the centre of cell (20, 20) = (1.025, 1.025); obstacle cell (26, 20) spans
     # x in [1.3, 1.35], y in [1.0, 1.05].
-    lethal, dist = _single_obstacle(26, 20)
-    half, circ = 0.2, 0.2 * math.sqrt(2)
+    lethal, near, inner = _single_obstacle_layers(26, 20)
     x, y = 1.025, 1.025
     # facing +x: the front edge is at x = 1.225 < 1.3 -> free
-    assert not ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x, y, 0.0, half, circ)
+    assert not ck.footprint_collides(lethal, near, inner, 0.0, 0.0, RES, x, y, 0.0, 0.2)
     # moved 0.1 m forwards: the front edge reaches 1.325 -> inside the obstacle cell
-    assert ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x + 0.1, y, 0.0, half, circ)
+    assert ck.footprint_collides(lethal, near, inner, 0.0, 0.0, RES, x + 0.1, y, 0.0, 0.2)
     # rotated by 45 degrees the corner reaches 1.025 + 0.283 = 1.308 -> collides
-    assert ck.footprint_collides(lethal, dist, 0.0, 0.0, RES, x, y, math.pi / 4, half, circ)
+    assert ck.footprint_collides(lethal, near, inner, 0.0, 0.0, RES, x, y, math.pi / 4, 0.2)
+
+
+def test_local_layers_distances():
+    lethal, near, inner = _single_obstacle_layers(20, 20)
+    assert lethal.sum() == 1 and lethal[20, 20]
+    assert inner[20, 24] and not inner[20, 25] and inner[23, 22] and not inner[23, 23]
+    # near: within 5 sqrt(2) = 7.07 cells
+    assert near[20, 27] and not near[20, 28] and near[25, 25] and not near[25, 26]
 
 
 def test_local_costmap_marks_hits_only_and_clears():
@@ -138,13 +169,30 @@ def test_local_costmap_marks_hits_only_and_clears():
     local = LocalCostmap(p, RES)
     angles = np.array([0.0, math.pi / 2])
     local.add_scan(0.0, np.array([5.0, 5.0, 0.0]), np.array([1.0, 30.0]), angles, 30.0)
-    local.build(5.0, 5.0, np.zeros(2))
+    local.build(5.0, 5.0)
     hx, hy = np.argwhere(local.lethal)[0][::-1]
     assert local.lethal.sum() == 1  # the max-range beam marks nothing
     assert abs(local.origin[0] + (hx + 0.5) * RES - 6.0) <= RES
     assert abs(local.origin[1] + (hy + 0.5) * RES - 5.0) <= RES
     assert local.cost[hy, hx] == 254 and local.cost[hy, hx - 4] == 253
+    assert local.cost[hy, hx - 5] == 0  # no map: inflation comes from the global costmap
     # a second scan 2 s later: the first one has expired (persistence 1 s)
     local.add_scan(2.0, np.array([5.0, 5.0, 0.0]), np.array([2.0, 30.0]), angles, 30.0)
-    local.build(5.0, 5.0, np.zeros(2))
+    local.build(5.0, 5.0)
     assert local.lethal.sum() == 1
+    local.add_scan(2.5, np.array([5.0, 5.0, 0.0]), np.array([1.5, 30.0]), angles, 30.0)
+    local.clear()  # recovery: only the newest scan stays
+    local.build(5.0, 5.0)
+    assert local.lethal.sum() == 1
+
+
+def test_local_costmap_includes_map_obstacles_and_inflation():
+    p = ExploreParams()
+    cm = GlobalCostmap(p)
+    cm.update(_prob_with_wall(), RES, (0.0, 0.0))  # wall at x in [2.0, 2.05]
+    local = LocalCostmap(p, RES)
+    local.build(1.5, 1.5, cm)
+    wx = int(round((2.0 - local.origin[0]) / RES))
+    wy = int(round((1.5 - local.origin[1]) / RES))
+    assert local.lethal[wy, wx] and local.cost[wy, wx] == 254
+    assert local.cost[wy, wx - 6] == cm.inflated[30, 34] < 253

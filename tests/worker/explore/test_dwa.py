@@ -8,7 +8,6 @@ import numpy as np
 
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
-from worker.explore.costmap_kernels import footprint_collides
 from worker.explore.dwa import DwaPlanner
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner
@@ -22,11 +21,11 @@ def _wall(x0, x1, y0, y1, step=0.02):
     return np.array([(x, y) for x in xs for y in ys])
 
 
-def _local(points, pose, p):
+def _local(points, pose, p, costmap=None):
     local = LocalCostmap(p, RES)
     if len(points):
         local.add_points(0.0, points)
-    local.build(pose[0], pose[1], np.zeros(2))
+    local.build(pose[0], pose[1], costmap)
     return local
 
 
@@ -91,17 +90,18 @@ def test_drives_around_a_post_along_the_global_plan_without_touching_it():
     dwa.set_plan(path)
     x, v, w = pose.copy(), 0.0, 0.0
     closest = np.inf
-    for _ in range(120):  # 12 s, integrating the unicycle with the commanded velocities
-        local = _local(post, x, p)
-        cmd = dwa.command(x, v, w, local, None)
-        assert cmd.legal
+    for _ in range(200):  # 20 s, integrating the unicycle with the commanded velocities
+        local = _local(post, x, p, cm)
+        cmd = dwa.command(x, v, w, local, None)  # no legal command: (0, 0), the robot stops
         v, w = cmd.v, cmd.w
         x[0] += v * math.cos(x[2]) * 0.1
         x[1] += v * math.sin(x[2]) * 0.1
         x[2] += w * 0.1
-        assert not footprint_collides(
-            local.lethal, local.dist_m, *local.origin, RES, *x, 0.2, 0.2 * math.sqrt(2)
-        )
+        # independent check: no point of the post inside the robot's 0.4 m square
+        c, s_ = math.cos(x[2]), math.sin(x[2])
+        u = (post[:, 0] - x[0]) * c + (post[:, 1] - x[1]) * s_
+        v_ = -(post[:, 0] - x[0]) * s_ + (post[:, 1] - x[1]) * c
+        assert not np.any((np.abs(u) < 0.2) & (np.abs(v_) < 0.2))
         closest = min(closest, float(np.min(np.hypot(*(post - x[:2]).T))))
         if dwa.goal_reached(x, None):
             break

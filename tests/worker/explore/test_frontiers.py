@@ -37,7 +37,7 @@ def test_incremental_frontier_update_tracks_the_map():
     prob[:, :10] = 0.05
     cm, fs = _setup(prob)
     prob[:, 10:15] = 0.05  # the robot saw 5 more columns
-    changed = cm.update(prob.astype(np.float32), RES, (0.0, 0.0), window=(0, 20, 8, 16))
+    changed = cm.update(prob.astype(np.float32), RES, (0.0, 0.0), window_m=(0.4, 0.0, 0.8, 1.0))
     fs.update(cm, changed)
     assert fs.frontier[:, 14].all() and not fs.frontier[:, 9].any()
     assert fs.n_frontier_cells == 20 == fs.frontier.sum()
