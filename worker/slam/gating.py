@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from worker.errors import InputError
-from worker.slam.motion import wrap_angle
+from worker.evaluate.se2 import wrap_angle
 
 
 def check_scan(t: float, pose_odom: np.ndarray, ranges_m: np.ndarray, n_beams: int):

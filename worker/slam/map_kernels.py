@@ -6,6 +6,9 @@ particles is copied before a particle writes into it (GMapping copies the patche
 active area before registering a scan); `counts` holds the exact reference counts.
 Each cell keeps GMapping's PointAccumulator: hits, visits, and the sum of the hit points
 (relative to the cell's lower-left corner, so float32 keeps sub-millimetre precision).
+Beside the pool, `bits` (P, 2, 32) int64 holds per patch row two bit masks over the row's
+cells, kept current by every write: OCCUPIED (hits / visits > 0.1) and FULL (>= 0.1). The
+scan matcher reads these first and touches the pool only for occupied cells.
 """
 
 from __future__ import annotations
@@ -18,10 +21,12 @@ PATCH = 1 << PATCH_BITS  # [cells] patch side
 PATCH_MASK = PATCH - 1
 HITS, VISITS, ACC_X, ACC_Y = 0, 1, 2, 3  # channels of a pool cell
 N_CHANNELS = 4
+OCCUPIED, FULL = 0, 1  # bit-mask planes of `bits`
+FULLNESS = 0.1  # GMapping's m_fullnessThreshold on hits / visits
 
 
 @njit(cache=True)
-def _writable_patch(pool, counts, free_stack, n_free, table, tx, ty):
+def _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty):
     """Patch id that this particle may write at table cell (tx, ty); -1 if the pool is full."""
     e = table[ty, tx]
     if e >= 0 and counts[e] == 1:
@@ -32,17 +37,36 @@ def _writable_patch(pool, counts, free_stack, n_free, table, tx, ty):
     new = free_stack[n_free[0]]
     if e < 0:
         pool[new] = 0.0
+        bits[new] = 0
     else:
         pool[new] = pool[e]  # copy-on-write of a shared patch
+        bits[new] = bits[e]
         counts[e] -= 1
     counts[new] = 1
     table[ty, tx] = new
     return new
 
 
+@njit(cache=True, inline="always")
+def _update_bits(pool, bits, e, ly, lx):
+    """Refresh the OCCUPIED / FULL bits of cell (ly, lx) of patch e after a write."""
+    hits = pool[e, ly, lx, HITS]
+    limit = FULLNESS * pool[e, ly, lx, VISITS]
+    bit = np.int64(1) << lx
+    if hits > limit:
+        bits[e, OCCUPIED, ly] |= bit
+    else:
+        bits[e, OCCUPIED, ly] &= ~bit
+    if hits >= limit and hits > 0:
+        bits[e, FULL, ly] |= bit
+    else:
+        bits[e, FULL, ly] &= ~bit
+
+
 @njit(cache=True)
 def _register_one(
     pool,
+    bits,
     counts,
     free_stack,
     n_free,
@@ -103,7 +127,7 @@ def _register_one(
                 last_tx, last_ty = tx, ty
                 e = -1
                 if 0 <= tx < tw and 0 <= ty < th:
-                    e = _writable_patch(pool, counts, free_stack, n_free, table, tx, ty)
+                    e = _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty)
             if e < 0:
                 dropped += 1
             else:
@@ -114,6 +138,7 @@ def _register_one(
                     pool[e, ly, lx, HITS] += 1.0
                     pool[e, ly, lx, ACC_X] += hx - cx * res
                     pool[e, ly, lx, ACC_Y] += hy - cy * res
+                _update_bits(pool, bits, e, ly, lx)
             if at_end:
                 break
             e2 = 2 * err
@@ -129,6 +154,7 @@ def _register_one(
 @njit(cache=True)
 def register_scans(
     pool,
+    bits,
     counts,
     free_stack,
     n_free,
@@ -156,6 +182,7 @@ def register_scans(
             return p, dropped
         dropped += _register_one(
             pool,
+            bits,
             counts,
             free_stack,
             n_free,

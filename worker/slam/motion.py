@@ -1,37 +1,10 @@
-"""SE(2) helpers and GMapping's odometry motion model (MotionModel::drawFromMotion)."""
+"""GMapping's odometry motion model (MotionModel::drawFromMotion), vectorised over particles."""
 
 from __future__ import annotations
 
 import numpy as np
 
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a (+) b: pose b, expressed in frame a, in a's parent frame. (..., 3) broadcasting."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
-    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
-
-
-def inverse(a: np.ndarray) -> np.ndarray:
-    """The inverse transform of a: compose(a, inverse(a)) = 0. (..., 3)."""
-    a = np.asarray(a, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = -c * a[..., 0] - s * a[..., 1]
-    y = s * a[..., 0] - c * a[..., 1]
-    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
-
-
-def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """inv(a) (+) b: pose b in frame a (GMapping's absoluteDifference(b, a))."""
-    return compose(inverse(a), b)
+from worker.evaluate.se2 import compose, relative
 
 
 def draw_from_motion(

@@ -26,6 +26,7 @@ class PatchMaps:
         self.tpx0 = 0
         self.tpy0 = 0
         self.pool = np.zeros((0, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
+        self.bits = np.zeros((0, 2, PATCH), dtype=np.int64)  # occupied / full row bit masks
         self.counts = np.zeros(0, dtype=np.int32)
         self.dropped = 0  # cell updates lost for lack of pool space (always 0 in practice)
 
@@ -39,7 +40,7 @@ class PatchMaps:
 
     def nbytes(self) -> int:
         """Bytes held by the pool and the tables."""
-        return int(self.pool.nbytes + self.tables.nbytes + self.counts.nbytes)
+        return int(self.pool.nbytes + self.bits.nbytes + self.tables.nbytes + self.counts.nbytes)
 
     def select(self, indices: np.ndarray) -> None:
         """Resampling: particle k becomes a copy of old particle indices[k] (shares patches)."""
@@ -82,6 +83,9 @@ class PatchMaps:
         pool = np.zeros((new, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
         pool[:old] = self.pool
         self.pool = pool
+        bits = np.zeros((new, 2, PATCH), dtype=np.int64)
+        bits[:old] = self.bits
+        self.bits = bits
         counts = np.zeros(new, dtype=np.int32)
         counts[:old] = self.counts
         self.counts = counts
@@ -124,6 +128,7 @@ class PatchMaps:
             n_free = np.array([free_stack.size], dtype=np.int64)
             start, dropped = register_scans(
                 self.pool,
+                self.bits,
                 self.counts,
                 free_stack,
                 n_free,

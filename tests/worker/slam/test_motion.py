@@ -1,4 +1,4 @@
-"""SE(2) helpers and GMapping's motion model sampling."""
+"""GMapping's motion model sampling."""
 
 from __future__ import annotations
 
@@ -6,17 +6,7 @@ import math
 
 import numpy as np
 
-from worker.slam.motion import compose, draw_from_motion, inverse, relative, wrap_angle
-
-
-def test_compose_inverse_by_hand():
-    a = np.array([1.0, 2.0, math.pi / 2])
-    b = np.array([1.0, 0.0, math.pi / 2])
-    # one metre ahead of a robot facing +y is (1, 3); heading pi wraps to -pi
-    assert np.allclose(compose(a, b), [1.0, 3.0, -math.pi])
-    assert np.allclose(compose(a, inverse(a)), 0.0)
-    assert np.allclose(relative(a, compose(a, b)), b)
-    assert wrap_angle(math.pi) == -math.pi
+from worker.slam.motion import draw_from_motion
 
 
 def test_noise_free_motion_is_exact(rng):

@@ -1,0 +1,126 @@
+"""GMapping-class Rao-Blackwellized particle filter (Grisetti, Stachniss, Burgard 2007)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worker.evaluate.se2 import compose, inverse
+from worker.slam.base import LaserGeometry, beam_angles
+from worker.slam.gating import UpdateGate, check_scan
+from worker.slam.grid import OccupancyGrid
+from worker.slam.match_kernels import scan_match_all
+from worker.slam.motion import draw_from_motion
+from worker.slam.params import SlamParams
+from worker.slam.patchmap import PatchMaps
+from worker.slam.resample import normalized_weights, systematic_indices
+
+
+class RbpfSlam:
+    """Particles = (pose, map); the map frame is the odometry frame of the first scan.
+
+    Every scan moves the particles by the odometry step through the motion model. An update
+    (update gating as GMapping) then refines each particle by scan matching against its own
+    map (the improved proposal), adds the match log-likelihood to its weight, resamples when
+    Neff < resample_threshold * N, and registers the scan in every particle's map. The
+    estimate is the best particle's (largest summed log-likelihood, as slam_gmapping) map->odom
+    correction at the last update, composed with the current odometry.
+    """
+
+    name = "rbpf"
+
+    def __init__(self, laser: LaserGeometry, params: SlamParams, rng: np.random.Generator):
+        self.params = params
+        self.rng = rng
+        angles = beam_angles(laser)
+        self._n_beams = angles.shape[0]
+        self._cos_a, self._sin_a = np.cos(angles), np.sin(angles)
+        self._max_range = (
+            float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
+        )
+        self._usable = min(params.max_urange, self._max_range)
+        self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
+        n = params.particles
+        self.maps = PatchMaps(n, params.delta, params.map_margin, params.occ_thresh)
+        self.poses = np.zeros((n, 3))  # (N, 3) [x, y, theta] map frame
+        self.log_weights = np.zeros(n)  # since the last resampling (GMapping's weight)
+        self.log_weight_sums = np.zeros(n)  # over the whole run (GMapping's weightSum)
+        self.neff = float(n)
+        self.updates = 0
+        self.resamplings = 0
+        self._odom_last: np.ndarray | None = None
+        self._pose_odom = np.zeros(3)
+        self._T_map_odom = np.zeros(3)
+        self._best = 0
+
+    def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
+        p = self.params
+        if self._odom_last is None:
+            self.poses[:] = pose  # the map frame starts at the first odometry pose
+        else:
+            self.poses = draw_from_motion(
+                self.poses, pose, self._odom_last, p.srr, p.srt, p.str_, p.stt, self.rng
+            )
+        self._odom_last = pose
+        self._pose_odom = pose
+        if not self._gate.step(t, pose):
+            return False
+        if self.updates > 0:
+            self._proposal_and_weights(ranges)
+            self._maybe_resample()
+        self.maps.register(
+            self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range
+        )
+        self.updates += 1
+        self._best = int(np.argmax(self.log_weight_sums))
+        self._T_map_odom = compose(self.poses[self._best], inverse(pose))
+        return True
+
+    def _proposal_and_weights(self, ranges: np.ndarray) -> None:
+        p = self.params
+        m = self.maps
+        self.poses, _, likes = scan_match_all(
+            m.pool,
+            m.bits,
+            m.tables,
+            m.tpx0,
+            m.tpy0,
+            self.poses,
+            ranges,
+            self._cos_a,
+            self._sin_a,
+            m.resolution,
+            self._usable,
+            self._max_range,
+            p.lskip,
+            p.kernel_size,
+            p.sigma,
+            p.lsigma,
+            p.lstep,
+            p.astep,
+            p.iterations,
+            p.minimum_score,
+        )
+        self.log_weights += likes
+        self.log_weight_sums += likes
+
+    def _maybe_resample(self) -> None:
+        weights, self.neff = normalized_weights(self.log_weights, self.params.ogain)
+        n = self.poses.shape[0]
+        if self.neff >= self.params.resample_threshold * n:
+            return
+        idx = systematic_indices(weights, self.rng)
+        self.poses = self.poses[idx]
+        self.log_weight_sums = self.log_weight_sums[idx]
+        self.log_weights = np.zeros(n)
+        self.maps.select(idx)
+        self.resamplings += 1
+
+    def pose_estimate(self) -> np.ndarray:
+        return compose(self._T_map_odom, self._pose_odom)
+
+    def T_map_odom(self) -> np.ndarray:
+        return self._T_map_odom.copy()
+
+    def occupancy(self) -> OccupancyGrid:
+        return self.maps.occupancy(self._best)
