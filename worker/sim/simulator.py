@@ -11,7 +11,7 @@ from worker.errors import InputError
 from worker.sim import odometry
 from worker.sim.collision import advance, footprint_collides
 from worker.sim.laser import LaserSpec
-from worker.sim.raycast import cast_scan_skip, safe_distance_cells
+from worker.sim.raycast import cast_scan_skip, jump_map
 from worker.world.world import World
 
 
@@ -83,7 +83,7 @@ class Simulator:
         self._oy = float(world.origin[1])
         self._half = 0.5 * self.params.footprint
         self._angles = self.params.laser.angles
-        self._safe = safe_distance_cells(world.clearance, self._res)
+        self._jump = jump_map(world.occ, world.clearance, self._res)
         pose = np.asarray(world.start_pose if start_pose is None else start_pose, dtype=float)
         self._x, self._y, self._th = float(pose[0]), float(pose[1]), odometry.wrap_angle(pose[2])
         if self._collides(self._x, self._y, self._th):
@@ -201,8 +201,7 @@ class Simulator:
         """
         laser = self.params.laser
         ranges = cast_scan_skip(
-            self._occ,
-            self._safe,
+            self._jump,
             self._res,
             self._ox,
             self._oy,

@@ -14,7 +14,7 @@ from worker.sim.raycast import (
     cast_scan_skip,
     cast_scans,
     cast_scans_skip,
-    safe_distance_cells,
+    jump_map,
 )
 from worker.world import World
 
@@ -112,7 +112,8 @@ def test_skipping_gives_the_same_ranges_as_plain_traversal(rng):
     for i in range(120):
         occ[40 + i // 2, 60 + i] = True
     world = World.from_array(occ, RES)
-    safe = safe_distance_cells(np.asarray(world.clearance), RES)
+    jump = jump_map(occ, world.clearance, RES)
+    assert jump.dtype == np.uint8 and (jump[occ] == 0).all() and (jump[~occ] >= 1).all()
     free = np.argwhere(~occ)
     pick = free[rng.choice(len(free), 60)]
     poses = np.column_stack(
@@ -124,7 +125,7 @@ def test_skipping_gives_the_same_ranges_as_plain_traversal(rng):
     )
     angles = LaserSpec().angles
     plain = cast_scans(occ, RES, 0.0, 0.0, poses, angles, 30.0)
-    fast = cast_scans_skip(occ, safe, RES, 0.0, 0.0, poses, angles, 30.0)
+    fast = cast_scans_skip(jump, RES, 0.0, 0.0, poses, angles, 30.0)
     np.testing.assert_allclose(fast, plain, atol=1e-9)
-    one = cast_scan_skip(occ, safe, RES, 0.0, 0.0, *poses[3], angles, 30.0)
+    one = cast_scan_skip(jump, RES, 0.0, 0.0, *poses[3], angles, 30.0)
     np.testing.assert_allclose(one, plain[3], atol=1e-9)
