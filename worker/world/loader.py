@@ -197,6 +197,10 @@ def _load_stage(path, resolution, start_pose, segmentation, max_pixels, footprin
     if alpha is not None:
         free &= alpha >= 128
         notes.append("transparent pixels count as obstacles")
+    # Stage turns the model (and its bitmap) about its centre by the pose's yaw; np.rot90
+    # turns an image (top row first) counter-clockwise as seen.
+    free = np.rot90(free, stage.quarter_turns)
+    h, w = free.shape
     origin = (stage.center[0] - 0.5 * w * resolution, stage.center[1] - 0.5 * h * resolution)
     if start_pose is None:
         start_pose = stage.robot_pose

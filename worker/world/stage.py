@@ -31,6 +31,7 @@ class StageMap:
     bitmap: Path  # the image, resolved against the file's folder
     size: tuple[float, float]  # [m] width, height of the bitmap in the world
     center: tuple[float, float]  # [m] where the bitmap's centre sits in the world
+    quarter_turns: int  # the bitmap's rotation in the world, counter-clockwise, 0..3 x 90 deg
     robot_pose: tuple[float, float, float] | None  # [m, m, rad] if a robot is placed
 
 
@@ -152,9 +153,18 @@ def read_stage_world(path: Path) -> StageMap:
     if size[0] <= 0 or size[1] <= 0:
         raise InputError(f"size must be positive, got {size[:2]}", path=path, line=floor.line)
     center = (0.0, 0.0)
+    yaw_deg = 0.0
     if "pose" in floor.props:
         p = _floats(floor.props["pose"], 2, "pose", path, floor.line)
         center = (p[0], p[1])
+        yaw_deg = p[3] if len(p) >= 4 else (p[2] if len(p) == 3 else 0.0)
+    quarter_turns = round(yaw_deg / 90.0)
+    if abs(yaw_deg - 90.0 * quarter_turns) > 1e-6:
+        raise InputError(
+            f"the bitmap is rotated by {yaw_deg:g} degrees; only multiples of 90 are supported",
+            path=path,
+            line=floor.line,
+        )
     robot_pose = None
     for ent in entities:
         if ent is floor or ent.kind in _NOT_ROBOT or "pose" not in ent.props:
@@ -169,5 +179,6 @@ def read_stage_world(path: Path) -> StageMap:
         bitmap=(path.parent / bitmap),
         size=(size[0], size[1]),
         center=center,
+        quarter_turns=quarter_turns % 4,
         robot_pose=robot_pose,
     )

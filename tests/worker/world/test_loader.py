@@ -131,6 +131,28 @@ def test_stage_world_file(tmp_path):
     np.testing.assert_array_equal(world.occ, expected_occ(img))
 
 
+@pytest.mark.parametrize("yaw", [90, -90, 180])
+def test_stage_world_rotated_bitmap(tmp_path, yaw):
+    img = np.full((40, 80), 255, dtype=np.uint8)  # 8 m x 4 m at 0.1 m/px
+    img[0, :] = img[-1, :] = img[:, 0] = img[:, -1] = 0
+    img[1:5, 1:5] = 0  # a block in the image's top-left corner
+    save(img, tmp_path / "r.png")
+    (tmp_path / "r.world").write_text(
+        f'model ( bitmap "r.png" size [8 4 1] pose [10 20 {yaw}] )\n'  # Stage 3: [x y yaw]
+    )
+    world = load_world(tmp_path / "r.world")
+    quarter = yaw % 360 // 90
+    width, height = (8.0, 4.0) if quarter % 2 == 0 else (4.0, 8.0)
+    assert (world.width_m, world.height_m) == pytest.approx((width, height))
+    np.testing.assert_allclose(world.origin, [10 - width / 2, 20 - height / 2])
+    # Unrotated, the block is at the top-left; turning the map by +90 degrees (CCW) moves the
+    # top-left corner to the bottom-left, by 180 to the bottom-right, by -90 to the top-right.
+    corner = {1: (10 - 1.8, 20 - 3.8), 2: (10 + 3.8, 20 - 1.8), 3: (10 + 1.8, 20 + 3.8)}[quarter]
+    assert not world.is_free(*corner)
+    far = {1: (10 + 1.5, 20 + 3.5), 2: (10 - 3.5, 20 + 1.5), 3: (10 - 1.5, 20 - 3.5)}[quarter]
+    assert world.is_free(*far)
+
+
 def test_stage_world_errors(tmp_path):
     save(plan_grey(), tmp_path / "cave.png")
     path = tmp_path / "bad.world"
@@ -142,6 +164,9 @@ def test_stage_world_errors(tmp_path):
         load_world(path)
     path.write_text('floorplan ( bitmap "cave.png" size [10 6 1]\n')
     with pytest.raises(InputError, match="never closed"):
+        load_world(path)
+    path.write_text('floorplan ( bitmap "cave.png" size [10 6 1] pose [0 0 0 45] )\n')
+    with pytest.raises(InputError, match="multiples of 90"):
         load_world(path)
     path.write_text("window ( size [1 1] )\n")
     with pytest.raises(InputError, match="no floorplan"):
