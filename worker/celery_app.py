@@ -33,7 +33,12 @@ app.conf.update(
     task_reject_on_worker_lost=True,
     task_soft_time_limit=SOFT_TIME_LIMIT_S,
     task_time_limit=HARD_TIME_LIMIT_S,
-    broker_transport_options={"visibility_timeout": VISIBILITY_TIMEOUT_S},
+    broker_transport_options={
+        "visibility_timeout": VISIBILITY_TIMEOUT_S,
+        # sweep for abandoned messages often enough to honour a short visibility timeout
+        "unacked_restore_interval": max(1, min(10, VISIBILITY_TIMEOUT_S // 4)),
+        "unacked_restore_throttle": 1,
+    },
     broker_connection_retry_on_startup=True,
     worker_send_task_events=False,
     task_default_queue="mapqual",
