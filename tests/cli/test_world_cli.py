@@ -103,3 +103,41 @@ def test_list_a_folder(run, tmp_path, plan):
     assert code == 0 and "2 worlds in" in out and "plan" in out
     code, _, err = run("world", "list", tmp_path / "missing")
     assert code == 2 and "no such folder" in err
+
+
+def test_every_input_form_through_the_cli(run, plan, tmp_path):
+    (tmp_path / "plan.yaml").write_text("image: plan.png\nresolution: 0.1\norigin: [1, 2, 0]\n")
+    (tmp_path / "plan.world").write_text(
+        'floorplan ( bitmap "plan.png" size [8 4 1] pose [0 0 0 0] )\n'
+        "robot ( pose [1.0 0.5 0 180] )\n"
+    )
+    expected = {
+        "plan.png": ([0.0, 0.0], None),
+        "plan.yaml": ([1.0, 2.0], None),
+        "plan.world": ([-4.0, -2.0], [1.0, 0.5, -3.141593]),
+    }
+    for name, (origin, start) in expected.items():
+        extra = ["--resolution", "0.1"] if name.endswith(".png") else []
+        code, out, err = run("world", "info", tmp_path / name, *extra, "--json")
+        assert code == 0, err
+        facts = json.loads(out)
+        assert facts["origin"] == pytest.approx(origin)
+        assert facts["width_m"] == pytest.approx(8.0) and facts["height_m"] == pytest.approx(4.0)
+        if start is not None:
+            assert facts["start_pose"] == pytest.approx(start)
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "message"),
+    [
+        ("bad.yaml", "image: plan.png\nresolution: [\n", "not valid YAML"),
+        ("bad.yaml", "image: plan.png\n", "no `resolution:`"),
+        ("bad.world", 'floorplan ( bitmap "plan.png" size [8 1 1] )\n', "non-square"),
+        ("bad.world", 'floorplan ( bitmap "nope.png" size [8 4 1] )\n', "no such file"),
+        ("bad.world", 'floorplan ( bitmap "plan.png" size [8 4 1] pose [0 0 0 30] )\n', "90"),
+    ],
+)
+def test_yaml_and_stage_errors_through_the_cli(run, plan, tmp_path, name, text, message):
+    (tmp_path / name).write_text(text)
+    code, _, err = run("world", "info", tmp_path / name)
+    assert code == 2 and message in err and err.count("\n") == 1
