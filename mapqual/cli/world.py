@@ -67,7 +67,7 @@ def info(
         ("free area", f"{f.free_area_m2:.1f} m^2  ({100 * f.free_fraction:.1f} % of the image)"),
         (
             "free regions",
-            f"{f.n_free_regions}; the start region has {f.largest_region_area_m2:.1f}"
+            f"{f.n_free_regions}; the main one has {f.largest_region_area_m2:.1f}"
             f" m^2 ({100 * f.largest_region_share:.1f} % of the free area)",
         ),
         (

@@ -27,11 +27,13 @@ class WorldFacts:
     free_area_m2: float  # [m^2] all free cells
     free_fraction: float  # free cells / all cells
     n_free_regions: int  # 4-connected free regions
-    largest_region_area_m2: float  # [m^2] the region the robot starts in
+    # The main region: the largest free region not touching the image border (else the
+    # largest); the automatic start pose lies in it.
+    largest_region_area_m2: float  # [m^2]
     largest_region_share: float  # its share of the free area
-    start_region_enclosed: bool  # the start region does not touch the image border
+    main_region_enclosed: bool  # the main region does not touch the image border
     border_free: bool  # some free cell touches the image border (the border counts as a wall)
-    clearance_mean_m: float  # [m] over the start region's cells
+    clearance_mean_m: float  # [m] over the main region's cells
     clearance_median_m: float  # [m]
     clearance_p90_m: float  # [m] 90th percentile
     clearance_max_m: float  # [m]
@@ -121,18 +123,14 @@ class World:
         if region == 0:
             raise InputError(f"{name}: the floorplan has no free cell")
         radius = analysis.footprint_radius(footprint_m)
-        in_region = labels == region
-        region_clearance = clearance[in_region]
-        if region_clearance.max() < radius:
+        widest = float(clearance[labels == region].max())
+        if widest < radius:
             raise InputError(
                 f"{name}: no free space wide enough for the {footprint_m:.2f} m robot footprint "
-                f"(largest clearance {region_clearance.max():.2f} m, needs {radius:.2f} m); "
+                f"(largest clearance {widest:.2f} m, needs {radius:.2f} m); "
                 "is the resolution right?"
             )
-        border_free = bool(
-            (~occ[0, :]).any() or (~occ[-1, :]).any() or (~occ[:, 0]).any() or (~occ[:, -1]).any()
-        )
-        if border_free:
+        if _border_free(occ):
             notes.append("free space touches the image border; the border counts as a wall")
         if not enclosed:
             notes.append("no enclosed free region; the robot starts in one touching the border")
@@ -140,27 +138,8 @@ class World:
             pose = analysis.choose_start_pose(clearance, labels, region, resolution, origin_arr)
         else:
             pose = _checked_start_pose(start_pose, occ, resolution, origin_arr, name)
-        cell_area = resolution * resolution
-        free_cells = int((~occ).sum())
-        facts = WorldFacts(
-            width_px=int(occ.shape[1]),
-            height_px=int(occ.shape[0]),
-            width_m=occ.shape[1] * resolution,
-            height_m=occ.shape[0] * resolution,
-            resolution=resolution,
-            free_area_m2=free_cells * cell_area,
-            free_fraction=free_cells / occ.size,
-            n_free_regions=n_regions,
-            largest_region_area_m2=float(in_region.sum()) * cell_area,
-            largest_region_share=float(in_region.sum()) / free_cells,
-            start_region_enclosed=enclosed,
-            border_free=border_free,
-            clearance_mean_m=float(region_clearance.mean()),
-            clearance_median_m=float(np.median(region_clearance)),
-            clearance_p90_m=float(np.percentile(region_clearance, 90)),
-            clearance_max_m=float(region_clearance.max()),
-            n_rooms=n_rooms,
-        )
+        in_region = labels == region
+        facts = _world_facts(occ, resolution, n_regions, in_region, enclosed, clearance, n_rooms)
         occ.setflags(write=False)
         clearance.setflags(write=False)
         return cls(
@@ -174,6 +153,48 @@ class World:
             source=source,
             clearance=clearance,
         )
+
+
+def _border_free(occ: np.ndarray) -> bool:
+    """Whether some free cell lies on the grid's outer ring."""
+    return bool(
+        (~occ[0, :]).any() or (~occ[-1, :]).any() or (~occ[:, 0]).any() or (~occ[:, -1]).any()
+    )
+
+
+def _world_facts(
+    occ: np.ndarray,
+    resolution: float,
+    n_regions: int,
+    in_region: np.ndarray,
+    enclosed: bool,
+    clearance: np.ndarray,
+    n_rooms: int | None,
+) -> WorldFacts:
+    """The summary numbers; `in_region` `(H, W)` bool marks the main free region."""
+    cell_area = resolution * resolution
+    free_cells = int((~occ).sum())
+    region_cells = int(in_region.sum())
+    region_clearance = clearance[in_region]
+    return WorldFacts(
+        width_px=int(occ.shape[1]),
+        height_px=int(occ.shape[0]),
+        width_m=occ.shape[1] * resolution,
+        height_m=occ.shape[0] * resolution,
+        resolution=resolution,
+        free_area_m2=free_cells * cell_area,
+        free_fraction=free_cells / occ.size,
+        n_free_regions=n_regions,
+        largest_region_area_m2=region_cells * cell_area,
+        largest_region_share=region_cells / free_cells,
+        main_region_enclosed=enclosed,
+        border_free=_border_free(occ),
+        clearance_mean_m=float(region_clearance.mean()),
+        clearance_median_m=float(np.median(region_clearance)),
+        clearance_p90_m=float(np.percentile(region_clearance, 90)),
+        clearance_max_m=float(region_clearance.max()),
+        n_rooms=n_rooms,
+    )
 
 
 def _checked_start_pose(

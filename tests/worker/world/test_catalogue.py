@@ -34,5 +34,5 @@ def test_yaml_applies_the_grey_250_rule_in_the_map_server_frame(name):
     h, w = grey.shape
     assert world.width_m == pytest.approx(w * 0.05) and world.height_m == pytest.approx(h * 0.05)
     assert world.facts.n_rooms is not None and world.facts.n_rooms > 3
-    assert world.facts.start_region_enclosed
+    assert world.facts.main_region_enclosed
     assert world.warnings == ()

@@ -32,7 +32,7 @@ def test_facts_match_hand_counts():
     # The small room touches the top border: the big one is the largest ENCLOSED region.
     assert f.largest_region_area_m2 == pytest.approx(8.0)
     assert f.largest_region_share == pytest.approx(3200 / 3500)
-    assert f.start_region_enclosed and f.border_free
+    assert f.main_region_enclosed and f.border_free
     assert any("border" in w for w in world.warnings)
     # Clearance in the 2 m wide room peaks at its middle rows: 20 cells to the wall centre
     # line minus half a cell -> 0.975 m.
@@ -58,7 +58,7 @@ def test_an_enclosed_building_is_preferred_over_free_space_outside_it():
     world = World.from_array(occ, RES)
     ix, iy = world.world_to_cell(*world.start_pose[:2])
     assert 52 <= ix < 148 and 52 <= iy < 148
-    assert world.facts.start_region_enclosed
+    assert world.facts.main_region_enclosed
 
 
 def test_a_given_start_pose_is_kept_and_its_angle_wrapped():
