@@ -24,6 +24,7 @@ from mapqual.cli import runs as _runs  # noqa: E402,F401
 from mapqual.cli import service as _service  # noqa: E402,F401
 from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import simulate as _simulate  # noqa: E402,F401
+from mapqual.cli import slam as _slam  # noqa: E402,F401
 from mapqual.cli import world as _world  # noqa: E402,F401
 
 

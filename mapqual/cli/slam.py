@@ -1,0 +1,147 @@
+"""`mapqual slam`: run a SLAM algorithm over a CARMEN log; write the map and the trajectory."""
+
+from __future__ import annotations
+
+import json
+import sys
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from mapqual.cli import app
+
+
+class Algorithm(StrEnum):
+    rbpf = "rbpf"
+    odometry = "odometry"
+
+
+def _opt(help_text: str):
+    return typer.Option(help=help_text, show_default=False)
+
+
+@app.command("slam")
+def slam(
+    log: Annotated[Path, typer.Argument(help="CARMEN log: ROBOTLASER1, or FLASER + ODOM lines.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
+    algorithm: Annotated[Algorithm, typer.Option(help="SLAM algorithm.")] = Algorithm.rbpf,
+    seed: Annotated[int, typer.Option(help="Random seed: same seed, same output.")] = 0,
+    params_file: Annotated[
+        Path | None,
+        typer.Option("--params", help="YAML/JSON of SLAM parameters (or a `slam:` section)."),
+    ] = None,
+    particles: Annotated[int | None, _opt("Particles [default 40].")] = None,
+    linear_update: Annotated[float | None, _opt("linearUpdate [m] [default 1.0].")] = None,
+    angular_update: Annotated[float | None, _opt("angularUpdate [rad] [default 0.25].")] = None,
+    temporal_update: Annotated[float | None, _opt("temporalUpdate [s], <0 off [default -1].")] = (
+        None
+    ),
+    delta: Annotated[float | None, _opt("Map resolution [m] [default 0.05].")] = None,
+    max_urange: Annotated[float | None, _opt("maxUrange [m] [default 30].")] = None,
+    max_range: Annotated[float | None, _opt("maxRange [m] [default laser max - 0.01].")] = None,
+    lskip: Annotated[int | None, _opt("Beams skipped when matching [default 0].")] = None,
+    srr: Annotated[float | None, _opt("Motion noise srr [default 0.1].")] = None,
+    srt: Annotated[float | None, _opt("Motion noise srt [default 0.2].")] = None,
+    str_: Annotated[float | None, typer.Option("--str", help="Motion noise str [default 0.1].")] = (
+        None
+    ),
+    stt: Annotated[float | None, _opt("Motion noise stt [default 0.2].")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Run SLAM over LOG with the odometry pose of each laser line; write DIR/map.pgm,
+    DIR/map.yaml, DIR/map.png, DIR/trajectory.log (FLASER lines, the estimate at every laser
+    timestamp), DIR/trajectory.tum and DIR/slam.json."""
+    import numpy as np
+
+    from worker.evaluate.trajio import write_carmen, write_tum
+    from worker.params import from_dict, load_params_file, to_dict
+    from worker.sim.carmen import read_laser_log
+    from worker.slam.params import SlamParams
+    from worker.slam.run import run_slam
+
+    given: dict[str, Any] = {}
+    if params_file is not None:
+        data = load_params_file(params_file)
+        given.update(data.get("slam", data) if isinstance(data.get("slam"), dict) else data)
+    options = {
+        "particles": particles,
+        "linear_update": linear_update,
+        "angular_update": angular_update,
+        "temporal_update": temporal_update,
+        "delta": delta,
+        "max_urange": max_urange,
+        "max_range": max_range,
+        "lskip": lskip,
+        "srr": srr,
+        "srt": srt,
+        "str_": str_,
+        "stt": stt,
+    }
+    given.update({k: v for k, v in options.items() if v is not None})
+    params = from_dict(SlamParams, given, "slam")
+    data = read_laser_log(log)
+    out.mkdir(parents=True, exist_ok=True)
+    with _Progress(quiet=as_json) as progress:
+        result = run_slam(
+            data.t,
+            data.pose_odom,
+            data.ranges,
+            data.laser,
+            algorithm.value,
+            params,
+            np.random.default_rng(seed),
+            on_progress=progress,
+        )
+    result.grid.save_map_server(out / "map")
+    result.grid.save_png(out / "map.png")
+    write_carmen(out / "trajectory.log", result.trajectory)
+    write_tum(out / "trajectory.tum", result.trajectory)
+    summary = {
+        "log": str(log),
+        "algorithm": algorithm.value,
+        "seed": seed,
+        "scans": int(len(data.t)),
+        "updates": result.updates,
+        "log_duration_s": round(result.log_duration_s, 3),
+        "wall_s": round(result.wall_s, 3),
+        "real_time_factor": round(result.real_time_factor, 1),
+        "map_cells": list(result.grid.shape),
+        "params": to_dict(params),
+    }
+    (out / "slam.json").write_text(json.dumps(summary, indent=2) + "\n")
+    if as_json:
+        print(json.dumps(summary))
+    else:
+        print(
+            f"{algorithm.value}: {summary['scans']} scans, {result.updates} updates, "
+            f"{result.wall_s:.1f} s ({result.real_time_factor:.0f}x real time) -> {out}"
+        )
+
+
+class _Progress:
+    """A rich progress bar over the scans on a terminal; silent otherwise."""
+
+    def __init__(self, quiet: bool):
+        self.bar = None
+        if sys.stderr.isatty() and not quiet:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+            self.bar = Progress(
+                "[bold]slam", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), transient=True
+            )
+            self.task = self.bar.add_task("slam", total=None)
+
+    def __enter__(self):
+        if self.bar is not None:
+            self.bar.start()
+        return self
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.stop()
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=done, total=total)
