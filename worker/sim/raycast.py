@@ -158,6 +158,8 @@ def cast_ray_skip(jump, resolution, origin_x, origin_y, x, y, dx, dy, range_max)
             ix = int(gx + t * dx)
             iy = int(gy + t * dy)
             continue
+        if s == 0:
+            return t * resolution  # unreachable: jumps stop short of obstacles by construction
         # Exact traversal from the current point until a hit, the range limit, or a cell from
         # which a jump is safe again.
         if step_x > 0:

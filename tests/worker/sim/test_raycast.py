@@ -129,3 +129,25 @@ def test_skipping_gives_the_same_ranges_as_plain_traversal(rng):
     np.testing.assert_allclose(fast, plain, atol=1e-9)
     one = cast_scan_skip(jump, RES, 0.0, 0.0, *poses[3], angles, 30.0)
     np.testing.assert_allclose(one, plain[3], atol=1e-9)
+
+
+@pytest.mark.parametrize(("res", "origin"), [(0.1, (-3.7, 12.25)), (0.025, (0.0, -1.0))])
+def test_skipping_matches_plain_traversal_on_speckled_grids(rng, res, origin):
+    occ = room(240, 160)
+    occ |= rng.uniform(size=occ.shape) < 0.002  # isolated specks: many near-miss grazes
+    occ[80, 20:200] = True  # a long wall, grazed at shallow angles
+    world = World.from_array(occ, res, origin=origin)
+    jump = jump_map(occ, world.clearance, res)
+    free = np.argwhere(~occ)
+    pick = free[rng.choice(len(free), 40)]
+    poses = np.column_stack(
+        [
+            origin[0] + (pick[:, 1] + rng.uniform(0, 1, 40)) * res,
+            origin[1] + (pick[:, 0] + rng.uniform(0, 1, 40)) * res,
+            rng.uniform(-math.pi, math.pi, 40),
+        ]
+    )
+    angles = LaserSpec().angles
+    plain = cast_scans(occ, res, origin[0], origin[1], poses, angles, 30.0)
+    fast = cast_scans_skip(jump, res, origin[0], origin[1], poses, angles, 30.0)
+    np.testing.assert_allclose(fast, plain, atol=1e-9)
