@@ -43,6 +43,11 @@ def test_log_and_tum_files_agree(world, tmp_path):
     np.testing.assert_allclose(gt.t, log.t_gt, atol=1e-6)
     np.testing.assert_allclose(gt.poses, log.pose_gt, atol=2e-6)
     np.testing.assert_allclose(odom.poses, log.pose_odom, atol=2e-6)
+    # The evaluator's own CARMEN reader finds the same ground truth and odometry in the log.
+    gt_carmen = read_trajectory(tmp_path / "sim.log", message="TRUEPOS")
+    np.testing.assert_allclose(gt_carmen.poses, gt.poses, atol=2e-6)
+    laser_carmen = read_trajectory(tmp_path / "sim.log", message="ROBOTLASER1")
+    np.testing.assert_allclose(laser_carmen.poses, odom.poses, atol=2e-6)
     # The wanderer moved, and the log's first pose is the world's start pose.
     np.testing.assert_allclose(log.pose_gt[0], world.start_pose, atol=1e-6)
     assert result.distance_m > 3.0
