@@ -59,10 +59,13 @@ class DwaPlanner:
         self._rotating_left = self._rotating_right = False
         self._stuck_left = self._stuck_right = False
         self._prev_xy = (0.0, 0.0)
+        self._escape_from: tuple[float, float, float] | None = None
 
     def set_plan(self, path_xy: np.ndarray | None) -> None:
         """New global path `(K, 2) [x, y]` in the map frame (None: no path)."""
         self.path_xy = None if path_xy is None or len(path_xy) == 0 else np.asarray(path_xy)
+        if self.path_xy is None:
+            self._escape_from = None
 
     def command(
         self, pose: np.ndarray, v0: float, w0: float, local: LocalCostmap, goal_yaw: float | None
@@ -86,7 +89,8 @@ class DwaPlanner:
         goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         vx, vth, _, kind = dk.best_command(
             float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
-            self._stuck_left, self._stuck_right, p.vx_samples, p.vtheta_samples,
+            self._stuck_left, self._stuck_right, self._escape_from is not None,
+            p.vx_samples, p.vtheta_samples,
             local.lethal, local.near, local.inner, local.cost, path_dist, goal_dist,
             float(local.origin[0]), float(local.origin[1]), local.resolution, self.prm,
         )  # fmt: skip
@@ -97,7 +101,23 @@ class DwaPlanner:
 
     def _track_oscillation(self, pose, kind: int, vth: float) -> None:
         """TrajectoryPlanner's flags: a second in-place turn the same way since the robot last
-        moved marks that way as stuck, until it travels oscillation_reset_dist."""
+        moved marks that way as stuck, until it travels oscillation_reset_dist; after backing
+        off, no forward motion until escape_reset_dist / escape_reset_theta from there."""
+        p = self.params
+        if kind == 2 and self._escape_from is None:
+            self._escape_from = (float(pose[0]), float(pose[1]), float(pose[2]))
+        if self._escape_from is not None:
+            ex, ey, eth = self._escape_from
+            if (
+                math.hypot(pose[0] - ex, pose[1] - ey) > p.escape_reset_dist
+                or abs(wrap_angle(pose[2] - eth)) > p.escape_reset_theta
+            ):
+                self._escape_from = None
+        if self._stuck_left and self._stuck_right:
+            # both ways flagged: base_local_planner would leave only the back-off; let the
+            # robot turn again rather than shuffle forwards and backwards on the spot
+            self._stuck_left = self._stuck_right = False
+            self._rotating_left = self._rotating_right = False
         if kind == 1:
             if vth < 0:
                 self._stuck_right |= self._rotating_right

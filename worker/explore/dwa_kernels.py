@@ -128,7 +128,7 @@ def lookahead_goal_dist(x, y, th, vth, goal_dist, ox, oy, res, prm):
 
 @njit(cache=True)
 def best_command(
-    x, y, th, v0, w0, goal_gap, stuck_left, stuck_right, n_vx, n_vth,
+    x, y, th, v0, w0, goal_gap, stuck_left, stuck_right, escaping, n_vx, n_vth,
     lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm,
 ):  # fmt: skip
     """Dynamic Window Approach as base_local_planner's TrajectoryPlanner (dwa: true) does it.
@@ -137,7 +137,8 @@ def best_command(
     speed capped by goal_gap / sim_time so the robot slows down at its goal. In-place
     rotations (at least min_in_place_vel) replace the best forward trajectory when they score
     no worse, preferring the one that looks most towards the goal, and not a direction flagged
-    as oscillating. If nothing is legal, back off at escape_vel. Returns (vx, vth, score, kind):
+    as oscillating. If nothing is legal, back off at escape_vel; while `escaping` (after a
+    back-off, until the robot got clear) no forward samples. Returns (vx, vth, score, kind):
     kind 0 forward, 1 rotation, 2 escape, -1 nothing legal.
     """
     dt = prm[P_DT]
@@ -157,14 +158,18 @@ def best_command(
     # stays available (the grid of samples alone need not contain it).
     vk = min(max(v0, vx_lo), vx_hi)
     wk = min(max(w0, vth_lo), vth_hi)
-    s = score_trajectory(
-        x, y, th, vk, wk, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
-    )
+    s = -1.0
+    if not escaping:
+        s = score_trajectory(
+            x, y, th, vk, wk, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
+        )
     if s >= 0.0:
         best, bvx, bvth, kind = s, vk, wk, 0
     # Fastest first and straight ahead first: on the grid many samples score the same and the
     # first of equal scores wins (ROS starts from the slowest; we prefer progress).
     for i in range(n_vx - 1, -1, -1):
+        if escaping:
+            break
         vx = vx_lo if n_vx == 1 else vx_lo + (vx_hi - vx_lo) * i / (n_vx - 1)
         for j in range(-1, n_vth):
             vth = 0.0 if j < 0 else vth_lo + dvth * j

@@ -11,7 +11,7 @@ from worker.explore.costmap import GlobalCostmap, LocalCostmap
 from worker.explore.dwa import DwaPlanner
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
-from worker.explore.planner import GlobalPlanner
+from worker.explore.planner import GlobalPlanner, path_length
 from worker.explore.safety import SafetyController
 
 
@@ -115,7 +115,9 @@ class Navigator:
             if t - self._plan_fail_since >= p.planner_patience:
                 self._give_up(t, "no plan")
             return NavCommand(0.0, 0.0, "planning")
-        cmd = self.dwa.command(pose, v0, w0, self.local, self.goal.yaw)
+        # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
+        # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
+        cmd = self.dwa.command(pose, v0, w0, self.local, None)
         if cmd.kind == "aligned":
             self._finish(t, "reached")
             return NavCommand(0.0, 0.0, "aligning")
@@ -155,6 +157,11 @@ class Navigator:
         if self.goal is not None:
             if np.hypot(*(new.goal_xy - self.goal.goal_xy)) <= 1.0:
                 return  # same goal, keep its plan and progress timers
+            # Switch only to a clearly nearer frontier: two about equally near ones must not
+            # make the robot dither between them.
+            remaining = path_length(self.path) / self.costmap.resolution * p.neutral_cost
+            if self.path is None or new.travel_cost >= p.goal_switch_ratio * remaining:
+                return
             self._end_goal(t, "replaced", "a nearer frontier")
         self.goal = new
         self._goal_t0 = t

@@ -32,6 +32,7 @@ class ExploreParams:
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
     frontier_period: float = 3.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
+    goal_switch_ratio: float = 0.5  # [-] switch goals when the new one costs < this x the rest
     progress_timeout: float = 30.0  # [s] a goal with no progress for this long is given up
     # --- global planner (navfn; thesis base_local_planner_params) ---
     planner_frequency: float = 0.2  # [Hz] replanning rate (also on every goal change)
@@ -58,6 +59,8 @@ class ExploreParams:
     occdist_scale: float = 0.05  # weight of the max obstacle cost along the trajectory
     heading_lookahead: float = 0.325  # [m] distances are scored this far ahead of the robot
     oscillation_reset_dist: float = 0.25  # [m] travel that clears the rotation-oscillation flags
+    escape_reset_dist: float = 0.15  # [m] back-off distance before driving forwards again
+    escape_reset_theta: float = 0.15  # [rad] or this much turning
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
