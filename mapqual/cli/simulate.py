@@ -27,14 +27,17 @@ def simulate(
     world: Annotated[Path, typer.Argument(help="Image, map_server YAML or Stage .world file.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
     seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes out.")] = 0,
-    duration: Annotated[float, typer.Option(help="Simulated time [s].")] = 600.0,
+    duration: Annotated[float, typer.Option(help="Simulated time in seconds.")] = 600.0,
     drive: Annotated[Drive, typer.Option(help="Reactive wanderer or waypoint follower.")] = (
         Drive.wander
     ),
     path: Annotated[
-        Path | None, typer.Option("--path", help="Waypoints file, `x y` [m] per line.")
+        Path | None,
+        typer.Option("--path", help="Waypoints file: `x y` in metres per line (world frame)."),
     ] = None,
-    laser_noise: Annotated[float, typer.Option(help="Range noise sigma [m].")] = 0.0,
+    laser_noise: Annotated[
+        float, typer.Option(help="Gaussian range noise sigma in metres (thesis: 0, 0.1, 0.3).")
+    ] = 0.0,
     odom_model: Annotated[OdomModel, typer.Option(help="Odometry error model.")] = (
         OdomModel.stage
     ),
