@@ -35,7 +35,10 @@ def read_grey(path: Path, max_pixels: int = MAX_PIXELS) -> tuple[np.ndarray, np.
                     )
                 im.load()
                 return _to_grey(im, path)
-    except (UnidentifiedImageError, Image.DecompressionBombError) as exc:
+    except Image.DecompressionBombError as exc:
+        # Pillow refuses images beyond twice its own limit before we see their size.
+        raise InputError(f"image too large: {exc}", path=path) from None
+    except UnidentifiedImageError as exc:
         raise InputError(f"not a readable image ({exc.__class__.__name__})", path=path) from None
     except (OSError, SyntaxError, ValueError) as exc:
         if isinstance(exc, InputError):

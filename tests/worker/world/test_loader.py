@@ -211,3 +211,27 @@ def test_segmentation_room_count(tmp_path):
     save(seg[:50], tmp_path / "small.png")
     with pytest.raises(InputError, match="segmentation image is 100 x 50"):
         load_world(tmp_path / "plan.png", 0.05, segmentation=tmp_path / "small.png")
+
+
+def test_a_decompression_bomb_is_refused_from_its_header(tmp_path):
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    def bomb(width: int, height: int) -> bytes:
+        header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+        return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IEND", b"")
+
+    # Tiny files claiming huge images are refused before any pixel is decoded: above our
+    # 64 Mpx limit by us, far above it by Pillow's own guard.
+    path = tmp_path / "bomb.png"
+    path.write_bytes(bomb(10000, 8000))
+    with pytest.raises(InputError, match="10000 x 8000 = 80,000,000 pixels, more than the limit"):
+        load_world(path, 0.05)
+    path.write_bytes(bomb(20000, 20000))
+    with pytest.raises(InputError, match="image too large: .*400000000 pixels"):
+        load_world(path, 0.05)
