@@ -12,6 +12,7 @@ from worker.sim import odometry
 from worker.sim.collision import advance, footprint_collides
 from worker.sim.laser import LaserSpec
 from worker.sim.raycast import cast_scan_skip, jump_map
+from worker.world.analysis import clearance_map
 from worker.world.world import World
 
 
@@ -83,7 +84,10 @@ class Simulator:
         self._oy = float(world.origin[1])
         self._half = 0.5 * self.params.footprint
         self._angles = self.params.laser.angles
-        self._jump = jump_map(world.occ, world.clearance, self._res)
+        clearance = world.clearance
+        if clearance is None:  # a World built by hand rather than by World.from_array
+            clearance = clearance_map(world.occ, self._res)
+        self._jump = jump_map(world.occ, clearance, self._res)
         pose = np.asarray(world.start_pose if start_pose is None else start_pose, dtype=float)
         self._x, self._y, self._th = float(pose[0]), float(pose[1]), odometry.wrap_angle(pose[2])
         if self._collides(self._x, self._y, self._th):

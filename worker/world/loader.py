@@ -149,6 +149,9 @@ def _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint
     if len(origin) < 2 or not all(math.isfinite(v) for v in origin):
         raise InputError("origin must be [x, y, yaw]", path=path)
     notes = []
+    mode = str(meta.get("mode", "trinary"))
+    if mode != "trinary":
+        notes.append(f"map_server mode {mode!r} is read as trinary (free / obstacle)")
     if len(origin) > 2 and origin[2] != 0.0:
         notes.append("the YAML origin's yaw is ignored (as most map_server users do)")
     grey, alpha = read_grey(path.parent / str(meta["image"]), max_pixels)

@@ -186,3 +186,12 @@ def test_same_seed_same_trajectory_and_scans():
 
     np.testing.assert_array_equal(run(11), run(11))
     assert not np.array_equal(run(11), run(12))
+
+
+def test_a_hand_built_world_without_clearance_still_simulates():
+    import dataclasses
+
+    world = dataclasses.replace(room_world(start=(6.0, 3.0, 0.0)), clearance=None)
+    sim = Simulator(world, SimParams(), np.random.default_rng(0))
+    ranges = sim.scan()
+    assert ranges[270] == pytest.approx(11.95 - 6.0)  # straight ahead to the inner wall face

@@ -235,3 +235,11 @@ def test_a_decompression_bomb_is_refused_from_its_header(tmp_path):
     path.write_bytes(bomb(20000, 20000))
     with pytest.raises(InputError, match="image too large: .*400000000 pixels"):
         load_world(path, 0.05)
+
+
+def test_map_server_modes_other_than_trinary_are_reported(tmp_path):
+    save(plan_grey(), tmp_path / "m.png")
+    (tmp_path / "m.yaml").write_text("image: m.png\nresolution: 0.05\nmode: scale\n")
+    world = load_world(tmp_path / "m.yaml")
+    assert any("mode 'scale'" in w for w in world.warnings)
+    np.testing.assert_array_equal(world.occ, np.flipud(plan_grey() <= 205))
