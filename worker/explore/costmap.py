@@ -166,11 +166,16 @@ class LocalCostmap:
         self.params = params
         self.resolution = float(resolution)
         self.n = int(math.ceil(params.local_window_m / self.resolution))
-        half = (params.footprint_half_m + params.footprint_padding) / self.resolution
+        res_m = self.resolution
+        half = (params.footprint_half_m + params.footprint_padding) / res_m
         # A footprint corner reaches half*sqrt(2) from the centre, and both the robot and the
         # obstacle may sit anywhere in their cells: centre cells up to (half + 1) sqrt(2) apart.
         self._near = ck.disc_offsets((half + 1.0) * math.sqrt(2.0) + 0.01)
         self._inner = ck.disc_offsets(half)
+        # farthest a trajectory takes the footprint from the robot: the map's obstacles
+        # matter for the collision test only that near
+        reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m
+        self._reach = int(math.ceil(reach_m / self.resolution)) + 2
         self._marks: list[tuple[float, np.ndarray]] = []  # (t, (K, 2) obstacle points [m])
         self.origin = np.zeros(2)
         shape = (self.n, self.n)
@@ -216,7 +221,7 @@ class LocalCostmap:
         self.lethal, self.near, self.inner, self.cost = ck.local_layers(
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
             float(self.origin[0]), float(self.origin[1]), res, self.n,
-            self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox),
+            self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox), self._reach,
         )  # fmt: skip
 
 

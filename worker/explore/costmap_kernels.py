@@ -200,16 +200,18 @@ def disc_offsets(radius_cells: float) -> np.ndarray:
 
 @njit(cache=True)
 def local_layers(
-    px, py, ox, oy, resolution, n, near_offsets, inner_offsets, g_lethal, g_cost, g_oy, g_ox
-):
+    px, py, ox, oy, resolution, n, near_offsets, inner_offsets, g_lethal, g_cost, g_oy, g_ox,
+    reach,
+):  # fmt: skip
     """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
 
     px, py: (K,) [m] obstacle points (map frame) from the recent scans; the global costmap's
-    obstacles `g_lethal` and inflation `g_cost` are read through the window (its cell (0, 0)
-    is global cell (g_oy, g_ox)). Returns `(lethal, near, inner, cost)`, all (n, n): lethal
-    bool cells holding an obstacle (scan or map); near bool within the circumscribed radius
+    obstacles `g_lethal` and costs `g_cost` are read through the window (its cell (0, 0) is
+    global cell (g_oy, g_ox)). Returns `(lethal, near, inner, cost)`, all (n, n): lethal bool
+    cells holding an obstacle (scan, or map within `reach` cells of the window's centre: the
+    farthest a trajectory can take the footprint); near bool within the circumscribed radius
     (plus a cell) of one, where the footprint test must look closer; inner bool within the
-    inscribed radius; cost uint8: the map's inflation, LETHAL / INSCRIBED where the layers say.
+    inscribed radius; cost uint8: the map's costs, raised to LETHAL / INSCRIBED by the layers.
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
     near = np.zeros((n, n), dtype=np.bool_)
@@ -225,8 +227,10 @@ def local_layers(
             cells[k, 1] = ix
             k += 1
     gh, gw = g_cost.shape
-    for iy in range(max(0, -g_oy), min(n, gh - g_oy)):
-        for ix in range(max(0, -g_ox), min(n, gw - g_ox)):
+    c0 = n // 2 - reach
+    c1 = n // 2 + reach + 1
+    for iy in range(max(0, -g_oy, c0), min(n, gh - g_oy, c1)):
+        for ix in range(max(0, -g_ox, c0), min(n, gw - g_ox, c1)):
             if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix]:
                 lethal[iy, ix] = True
                 if k == cells.shape[0]:
@@ -260,5 +264,5 @@ def local_layers(
             else:
                 gx = g_ox + ix
                 if 0 <= gy < gh and 0 <= gx < gw:
-                    cost[iy, ix] = min(g_cost[gy, gx], INSCRIBED - 1)
+                    cost[iy, ix] = g_cost[gy, gx]
     return lethal, near, inner, cost

@@ -98,7 +98,9 @@ def stamp_targets(cells, cell_cluster, cell_valid, offsets, inflated, unknown, t
         for m in range(offsets.shape[0]):
             jy = cells[i, 0] + offsets[m, 0]
             jx = cells[i, 1] + offsets[m, 1]
-            if jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
+            # candidates on the even sub-lattice only: a goal needs no finer placement than
+            # 2 cells and it quarters the stamping
+            if (jy | jx) & 1 or jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
                 continue
             if unknown[jy, jx] or inflated[jy, jx] >= 253:
                 continue

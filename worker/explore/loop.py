@@ -157,7 +157,7 @@ def explore(
             grid = slam.occupancy()
             full = t - last_full_t >= p.full_map_check_period
             c0 = time.perf_counter()
-            nav.update_map(grid.prob, grid.resolution, grid.origin, pose_est[:2], full)
+            nav.update_map(grid.prob, grid.resolution, grid.origin, full)
             nav_s += time.perf_counter() - c0
             last_map_t = t
             if full:

@@ -78,14 +78,18 @@ class Navigator:
         self._best_gap = math.inf
         self._progress_t = 0.0
         self._frontier_changed = False
+        self._beams_box: tuple[float, float, float, float] | None = None
 
     # --- map ---
-    def update_map(self, prob, resolution: float, origin, robot_xy, full: bool) -> None:
-        """Refresh costmap and frontiers from the SLAM map (only around the robot unless full)."""
+    def update_map(self, prob, resolution: float, origin, full: bool) -> None:
+        """Refresh costmap and frontiers from the SLAM map: where the beams since the last
+        update reached (the map cannot have changed elsewhere), or everywhere when full."""
         window = None
-        if not full and self.costmap.resolution == resolution:
-            r = self.range_max + resolution
-            window = (robot_xy[0] - r, robot_xy[1] - r, robot_xy[0] + r, robot_xy[1] + r)
+        if not full and self.costmap.resolution == resolution and self._beams_box is not None:
+            m = 2 * resolution
+            b = self._beams_box
+            window = (b[0] - m, b[1] - m, b[2] + m, b[3] + m)
+        self._beams_box = None
         changed = self.costmap.update(prob, resolution, origin, window)
         self.frontiers.update(self.costmap, changed)
         if changed[1] > changed[0]:
@@ -97,6 +101,7 @@ class Navigator:
     def step(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
         """One control period: the command for pose `(3,)` [x, y, theta] (map frame)."""
         p = self.params
+        self._grow_beams_box(pose, ranges)
         if self.local is None:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
@@ -132,6 +137,20 @@ class Navigator:
         if override is not None:
             return NavCommand(override[0], override[1], "safety")
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+
+    def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
+        """Bounding box `(x0, y0, x1, y1)` [m] of the robot and its beams' end points."""
+        a = self.angles + pose[2]
+        xs = pose[0] + ranges * np.cos(a)
+        ys = pose[1] + ranges * np.sin(a)
+        box = (
+            min(xs.min(), pose[0]), min(ys.min(), pose[1]),
+            max(xs.max(), pose[0]), max(ys.max(), pose[1]),
+        )  # fmt: skip
+        b = self._beams_box
+        self._beams_box = box if b is None else (
+            min(b[0], box[0]), min(b[1], box[1]), max(b[2], box[2]), max(b[3], box[3])
+        )  # fmt: skip
 
     def _check_goal_still_open(self, t: float) -> None:
         """A goal whose frontier disappeared (the robot saw the place on the way) is done."""

@@ -30,7 +30,7 @@ class ExploreParams:
     # --- frontiers (explore_lite) ---
     min_frontier_size: float = 0.5  # [m] clusters smaller than this are ignored
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
-    frontier_period: float = 3.0  # [s] re-choose the frontier this often
+    frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
     goal_switch_ratio: float = 0.5  # [-] switch goals when the new one costs < this x the rest
     progress_timeout: float = 30.0  # [s] a goal with no progress for this long is given up

@@ -29,6 +29,7 @@ class DijkstraSearch:
         params: ExploreParams,
         stop_extra: float = 0.0,
         allow_unknown: bool | None = None,
+        goal_cell: tuple[int, int] | None = None,
     ) -> np.ndarray:
         """Search from `start_cell (ix, iy)`; settled target flat indices, nearest first."""
         if costmap.shape != self.shape:
@@ -53,6 +54,8 @@ class DijkstraSearch:
             self.parent,
             self.stamp,
             self.run_id,
+            -1 if goal_cell is None else goal_cell[1],
+            -1 if goal_cell is None else goal_cell[0],
         )
 
     def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:
@@ -82,7 +85,9 @@ class GlobalPlanner:
             self._target = np.zeros(costmap.shape, dtype=np.bool_)
         self._target[gy, gx] = True
         try:
-            found = self.search.run(costmap, (sx, sy), self._target, self.params)
+            found = self.search.run(
+                costmap, (sx, sy), self._target, self.params, goal_cell=(gx, gy)
+            )
         finally:
             self._target[gy, gx] = False
         if found.size == 0:

@@ -138,7 +138,7 @@ def _single_obstacle_layers(cx, cy, n=40):
     lethal, near, inner, _ = ck.local_layers(
         pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
         ck.disc_offsets(5 * math.sqrt(2) + 0.01), ck.disc_offsets(4.0),
-        np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6),
+        np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), n,
     )  # fmt: skip
     return lethal, near, inner
 

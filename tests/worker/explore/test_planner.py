@@ -86,3 +86,25 @@ def test_start_inside_inscribed_zone_can_escape():
     assert cm.inflated[20, 21] == 253
     path = GlobalPlanner(ExploreParams()).plan(cm, start, (1.8, 1.0))
     assert path is not None and path[-1][0] > 1.7
+
+
+def test_a_star_plan_costs_the_same_as_dijkstra():
+    rng = np.random.default_rng(5)
+    prob = np.where(rng.random((80, 80)) < 0.04, 0.9, 0.05)
+    prob[rng.random((80, 80)) < 0.1] = np.nan
+    cm = _costmap(prob)
+    p = ExploreParams()
+    free = np.argwhere((cm.inflated < 253) & ~cm.unknown)
+    for k in range(5):
+        (sy, sx), (gy, gx) = free[rng.integers(len(free), size=2)]
+        target = np.zeros(cm.shape, dtype=bool)
+        target[gy, gx] = True
+        plain, star = DijkstraSearch(), DijkstraSearch()
+        a = plain.run(cm, (sx, sy), target, p)
+        b = star.run(cm, (sx, sy), target, p, goal_cell=(gx, gy))
+        assert len(a) == len(b)
+        if len(a):
+            assert math.isclose(plain.potential[gy, gx], star.potential[gy, gx], rel_tol=1e-9)
+            # A* settles fewer cells
+            assert (star.stamp == star.run_id).sum() <= (plain.stamp == plain.run_id).sum()
+        _ = k
