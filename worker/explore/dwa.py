@@ -84,6 +84,9 @@ class DwaPlanner:
         seeds, goal_cell = self._local_plan(pose, local)
         if seeds is None:
             return Command(0.0, 0.0, False, "none")
+        # meter_scoring as TrajectoryPlannerROS does it: every weight times the resolution,
+        # distances counted in cells, so distances in metres and the cost weight x resolution
+        self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
         path_dist = dk.wavefront(seeds, local.cost, local.resolution)
         goal_dist = dk.wavefront(goal_cell, local.cost, local.resolution)
         goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])

@@ -79,7 +79,8 @@ def score_trajectory(
     -1: the footprint hits an obstacle cell of the local costmap at some step; -2: a point has
     no path or goal distance (off the window, or cut off by obstacles). Otherwise the score of
     the end point, base_local_planner's (thesis eq. 5.1):
-    pdist * path_dist + gdist * goal_dist + occdist * max centre cost along the trajectory.
+    pdist * path_dist + gdist * goal_dist + occdist * max centre cost along the trajectory
+    (the caller folds meter_scoring into the weights).
     """
     h, w = lethal.shape
     if half < 0.0:

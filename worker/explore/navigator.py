@@ -67,6 +67,8 @@ class Navigator:
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
         self.blacklist: list[np.ndarray] = []
+        self._arrived_at: list[np.ndarray] = []  # frontiers reached that did not vanish
+        self._blacklist_retries = params.blacklist_retries
         self.goal: FrontierGoal | None = None
         self.path: np.ndarray | None = None
         self._goal_t0 = 0.0
@@ -168,6 +170,12 @@ class Navigator:
         p = self.params
         self._next_choice_t = t + p.frontier_period
         new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist)
+        if new is None and self.blacklist and self._blacklist_retries > 0:
+            # before giving up on the building, give the blacklisted frontiers another chance
+            self._blacklist_retries -= 1
+            self.blacklist.clear()
+            self._arrived_at.clear()
+            new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist)
         if new is None:
             if self.goal is not None:
                 self._end_goal(t, "dropped", "no reachable frontier left")
@@ -227,11 +235,15 @@ class Navigator:
         return t - self._progress_t >= self.params.progress_timeout
 
     def _finish(self, t: float, status: str) -> None:
-        """Goal done: when its frontier is still there after arriving, do not come back to it."""
-        if status == "reached" and self.frontiers.frontier_near(
-            self.costmap, self.goal.frontier_xy, self.params.blacklist_radius
-        ):
-            self.blacklist.append(self.goal.frontier_xy.copy())
+        """Goal done. A frontier still there after the robot arrived twice is blacklisted (the
+        SLAM map only updates after some motion, so once is not enough to tell)."""
+        r = self.params.blacklist_radius
+        f = self.goal.frontier_xy
+        if status == "reached" and self.frontiers.frontier_near(self.costmap, f, r):
+            if any(np.hypot(*(f - q)) <= r for q in self._arrived_at):
+                self.blacklist.append(f.copy())
+            else:
+                self._arrived_at.append(f.copy())
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 

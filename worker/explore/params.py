@@ -32,6 +32,7 @@ class ExploreParams:
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
     frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
+    blacklist_retries: int = 1  # times the blacklist is cleared when nothing else is left
     goal_switch_ratio: float = 0.5  # [-] switch goals when the new one costs < this x the rest
     progress_timeout: float = 30.0  # [s] a goal with no progress for this long is given up
     # --- global planner (navfn; thesis base_local_planner_params) ---
