@@ -44,6 +44,10 @@ def simulate(
     resolution: Annotated[
         float | None, typer.Option(help="Metres per pixel (for a bare image).")
     ] = None,
+    start: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(help="Start pose X Y THETA (metres, radians); default: the world's."),
+    ] = None,
     plot: Annotated[
         bool, typer.Option(help="Also draw DIR/sim.png: paths and the last scan on the map.")
     ] = False,
@@ -63,7 +67,7 @@ def simulate(
         raise InputError("--path is only used with --drive path")
     params = SimParams(laser_noise_sigma=laser_noise, odom_model=odom_model.value)
     waypoints = read_waypoints(path) if path is not None else None
-    w = load_world(world, resolution)
+    w = load_world(world, resolution, start_pose=start)
     result = run_simulation(
         w,
         out,

@@ -127,3 +127,27 @@ def test_a_waypoint_inside_a_wall_is_rejected(run, room_yaml, tmp_path):
         "simulate", room_yaml, "--drive", "path", "--path", path, "-o", tmp_path / "out"
     )
     assert code == 2 and "waypoint 2 (4, 1) is not on a free cell" in err
+
+
+def test_a_given_start_pose(run, room_yaml, tmp_path):
+    code, _, err = run(
+        "simulate",
+        room_yaml,
+        "--start",
+        "1.5",
+        "-1.0",
+        "1.0",
+        "--duration",
+        "1",
+        "-o",
+        tmp_path / "out",
+    )
+    assert code == 0, err
+    log = read_laser_log(tmp_path / "out" / "sim.log")
+    np.testing.assert_allclose(log.pose_gt[0], [1.5, -1.0, 1.0], atol=1e-6)
+    code, _, err = run("simulate", room_yaml, "--start", "4.0", "1.0", "0", "-o", tmp_path / "out")
+    assert code == 2 and "not on a free cell" in err and err.count("\n") == 1
+    code, _, err = run(
+        "simulate", room_yaml, "--start", "-0.85", "-1.0", "0", "-o", tmp_path / "out"
+    )
+    assert code == 2 and "overlaps an obstacle" in err and err.count("\n") == 1
