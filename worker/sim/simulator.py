@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -141,13 +142,15 @@ class Simulator:
 
     @property
     def in_contact(self) -> bool:
-        """Whether the last step was blocked by an obstacle."""
+        """Whether the robot is in a contact: blocked, and not yet a cell clear of the obstacle."""
         return self._in_contact
 
     def step(self, v_cmd: float, w_cmd: float) -> bool:
         """Advance one dt towards the commanded velocities; returns False if blocked."""
         p = self.params
         dt = p.dt
+        if not (math.isfinite(v_cmd) and math.isfinite(w_cmd)):
+            raise ValueError(f"velocity command must be finite, got ({v_cmd}, {w_cmd})")
         v_target = min(max(float(v_cmd), p.v_min), p.v_max)
         w_target = min(max(float(w_cmd), -p.w_max), p.w_max)
         dv = p.acc_lin * dt

@@ -165,6 +165,13 @@ def test_a_start_pose_against_a_wall_is_rejected():
         Simulator(world, SimParams(), np.random.default_rng(0))
 
 
+def test_a_non_finite_command_is_refused():
+    sim = Simulator(room_world(start=(6.0, 3.0, 0.0)), SimParams(), np.random.default_rng(0))
+    with pytest.raises(ValueError, match="finite"):
+        sim.step(float("nan"), 0.0)
+    np.testing.assert_allclose(sim.pose_gt, [6.0, 3.0, 0.0])
+
+
 def test_bad_parameters_are_input_errors():
     with pytest.raises(InputError, match="laser noise"):
         SimParams(laser_noise_sigma=-1.0)
