@@ -21,7 +21,7 @@ from typing import TextIO
 import numpy as np
 
 from worker.errors import InputError
-from worker.sim.format_kernels import format_fixed3
+from worker.sim.format_kernels import Fixed3Formatter
 from worker.sim.laser import LaserSpec
 
 HOSTNAME = "mapqual"
@@ -53,6 +53,7 @@ class CarmenWriter:
     def __init__(self, stream: TextIO, laser: LaserSpec, comment: str | None = None):
         self.stream = stream
         self.laser = laser
+        self._format = Fixed3Formatter()
         self._laser_head = (
             f"ROBOTLASER1 {LASER_TYPE_SIMULATED} {laser.angle_min:.12f} {laser.fov:.12f} "
             f"{laser.angle_increment:.12f} {laser.range_max:.3f} 0.010 0 {laser.n_beams} "
@@ -73,7 +74,7 @@ class CarmenWriter:
         odom = f"{ox:.6f} {oy:.6f} {oth:.6f}"
         self.stream.write(f"ODOM {odom} {v:.6f} {w:.6f} 0.000000 {tail}")
         self.stream.write(self._laser_head)
-        self.stream.write(format_fixed3(ranges_m))
+        self.stream.write(self._format(ranges_m))
         self.stream.write(f" 0 {odom} {odom} {v:.6f} {w:.6f} 0.000 0.000 0.000 {tail}")
         self.stream.write(
             f"TRUEPOS {float(pose_gt[0]):.6f} {float(pose_gt[1]):.6f} {float(pose_gt[2]):.6f} "
