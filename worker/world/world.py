@@ -115,7 +115,9 @@ class World:
                 f"resolution {resolution:g} m/pixel is outside ({RESOLUTION_MIN:g}, "
                 f"{RESOLUTION_MAX:g}] m"
             )
-        origin_arr = np.asarray(origin, dtype=np.float64).reshape(2)
+        origin_arr = np.asarray(origin, dtype=np.float64).reshape(-1)
+        if origin_arr.shape != (2,) or not np.all(np.isfinite(origin_arr)):
+            raise InputError(f"origin must be two finite numbers [x, y], got {origin!r}")
         notes = list(warnings)
         clearance = analysis.clearance_map(occ, resolution)
         labels, n_regions = analysis.free_regions(occ)

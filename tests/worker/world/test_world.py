@@ -73,6 +73,8 @@ def test_a_given_start_pose_is_kept_and_its_angle_wrapped():
         ({"resolution": 1.5}, "outside"),
         ({"start_pose": (-3.0, 0.0, 0.0)}, "not on a free cell"),
         ({"start_pose": (0.0, float("nan"), 0.0)}, "finite"),
+        ({"origin": (0.0, float("inf"))}, "origin must be two finite numbers"),
+        ({"origin": (1.0, 2.0, 3.0)}, "origin must be two finite numbers"),
     ],
 )
 def test_validation_errors(kwargs, message):
