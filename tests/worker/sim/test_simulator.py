@@ -202,3 +202,29 @@ def test_a_hand_built_world_without_clearance_still_simulates():
     sim = Simulator(world, SimParams(), np.random.default_rng(0))
     ranges = sim.scan()
     assert ranges[270] == pytest.approx(11.95 - 6.0)  # straight ahead to the inner wall face
+
+
+def test_footprint_collision_agrees_with_point_sampling(rng):
+    # Any sampled point of the (rotated) footprint inside an occupied cell means a collision;
+    # no sampled point inside, with the footprint shrunk by 1 mm still colliding, would mean a
+    # false alarm larger than the sampling step.
+    occ = rng.uniform(size=(60, 60)) < 0.007  # about half the poses touch a speck
+    half = 0.2
+    u = np.linspace(-half, half, 81)  # 5 mm sampling
+    gu, gv = np.meshgrid(u, u)
+    for _ in range(300):
+        x, y = rng.uniform(0.5, 2.5, 2)
+        th = rng.uniform(-math.pi, math.pi)
+        px = x + gu * math.cos(th) - gv * math.sin(th)
+        py = y + gu * math.sin(th) + gv * math.cos(th)
+        ix, iy = np.floor(px / RES).astype(int), np.floor(py / RES).astype(int)
+        sampled_hit = bool(occ[iy, ix].any())
+        if sampled_hit:
+            assert footprint_collides(occ, RES, 0.0, 0.0, x, y, th, half)
+        elif footprint_collides(occ, RES, 0.0, 0.0, x, y, th, half - 0.001):
+            # Possible only if a cell corner pokes less than one sampling step into the square.
+            inner = np.linspace(-half + 0.001, half - 0.001, 401)
+            gi, gj = np.meshgrid(inner, inner)
+            qx = x + gi * math.cos(th) - gj * math.sin(th)
+            qy = y + gi * math.sin(th) + gj * math.cos(th)
+            assert occ[np.floor(qy / RES).astype(int), np.floor(qx / RES).astype(int)].any()
