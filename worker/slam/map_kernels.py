@@ -131,14 +131,19 @@ def _register_one(
             if e < 0:
                 dropped += 1
             else:
-                ly = cy & PATCH_MASK
-                lx = cx & PATCH_MASK
-                pool[e, ly, lx, VISITS] += 1.0
+                # unsigned indices: numba then skips its negative-index wraparound
+                ue = np.uintp(e)
+                ly = np.uintp(cy & PATCH_MASK)
+                lx = np.uintp(cx & PATCH_MASK)
+                pool[ue, ly, lx, VISITS] += 1.0
                 if at_end:
-                    pool[e, ly, lx, HITS] += 1.0
-                    pool[e, ly, lx, ACC_X] += hx - cx * res
-                    pool[e, ly, lx, ACC_Y] += hy - cy * res
-                _update_bits(pool, bits, e, ly, lx)
+                    pool[ue, ly, lx, HITS] += 1.0
+                    pool[ue, ly, lx, ACC_X] += hx - cx * res
+                    pool[ue, ly, lx, ACC_Y] += hy - cy * res
+                    _update_bits(pool, bits, e, ly, lx)
+                elif (bits[ue, FULL, ly] >> lx) & 1:
+                    # a visit alone can only clear bits, and only of a cell that has them
+                    _update_bits(pool, bits, e, ly, lx)
             if at_end:
                 break
             e2 = 2 * err

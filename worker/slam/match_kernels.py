@@ -58,7 +58,8 @@ def score_and_likelihood(
 
     Every (lskip + 1)-th beam is used, from beam lskip; beams beyond usable_range or
     max_range (no return) are left out. want_l = False skips the likelihood (it is then 0).
-    One flat loop (no helper calls): this is the innermost loop of the whole filter.
+    One flat loop (no helper calls): this is the innermost loop of the whole filter. Indices
+    are cast to unsigned after their bounds checks, which spares numba's wraparound code.
     """
     c = math.cos(theta)
     s = math.sin(theta)
@@ -85,7 +86,8 @@ def score_and_likelihood(
             ty = (gy >> PATCH_BITS) - tpy0
             if ty < 0 or ty >= th:
                 continue
-            ly = gy & PATCH_MASK
+            ly = np.uintp(gy & PATCH_MASK)
+            uty = np.uintp(ty)
             last_tx = -1
             row = np.int64(0)
             e = -1
@@ -93,9 +95,9 @@ def score_and_likelihood(
                 tx = (gx >> PATCH_BITS) - tpx0
                 if tx != last_tx:  # the window's row crosses at most one patch border
                     last_tx = tx
-                    e = table[ty, tx] if 0 <= tx < tw else -1
-                    row = bits[e, OCCUPIED, ly] if e >= 0 else np.int64(0)
-                lx = gx & PATCH_MASK
+                    e = table[uty, np.uintp(tx)] if 0 <= tx < tw else -1
+                    row = bits[np.uintp(e), OCCUPIED, ly] if e >= 0 else np.int64(0)
+                lx = np.uintp(gx & PATCH_MASK)
                 if not (row >> lx) & 1:
                     continue
                 # the cell before must not be full: the near side of an obstacle only
@@ -104,12 +106,15 @@ def score_and_likelihood(
                 tfx = (gfx >> PATCH_BITS) - tpx0
                 tfy = (gfy >> PATCH_BITS) - tpy0
                 if 0 <= tfx < tw and 0 <= tfy < th:
-                    ef = table[tfy, tfx]
-                    if ef >= 0 and (bits[ef, FULL, gfy & PATCH_MASK] >> (gfx & PATCH_MASK)) & 1:
-                        continue
-                hits = pool[e, ly, lx, HITS]
-                mx = gx * res + pool[e, ly, lx, ACC_X] / hits
-                my = gy * res + pool[e, ly, lx, ACC_Y] / hits
+                    ef = table[np.uintp(tfy), np.uintp(tfx)]
+                    if ef >= 0:
+                        row_f = bits[np.uintp(ef), FULL, np.uintp(gfy & PATCH_MASK)]
+                        if (row_f >> np.uintp(gfx & PATCH_MASK)) & 1:
+                            continue
+                ue = np.uintp(e)
+                hits = pool[ue, ly, lx, HITS]
+                mx = gx * res + pool[ue, ly, lx, ACC_X] / hits
+                my = gy * res + pool[ue, ly, lx, ACC_Y] / hits
                 d2 = (hx - mx) * (hx - mx) + (hy - my) * (hy - my)
                 if best < 0 or d2 < best:
                     best = d2
