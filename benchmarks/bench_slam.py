@@ -1,0 +1,110 @@
+"""Benchmark of the SLAM stage: ms per rbpf update, peak memory, `mapqual slam` real-time factor.
+
+    .venv/bin/python benchmarks/bench_slam.py [--world office_a] [--minutes 30] [--particles 40]
+
+1. simulates a wander log of --minutes simulated minutes in worlds/bormann/<world>.yaml;
+2. times every filter update of rbpf (541 beams) in this process, on one core, over the
+   first --updates updates (numba compiled beforehand, not timed);
+3. runs `mapqual slam LOG` in a child process over the whole log and reports its wall time,
+   real-time factor (simulated time / wall time) and peak resident memory.
+Figures depend on the machine and its load: say whether it was shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from worker.sim.carmen import read_laser_log  # noqa: E402
+from worker.sim.run import run_simulation  # noqa: E402
+from worker.slam.base import make_slam  # noqa: E402
+from worker.slam.params import SlamParams  # noqa: E402
+from worker.world import load_world  # noqa: E402
+
+
+def _time_updates(log, particles: int, n_updates: int) -> np.ndarray:
+    """Wall time [s] of each rbpf update over the log's first n_updates updates."""
+    warm = make_slam("rbpf", log.laser, SlamParams(particles=2), np.random.default_rng(0))
+    for k in range(0, min(400, len(log.t)), 10):  # compile the kernels
+        warm.process(log.t[k], log.pose_odom[k], log.ranges[k])
+    slam = make_slam("rbpf", log.laser, SlamParams(particles=particles), np.random.default_rng(1))
+    times = []
+    for k in range(len(log.t)):
+        t0 = time.perf_counter()
+        updated = slam.process(log.t[k], log.pose_odom[k], log.ranges[k])
+        dt = time.perf_counter() - t0
+        if updated and slam.updates > 1:  # the first update only registers the scan
+            times.append(dt)
+            if len(times) >= n_updates:
+                break
+    return np.array(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--world", default="office_a")
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--particles", type=int, default=40)
+    ap.add_argument("--updates", type=int, default=200, help="updates timed in process")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--skip-cli", action="store_true", help="skip the whole-log CLI run")
+    args = ap.parse_args()
+
+    world = load_world(ROOT / "worlds" / "bormann" / f"{args.world}.yaml")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        sim = run_simulation(world, tmp / "sim", seed=args.seed, duration_s=60 * args.minutes)
+        log = read_laser_log(tmp / "sim" / "sim.log")
+        print(
+            f"world {args.world}: {world.width_m:.1f} x {world.height_m:.1f} m; log "
+            f"{sim.sim_time_s:.0f} s simulated, {sim.distance_m:.0f} m driven, "
+            f"{len(log.t)} scans of {log.laser.n_beams} beams"
+        )
+        times = _time_updates(log, args.particles, args.updates)
+        print(
+            f"rbpf update, {args.particles} particles, {log.laser.n_beams} beams, one core: "
+            f"mean {1000 * times.mean():.1f} ms, median {1000 * np.median(times):.1f} ms, "
+            f"p95 {1000 * np.percentile(times, 95):.1f} ms over {len(times)} updates "
+            f"(target <= 40 ms)"
+        )
+        if args.skip_cli:
+            return
+        mapqual = Path(sys.executable).with_name("mapqual")
+        cmd = [
+            str(mapqual),
+            "slam",
+            str(tmp / "sim" / "sim.log"),
+            "-o",
+            str(tmp / "slam"),
+            "--particles",
+            str(args.particles),
+            "--json",
+        ]
+        env = dict(os.environ, NUMBA_NUM_THREADS="1")
+        t0 = time.perf_counter()
+        out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+        wall = time.perf_counter() - t0
+        peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        summary = json.loads(out.stdout)
+        print(
+            f"mapqual slam over the whole log: {wall:.1f} s wall (process {summary['wall_s']:.1f}"
+            f" s in SLAM), {summary['updates']} updates, real-time factor "
+            f"{sim.sim_time_s / wall:.1f}x (target >= 20x), peak memory {peak_mb:.0f} MB "
+            f"(target <= 1024 MB)"
+        )
+
+
+if __name__ == "__main__":
+    main()
