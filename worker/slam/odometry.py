@@ -33,6 +33,7 @@ class OdometrySlam:
         self.maps = PatchMaps(1, params.delta, params.map_margin, params.occ_thresh)
         self._pose_odom = np.zeros(3)
         self.updates = 0
+        self._grid: OccupancyGrid | None = None  # cached map of the latest update
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -43,6 +44,7 @@ class OdometrySlam:
             pose[None, :], ranges, self._cos_a, self._sin_a, self._usable, self._max_range
         )
         self.updates += 1
+        self._grid = None
         return True
 
     def pose_estimate(self) -> np.ndarray:
@@ -52,4 +54,7 @@ class OdometrySlam:
         return np.zeros(3)
 
     def occupancy(self) -> OccupancyGrid:
-        return self.maps.occupancy(0)
+        # the grid is immutable: rebuild it only after an update changed the maps
+        if self._grid is None:
+            self._grid = self.maps.occupancy(0)
+        return self._grid

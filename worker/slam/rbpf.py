@@ -51,6 +51,7 @@ class RbpfSlam:
         self._pose_odom = np.zeros(3)
         self._T_map_odom = np.zeros(3)
         self._best = 0
+        self._grid: OccupancyGrid | None = None  # cached map of the latest update
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -72,6 +73,7 @@ class RbpfSlam:
             self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range
         )
         self.updates += 1
+        self._grid = None
         self._best = int(np.argmax(self.log_weight_sums))
         self._T_map_odom = compose(self.poses[self._best], inverse(pose))
         return True
@@ -123,4 +125,7 @@ class RbpfSlam:
         return self._T_map_odom.copy()
 
     def occupancy(self) -> OccupancyGrid:
-        return self.maps.occupancy(self._best)
+        # the grid is immutable: rebuild it only after an update changed the maps
+        if self._grid is None:
+            self._grid = self.maps.occupancy(self._best)
+        return self._grid

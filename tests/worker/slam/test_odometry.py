@@ -96,3 +96,17 @@ def test_bad_inputs_are_input_errors():
         SlamParams(particles=0)
     with pytest.raises(InputError, match="delta must be a positive"):
         SlamParams(delta=0.0)
+
+
+def test_occupancy_is_cached_until_the_next_update():
+    laser = Laser(n_beams=5, angle_min=-0.2, angle_increment=0.1)
+    slam = make_slam("odometry", laser)
+    assert slam.occupancy().known.sum() == 0  # before any scan: one unknown cell
+    slam.process(0.0, np.array([1.0, 1.0, 0.0]), np.full(5, 2.0))
+    g1 = slam.occupancy()
+    assert slam.occupancy() is g1
+    assert not slam.process(0.1, np.array([1.1, 1.0, 0.0]), np.full(5, 2.0))  # gated
+    assert slam.occupancy() is g1
+    assert slam.process(5.0, np.array([1.0, 2.5, 0.0]), np.full(5, 2.0))
+    g2 = slam.occupancy()
+    assert g2 is not g1 and g2.known.sum() > g1.known.sum()
