@@ -119,3 +119,29 @@ def test_bad_input_is_one_line_exit_2(run, sim_log, tmp_path, args, message):
     code, _, err = run("slam", *args, "-o", tmp_path / "x")
     assert code == 2
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_classic_flaser_log_with_180_beams(run, tmp_path):
+    """A Freiburg-style log: FLASER lines of 181 beams over 180 degrees carry the odometry."""
+    from tests.worker.slam.helpers import box_scan
+
+    angles = -np.pi / 2 + np.pi / 180 * np.arange(181)
+    lines = []
+    for k in range(60):  # 0.1 m per scan along the room, weaving a little
+        x, y, th = 1.0 + 0.1 * k, 2.0 + 0.3 * np.sin(0.1 * k), 0.1 * np.cos(0.1 * k)
+        ranges = box_scan((x, y, th), angles, (0.0, 0.0, 9.0, 4.0), range_max=80.0)
+        fields = [f"{r:.3f}" for r in ranges] + [f"{v:.6f}" for v in (x, y, th, x, y, th)]
+        lines.append(f"FLASER 181 {' '.join(fields)} {0.1 * k:.3f} host {0.1 * k:.3f}")
+    log = tmp_path / "classic.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    code, stdout, err = run("slam", log, "-o", out, "--particles", 5, "--json")
+    assert code == 0, err
+    assert json.loads(stdout)["scans"] == 60
+    est = read_trajectory(out / "trajectory.log")
+    assert len(est.t) == 60
+    # exact odometry in a closed-form room: the estimate stays on it
+    x = 1.0 + 0.1 * np.arange(60)
+    assert np.abs(est.poses[:, 0] - x).max() < 0.05
+    img = np.array(Image.open(out / "map.pgm"))
+    assert (img == 0).sum() > 100  # the room's walls are mapped
