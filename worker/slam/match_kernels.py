@@ -152,6 +152,8 @@ def optimize(
 
     Tries steps of +-ldelta in x and y (map frame) and +-adelta in theta, moves to the best
     one while it improves the score, and halves both steps when none does, `iterations` times.
+    The step straight back to where the last move came from is not scored again: that pose
+    scored lower than the current one, so it can never be chosen (a pure saving).
     """
     best_pose = pose.copy()
     cur, _ = score_and_likelihood(
@@ -179,15 +181,20 @@ def optimize(
     adelta = astep
     refinement = 0
     best = -1.0
+    came_by = -1  # the move that led to the current pose at the current step size
     while True:
         if best >= cur:
             refinement += 1
             ldelta *= 0.5
             adelta *= 0.5
+            came_by = -1
         best = cur
         bx, by, bt = best_pose[0], best_pose[1], best_pose[2]
         nx, ny, nt = bx, by, bt
+        chosen = -1
         for move in range(6):
+            if came_by >= 0 and move == came_by ^ 1:  # moves 0/1, 2/3, 4/5 undo each other
+                continue
             x, y, t = bx, by, bt
             if move == 0:
                 x += ldelta
@@ -225,7 +232,9 @@ def optimize(
             if sc > cur:
                 cur = sc
                 nx, ny, nt = x, y, t
+                chosen = move
         best_pose[0], best_pose[1], best_pose[2] = nx, ny, nt
+        came_by = chosen
         if not (cur > best or refinement < iterations):
             break
     best_pose[2] = (best_pose[2] + math.pi) % (2 * math.pi) - math.pi
