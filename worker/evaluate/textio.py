@@ -16,8 +16,8 @@ from worker.errors import InputError
 _GZIP_MAGIC = b"\x1f\x8b"
 
 
-def read_text(path: str | Path) -> str:
-    """The text of a file; gzip-compressed files (by their magic bytes) are inflated."""
+def read_bytes(path: str | Path) -> bytes:
+    """The bytes of a file; gzip-compressed files (by their magic bytes) are inflated."""
     p = Path(path)
     try:
         raw = p.read_bytes()
@@ -32,10 +32,19 @@ def read_text(path: str | Path) -> str:
             raw = gzip.decompress(raw)
         except (OSError, EOFError) as exc:
             raise InputError(f"corrupt gzip data: {exc}", path=p) from None
+    return raw
+
+
+def _decode(raw: bytes, path: Path) -> str:
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"not a text file (byte {exc.start} is not UTF-8)", path=p) from None
+        raise InputError(f"not a text file (byte {exc.start} is not UTF-8)", path=path) from None
+
+
+def read_text(path: str | Path) -> str:
+    """The text (UTF-8) of a file; gzip-compressed files are inflated."""
+    return _decode(read_bytes(path), Path(path))
 
 
 def _strip_comment(line: str) -> str:
@@ -86,27 +95,16 @@ def parse_table(text: str, ncols: int, what: str, path: str | Path) -> NDArray[n
 
 
 def load_table(path: str | Path, ncols: int, what: str) -> NDArray[np.float64]:
-    """`parse_table` of a file; a plain file goes straight to numpy's parser (reading it
-    into a Python string first costs more than the parse itself)."""
+    """`parse_table` of a file (`.gz` transparently). Plain decimal tables, what our writers
+    emit, go through a numba byte parser (`parse_kernels`); anything else through numpy."""
+    from worker.evaluate.parse_kernels import OK, parse_decimal_table
+
     p = Path(path)
-    try:
-        with p.open("rb") as fh:
-            gz = fh.read(2) == _GZIP_MAGIC
-    except OSError:
-        gz = True  # let read_text word the error
-    if gz:
-        return parse_table(read_text(p), ncols, what, p)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            table = np.loadtxt(p, dtype=np.float64, comments="#", ndmin=2)
-    except ValueError:  # includes UnicodeDecodeError
-        return parse_table(read_text(p), ncols, what, p)
-    if table.size == 0:
-        return np.zeros((0, ncols))
-    if table.shape[1] != ncols or not np.isfinite(table).all():
-        raise _find_bad_line(read_text(p).splitlines(), None, ncols, what, p)
-    return table
+    raw = read_bytes(p)
+    table, status = parse_decimal_table(np.frombuffer(raw, dtype=np.uint8), ncols)
+    if status == OK:
+        return table
+    return parse_table(_decode(raw, p), ncols, what, p)
 
 
 def parse_columns(lines: Sequence[str], usecols: Sequence[int]) -> NDArray[np.float64] | None:
