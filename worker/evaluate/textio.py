@@ -1,4 +1,4 @@
-"""Fast text I/O for numeric tables: bulk numpy parsing, with a line-by-line pass for errors."""
+"""Text I/O for numeric tables: bulk parsing (numba on bytes, else numpy), errors by line."""
 
 from __future__ import annotations
 
