@@ -189,7 +189,9 @@ class LocalCostmap:
     ) -> None:
         """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
-        r = ranges_m[hit]
+        # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
+        # put the mark in the free cell in front
+        r = ranges_m[hit] + 0.2 * self.resolution
         a = angles[hit] + pose[2]
         self.add_points(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
 
@@ -203,8 +205,17 @@ class LocalCostmap:
         """Recovery behaviour: forget all but the newest scan's obstacles."""
         self._marks = self._marks[-1:]
 
-    def build(self, x: float, y: float, costmap: GlobalCostmap | None = None) -> None:
-        """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given)."""
+    def build(
+        self,
+        x: float,
+        y: float,
+        costmap: GlobalCostmap | None = None,
+        theta: float | None = None,
+        use_map: bool = True,
+    ) -> None:
+        """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given);
+        with the robot's heading theta, the cells under its footprint are cleared. use_map
+        False: the map's obstacles are left out (the thesis's scan-only local costmap)."""
         res = self.resolution
         half = self.n // 2
         g_origin = costmap.origin if costmap is not None else np.zeros(2)
@@ -212,7 +223,7 @@ class LocalCostmap:
         iy = math.floor((y - g_origin[1]) / res)
         self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
         pts = np.concatenate([m[1] for m in self._marks]) if self._marks else np.zeros((0, 2))
-        if costmap is None or costmap.shape[0] == 0:
+        if costmap is None or costmap.shape[0] == 0 or not use_map:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
             g_oy = g_ox = -(10**6)
         else:
@@ -222,6 +233,8 @@ class LocalCostmap:
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
             float(self.origin[0]), float(self.origin[1]), res, self.n,
             self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox), self._reach,
+            float(x), float(y), float(theta or 0.0),
+            self.params.footprint_half_m if theta is not None else -1.0,
         )  # fmt: skip
 
 

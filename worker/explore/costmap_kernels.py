@@ -201,7 +201,7 @@ def disc_offsets(radius_cells: float) -> np.ndarray:
 @njit(cache=True)
 def local_layers(
     px, py, ox, oy, resolution, n, near_offsets, inner_offsets, g_lethal, g_cost, g_oy, g_ox,
-    reach,
+    reach, rx, ry, rth, rhalf,
 ):  # fmt: skip
     """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
 
@@ -212,16 +212,30 @@ def local_layers(
     farthest a trajectory can take the footprint); near bool within the circumscribed radius
     (plus a cell) of one, where the footprint test must look closer; inner bool within the
     inscribed radius; cost uint8: the map's costs, raised to LETHAL / INSCRIBED by the layers.
+    Cells wholly under the robot's footprint (pose rx, ry, rth; half side rhalf) are left
+    free, as costmap_2d's footprint clearing does: the robot stands there, so they are map
+    artefacts (which would otherwise forbid every motion).
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
     near = np.zeros((n, n), dtype=np.bool_)
     inner = np.zeros((n, n), dtype=np.bool_)
     cells = np.empty((px.shape[0], 2), dtype=np.int64)
     k = 0
+    c = math.cos(rth)
+    s = math.sin(rth)
+    # only cells wholly inside the footprint: one the robot's edge merely touches may be real
+    lim = rhalf - 0.75 * resolution
+    under = np.zeros((n, n), dtype=np.bool_)
+    for iy in range(n):
+        dy = oy + (iy + 0.5) * resolution - ry
+        for ix in range(n):
+            dx = ox + (ix + 0.5) * resolution - rx
+            if abs(dx) <= 2 * lim and abs(dy) <= 2 * lim:
+                under[iy, ix] = abs(dx * c + dy * s) < lim and abs(-dx * s + dy * c) < lim
     for i in range(px.shape[0]):
         ix = int(math.floor((px[i] - ox) / resolution))
         iy = int(math.floor((py[i] - oy) / resolution))
-        if 0 <= ix < n and 0 <= iy < n and not lethal[iy, ix]:
+        if 0 <= ix < n and 0 <= iy < n and not lethal[iy, ix] and not under[iy, ix]:
             lethal[iy, ix] = True
             cells[k, 0] = iy
             cells[k, 1] = ix
@@ -231,7 +245,7 @@ def local_layers(
     c1 = n // 2 + reach + 1
     for iy in range(max(0, -g_oy, c0), min(n, gh - g_oy, c1)):
         for ix in range(max(0, -g_ox, c0), min(n, gw - g_ox, c1)):
-            if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix]:
+            if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix] and not under[iy, ix]:
                 lethal[iy, ix] = True
                 if k == cells.shape[0]:
                     c2 = np.empty((2 * k + 16, 2), dtype=np.int64)

@@ -54,6 +54,7 @@ class DwaPlanner:
         prm[dk.P_ESCAPE_VX] = p.escape_vel
         prm[dk.P_HALF_RAW] = p.footprint_half_m
         self.prm = prm
+        self._prm_unpadded = prm.copy()
         self.path_xy: np.ndarray | None = None
         self.local_goal_xy: np.ndarray | None = None
         self._rotating_left = self._rotating_right = False
@@ -87,16 +88,29 @@ class DwaPlanner:
         # meter_scoring as TrajectoryPlannerROS does it: every weight times the resolution,
         # distances counted in cells, so distances in metres and the cost weight x resolution
         self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
+        self._prm_unpadded[:] = self.prm
+        self._prm_unpadded[dk.P_HALF] = p.footprint_half_m
         path_dist = dk.wavefront(seeds, local.cost, local.resolution)
         goal_dist = dk.wavefront(goal_cell, local.cost, local.resolution)
         goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
-        vx, vth, _, kind = dk.best_command(
-            float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
-            self._stuck_left, self._stuck_right, self._escape_from is not None,
-            p.vx_samples, p.vtheta_samples,
-            local.lethal, local.near, local.inner, local.cost, path_dist, goal_dist,
-            float(local.origin[0]), float(local.origin[1]), local.resolution, self.prm,
-        )  # fmt: skip
+        passes = [(self.prm, False), (self._prm_unpadded, True)]
+        if self._stuck_left or self._stuck_right:
+            passes.append((None, True))  # nothing legal: the oscillation flags give way too
+        for prm, last in passes:
+            if prm is None:
+                prm = self._prm_unpadded
+                self._stuck_left = self._stuck_right = False
+            # the padding is a preference: with nothing legal (robot wedged in a doorway, say)
+            # the exact footprint decides, before backing off is tried
+            vx, vth, _, kind = dk.best_command(
+                float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
+                self._stuck_left, self._stuck_right, self._escape_from is not None,
+                p.vx_samples, p.vtheta_samples,
+                local.lethal, local.near, local.inner, local.cost, path_dist, goal_dist,
+                float(local.origin[0]), float(local.origin[1]), local.resolution, prm, last,
+            )  # fmt: skip
+            if kind >= 0:
+                break
         self._track_oscillation(pose, kind, vth)
         if kind < 0:
             return Command(0.0, 0.0, False, "none")

@@ -130,7 +130,7 @@ def lookahead_goal_dist(x, y, th, vth, goal_dist, ox, oy, res, prm):
 @njit(cache=True)
 def best_command(
     x, y, th, v0, w0, goal_gap, stuck_left, stuck_right, escaping, n_vx, n_vth,
-    lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm,
+    lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm, allow_escape=True,
 ):  # fmt: skip
     """Dynamic Window Approach as base_local_planner's TrajectoryPlanner (dwa: true) does it.
 
@@ -195,7 +195,7 @@ def best_command(
             if ahead < heading_dist:
                 heading_dist = ahead
                 best, bvx, bvth, kind = s, 0.0, vlim, 1
-    if kind < 0:
+    if kind < 0 and allow_escape:
         # base_local_planner backs off even when the padded footprint is already touching;
         # we back off when the unpadded one stays clear.
         s = score_trajectory(
@@ -215,5 +215,20 @@ def rotation_legal(x, y, th, vth, lethal, near, inner, ox, oy, res, prm):
     for _ in range(n):
         th += vth * dt
         if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, prm[P_HALF]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def motion_legal(x, y, th, v, w, duration, lethal, near, inner, ox, oy, res, half, step):
+    """True when driving (v, w) for `duration` [s] keeps the footprint clear (sampled every
+    `step` [m] or rad of motion)."""
+    n = max(1, int(max(abs(v), abs(w)) * duration / step + 0.5))
+    dt = duration / n
+    for _ in range(n):
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+        if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, half):
             return False
     return True

@@ -79,7 +79,9 @@ def label_clusters(frontier, cells, labels_buf, stamp, run_id):
 
 
 @njit(cache=True)
-def stamp_targets(cells, cell_cluster, cell_valid, offsets, inflated, unknown, target, owner):
+def stamp_targets(
+    cells, cell_cluster, cell_valid, offsets, inflated, unknown, target, owner, blocked
+):
     """Mark goal candidates: passable known cells within the goal radius of a valid frontier cell.
 
     cells: (K, 2) [iy, ix] frontier cells; cell_cluster: (K,) their cluster; cell_valid: (K,)
@@ -102,7 +104,7 @@ def stamp_targets(cells, cell_cluster, cell_valid, offsets, inflated, unknown, t
             # 2 cells and it quarters the stamping
             if (jy | jx) & 1 or jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
                 continue
-            if unknown[jy, jx] or inflated[jy, jx] >= 253:
+            if unknown[jy, jx] or inflated[jy, jx] >= blocked:
                 continue
             target[jy, jx] = True
             owner[jy, jx] = c
@@ -126,3 +128,51 @@ def any_in_disc(mask, iy, ix, offsets):
         if 0 <= jy < h and 0 <= jx < w and mask[jy, jx]:
             return True
     return False
+
+
+@njit(cache=True)
+def line_of_sight(lethal, unknown, y0, x0, y1, x1):
+    """True when the straight line between two cells crosses only known free cells
+    (Bresenham; the end cells themselves are not tested)."""
+    dx = abs(x1 - x0)
+    dy = -abs(y1 - y0)
+    sx = 1 if x0 < x1 else -1
+    sy = 1 if y0 < y1 else -1
+    err = dx + dy
+    x = x0
+    y = y0
+    while True:
+        if x == x1 and y == y1:
+            return True
+        if (x != x0 or y != y0) and (lethal[y, x] or unknown[y, x]):
+            return False
+        e2 = 2 * err
+        if e2 >= dy:
+            err += dy
+            x += sx
+        if e2 <= dx:
+            err += dx
+            y += sy
+
+
+@njit(cache=True)
+def first_with_sight(order, cand, members, lethal, unknown, width, max_tries):
+    """Index into `order` of the first candidate cell that sees a frontier cell of its cluster.
+
+    order: (K,) candidate indices, best first; cand: (N,) flat indices of candidate cells;
+    members: (M, 2) [iy, ix] frontier cells of the cluster. Each candidate is tested against
+    its nearest frontier cells (up to 8). Returns -1 when none of the first max_tries does.
+    """
+    m = members.shape[0]
+    d2 = np.empty(m)
+    for k in range(min(order.shape[0], max_tries)):
+        idx = cand[order[k]]
+        cy = idx // width
+        cx = idx - cy * width
+        for j in range(m):
+            d2[j] = (members[j, 0] - cy) ** 2 + (members[j, 1] - cx) ** 2
+        nearest = np.argsort(d2)[:8]
+        for j in nearest:
+            if line_of_sight(lethal, unknown, cy, cx, members[j, 0], members[j, 1]):
+                return k
+    return -1

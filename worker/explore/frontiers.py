@@ -10,7 +10,7 @@ import numpy as np
 from worker.explore import frontier_kernels as fk
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.params import ExploreParams
-from worker.explore.planner import DijkstraSearch, cells_in_radius
+from worker.explore.planner import DijkstraSearch, cells_in_radius, planner_blocked_cost
 
 
 @dataclass(frozen=True)
@@ -75,12 +75,18 @@ class FrontierSearch:
         return cells, labels
 
     def choose(
-        self, costmap: GlobalCostmap, robot_xy, blacklist: list[np.ndarray]
+        self,
+        costmap: GlobalCostmap,
+        robot_xy,
+        blacklist: list[np.ndarray],
+        avoid: list[np.ndarray] = (),
     ) -> FrontierGoal | None:
         """Nearest frontier cluster by travel cost through known space, backed off from walls.
 
         Clusters shorter than min_frontier_size and clusters with a cell within blacklist_radius
-        of a blacklisted point are ignored. None when no frontier can be reached.
+        of a blacklisted point are ignored; so are goal cells within blacklist_radius of an
+        `avoid` point (goals already reached without the frontier going away). None when no
+        frontier can be reached.
         """
         p = self.params
         res = costmap.resolution
@@ -102,15 +108,17 @@ class FrontierSearch:
             return None
         offsets = cells_in_radius(p.goal_radius, res)
         marked = fk.stamp_targets(
-            cells,
-            labels,
-            cell_valid,
-            offsets,
-            costmap.inflated,
-            costmap.unknown,
-            self._target,
-            self._owner,
-        )
+            cells, labels, cell_valid, offsets, costmap.inflated, costmap.unknown,
+            self._target, self._owner, planner_blocked_cost(p),
+        )  # fmt: skip
+        if avoid:
+            disc = cells_in_radius(p.blacklist_radius, res)
+            h, w = costmap.shape
+            for a in avoid:
+                ax, ay = costmap.world_to_cell(a[0], a[1])
+                ys, xs = disc[:, 0] + ay, disc[:, 1] + ax
+                ok = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+                self._target[ys[ok], xs[ok]] = False
         try:
             # Look a little past the first candidate (two goal radii of free travel) so that
             # the goal can be the lowest-cost cell of that cluster, not its nearest edge.
@@ -125,10 +133,16 @@ class FrontierSearch:
         same = owners == owners[0]
         cand, cand_pot = found[same], pots[same]
         cand_cost = costmap.inflated.reshape(-1)[cand]
-        best = np.lexsort((cand_pot, cand_cost))[0]
+        order = np.lexsort((cand_pot, cand_cost))
+        members = cells[labels == owners[0]]
+        # The goal must see its frontier: a cell near it but behind a door jamb would be
+        # "reached" without the robot ever seeing what lies beyond.
+        k = fk.first_with_sight(
+            order, cand, members, costmap.lethal, costmap.unknown, costmap.shape[1], 64
+        )
+        best = order[max(k, 0)]
         gy, gx = divmod(int(cand[best]), costmap.shape[1])
         goal_xy = np.array(costmap.cell_to_world(gx, gy), dtype=float)
-        members = cells[labels == owners[0]]
         fxs, fys = costmap.cell_to_world(members[:, 1], members[:, 0])
         k = int(np.argmin(np.hypot(fxs - goal_xy[0], fys - goal_xy[1])))
         frontier_xy = np.array([fxs[k], fys[k]])

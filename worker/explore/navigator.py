@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
-from worker.explore.dwa import DwaPlanner
+from worker.explore.dwa import Command, DwaPlanner, wrap_angle
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, path_length
@@ -67,7 +68,8 @@ class Navigator:
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
         self.blacklist: list[np.ndarray] = []
-        self._arrived_at: list[np.ndarray] = []  # frontiers reached that did not vanish
+        # (frontier, goal) of goals reached whose frontier did not vanish
+        self._arrived_at: list[tuple[np.ndarray, np.ndarray]] = []
         self._blacklist_retries = params.blacklist_retries
         self.goal: FrontierGoal | None = None
         self.path: np.ndarray | None = None
@@ -81,6 +83,9 @@ class Navigator:
         self._progress_t = 0.0
         self._frontier_changed = False
         self._beams_box: tuple[float, float, float, float] | None = None
+        self._trail: list[np.ndarray] = []  # (2,) positions 5 cm apart, newest last
+        self._retrace_to: np.ndarray | None = None
+        self._retrace_until = 0.0
 
     # --- map ---
     def update_map(self, prob, resolution: float, origin, full: bool) -> None:
@@ -107,10 +112,16 @@ class Navigator:
         if self.local is None:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
-        self.local.build(pose[0], pose[1], self.costmap)
+        self.local.build(pose[0], pose[1], self.costmap, pose[2])
+        self._grow_trail(pose)
         if self.safety.active(t):
-            v, w = self.safety.check(t, ranges, 0.0)
-            return NavCommand(v, w, "safety")
+            return NavCommand(
+                *self._safe_override(pose, self.safety.check(t, ranges, 0.0)), "safety"
+            )
+        if self._retrace_to is not None:
+            vw = self._retrace(t, pose)
+            if vw is not None:
+                return NavCommand(vw[0], vw[1], "recovering")
         self._check_goal_still_open(t)
         if self.goal is None or t >= self._next_choice_t:
             self._choose(t, pose)
@@ -125,6 +136,14 @@ class Navigator:
         # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
         # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
         cmd = self.dwa.command(pose, v0, w0, self.local, None)
+        if not cmd.legal:
+            # the map's obstacles may sit a cell nearer than the real ones (rounded hits):
+            # with nothing legal, trust the scans alone, as the thesis's local costmap did
+            self.local.build(pose[0], pose[1], self.costmap, pose[2], use_map=False)
+            cmd = self.dwa.command(pose, v0, w0, self.local, None)
+            if cmd.kind in ("escape", "rotate"):
+                # not blind: backing up or turning sweeps what the laser does not see
+                cmd = Command(0.0, 0.0, False, "none")
         if cmd.kind == "aligned":
             self._finish(t, "reached")
             return NavCommand(0.0, 0.0, "aligning")
@@ -137,8 +156,23 @@ class Navigator:
             return NavCommand(0.0, 0.0, "recovering")
         override = self.safety.check(t, ranges, cmd.v)
         if override is not None:
-            return NavCommand(override[0], override[1], "safety")
+            return NavCommand(*self._safe_override(pose, override), "safety")
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+
+    def _safe_override(self, pose: np.ndarray, vw: tuple[float, float]) -> tuple[float, float]:
+        """The safety controller backs off blind (the laser does not see behind): check the
+        manoeuvre against the local costmap, which holds the map's obstacles; if it would hit
+        something, only turn; if that too, stop."""
+        p = self.params
+        L = self.local
+        for v, w in (vw, (0.0, vw[1]), (0.0, 0.0)):
+            if (v, w) == (0.0, 0.0) or dk.motion_legal(
+                float(pose[0]), float(pose[1]), float(pose[2]), v, w, p.safety_backoff_time,
+                L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]),
+                L.resolution, p.footprint_half_m, p.sim_granularity,
+            ):  # fmt: skip
+                return v, w
+        return 0.0, 0.0
 
     def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
         """Bounding box `(x0, y0, x1, y1)` [m] of the robot and its beams' end points."""
@@ -169,7 +203,8 @@ class Navigator:
     def _choose(self, t: float, pose: np.ndarray) -> None:
         p = self.params
         self._next_choice_t = t + p.frontier_period
-        new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist)
+        avoid = [g for _, g in self._arrived_at]
+        new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist, avoid)
         if new is None and self.blacklist and self._blacklist_retries > 0:
             # before giving up on the building, give the blacklisted frontiers another chance
             self._blacklist_retries -= 1
@@ -224,6 +259,7 @@ class Navigator:
             self.stats.recoveries += 1
             self.local.clear()
             self._next_plan_t = t  # replan now
+            self._start_retrace(t)
         return NavCommand(0.0, 0.0, "recovering")
 
     def _no_progress(self, t: float, pose: np.ndarray) -> bool:
@@ -235,19 +271,58 @@ class Navigator:
         return t - self._progress_t >= self.params.progress_timeout
 
     def _finish(self, t: float, status: str) -> None:
-        """Goal done. A frontier still there after the robot arrived twice is blacklisted (the
-        SLAM map only updates after some motion, so once is not enough to tell)."""
+        """Goal done. A frontier still there after the robot arrived is approached from
+        elsewhere next time, and blacklisted after three such arrivals (the SLAM map updates
+        only after some motion, so one arrival is not enough to tell)."""
         r = self.params.blacklist_radius
         f = self.goal.frontier_xy
         if status == "reached" and self.frontiers.frontier_near(self.costmap, f, r):
-            if any(np.hypot(*(f - q)) <= r for q in self._arrived_at):
+            # next time, a goal elsewhere near that frontier; after a few, drop the frontier
+            self._arrived_at.append((f.copy(), self.goal.goal_xy.copy()))
+            if sum(np.hypot(*(f - q)) <= 2 * r for q, _ in self._arrived_at) >= 3:
                 self.blacklist.append(f.copy())
-            else:
-                self._arrived_at.append(f.copy())
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
+    def _grow_trail(self, pose: np.ndarray) -> None:
+        if not self._trail or np.hypot(*(pose[:2] - self._trail[-1])) >= 0.05:
+            self._trail.append(pose[:2].copy())
+            if len(self._trail) > 200:
+                del self._trail[:100]
+
+    def _start_retrace(self, t: float) -> None:
+        """Recovery: back out along the way the robot came (that space was free), ~0.8 m."""
+        if len(self._trail) < 4:
+            return
+        self._retrace_to = self._trail[max(0, len(self._trail) - 17)].copy()
+        self._retrace_until = t + self.params.retrace_time
+        self.stats.recoveries += 1
+
+    def _retrace(self, t: float, pose: np.ndarray) -> tuple[float, float] | None:
+        """Reverse towards the retrace point, checked against the local costmap; None: done."""
+        p = self.params
+        d = self._retrace_to - pose[:2]
+        if np.hypot(*d) < 0.1 or t >= self._retrace_until:
+            self._retrace_to = None
+            self._trail.clear()
+            return None
+        # backwards: the robot's rear points at the target
+        err = wrap_angle(math.atan2(d[1], d[0]) + math.pi - pose[2])
+        w = max(-p.max_vel_theta, min(p.max_vel_theta, 1.5 * err))
+        v = p.escape_vel * 1.5 if abs(err) < 0.6 else 0.0
+        L = self.local
+        for vv, ww in ((v, w), (0.0, w), (v, 0.0)):
+            if (vv, ww) != (0.0, 0.0) and dk.motion_legal(
+                float(pose[0]), float(pose[1]), float(pose[2]), vv, ww, 0.5,
+                L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]),
+                L.resolution, p.footprint_half_m, p.sim_granularity,
+            ):  # fmt: skip
+                return vv, ww
+        self._retrace_to = None
+        return None
+
     def _give_up(self, t: float, why: str) -> None:
+        self._start_retrace(t)
         self.blacklist.append(self.goal.frontier_xy.copy())
         self.stats.consecutive_failures += 1
         self._end_goal(t, "failed", why)

@@ -17,7 +17,7 @@ class ExploreParams:
     # --- robot and costmaps (costmap_2d; thesis pioneer3at_costmap_common_params) ---
     footprint_half_m: float = 0.2  # [m] half side of the 0.4 m x 0.4 m square footprint
     # [m] added to the half side in the local planner's collision test (ROS footprint_padding;
-    # the thesis had 0: ours covers the 2.5 cm between trajectory samples and map rounding)
+    # the thesis had 0: ours covers the 2.5 cm between trajectory samples)
     footprint_padding: float = 0.02
     inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
     cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
@@ -40,6 +40,9 @@ class ExploreParams:
     neutral_cost: float = 50.0  # [-] navfn COST_NEUTRAL: cost of a free cell step
     cost_factor: float = 0.8  # [-] navfn COST_FACTOR: costmap value -> step cost
     allow_unknown: bool = True  # plan through unknown space
+    # [m] plans keep this much farther from obstacles than the inscribed radius (navfn: 0,
+    # any non-INSCRIBED cell is fine); gaps the padded local footprint cannot take are avoided
+    planner_margin: float = 0.05
     planner_patience: float = 5.0  # [s] planning may fail this long before recovery
     # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
     controller_frequency: float = 10.0  # [Hz]
@@ -65,6 +68,7 @@ class ExploreParams:
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
+    retrace_time: float = 8.0  # [s] longest back-out along the way the robot came (recovery)
     # --- safety controller (range_proximity_safety_controller) ---
     safety_distance: float = 0.2  # [m] obstacle this near the footprint's front: back off
     safety_backoff_time: float = 1.0  # [s] duration of one back-off manoeuvre
@@ -80,25 +84,18 @@ class ExploreParams:
     progress_period: float = 1.0  # [s] on_progress callback period
 
     def __post_init__(self) -> None:
-        positive = [
-            f.name
-            for f in fields(self)
-            if f.name
-            not in (
-                "escape_vel",
-                "occdist_scale",
-                "pdist_scale",
-                "gdist_scale",
-                "footprint_padding",
-            )
-            and not isinstance(getattr(self, f.name), bool)
-            and getattr(self, f.name) <= 0
-        ]
-        if positive:
-            raise InputError(f"exploration parameters must be positive: {', '.join(positive)}")
+        signed = ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
+        may_be_zero = ("footprint_padding", "blacklist_retries", "planner_margin")
+        bad = []
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in signed or isinstance(value, bool):
+                continue
+            if value < 0 or (value == 0 and f.name not in may_be_zero):
+                bad.append(f.name)
+        if bad:
+            raise InputError(f"exploration parameters must be positive: {', '.join(bad)}")
         if self.min_vel_x > self.max_vel_x:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
-        if self.footprint_padding < 0:
-            raise InputError("exploration parameter footprint_padding must be >= 0")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")

@@ -56,6 +56,7 @@ class DijkstraSearch:
             self.run_id,
             -1 if goal_cell is None else goal_cell[1],
             -1 if goal_cell is None else goal_cell[0],
+            planner_blocked_cost(params),
         )
 
     def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:
@@ -95,6 +96,17 @@ class GlobalPlanner:
         cells = self.search.path_to(found[0])
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
         return np.column_stack((xs, ys))
+
+
+def planner_blocked_cost(params: ExploreParams) -> int:
+    """Costmap value from which the planners treat a cell as blocked: the inflation cost at
+    the inscribed radius plus `planner_margin` (INSCRIBED when the margin is 0)."""
+    from worker.explore.costmap_kernels import INSCRIBED, inflation_cost
+
+    if params.planner_margin <= 0:
+        return INSCRIBED
+    d = params.footprint_half_m + params.planner_margin
+    return inflation_cost(d, params.footprint_half_m, params.cost_scaling_factor, 1e9) + 1
 
 
 def path_length(path_xy: np.ndarray) -> float:

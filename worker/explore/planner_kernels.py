@@ -14,17 +14,19 @@ _DL = np.array([1.0, 1.0, 1.0, 1.0, _SQRT2, _SQRT2, _SQRT2, _SQRT2])
 
 
 @njit(cache=True, inline="always")
-def _cell_cost(inflated, unknown, iy, ix, neutral, factor, allow_unknown, escaping):
+def _cell_cost(inflated, unknown, iy, ix, neutral, factor, allow_unknown, escaping, blocked):
     """navfn's step cost of entering a cell (NavFn::setCostmap); inf when not traversable.
 
-    Costs below INSCRIBED become neutral + factor * cost; unknown cells cost COST_OBS - 1 (253)
-    when planning through unknown space is allowed. An INSCRIBED cell may only be entered while
-    escaping from one (a robot that starts too near a wall must be able to leave).
+    Costs below `blocked` become neutral + factor * cost; unknown cells cost COST_OBS - 1
+    (253) when planning through unknown space is allowed. `blocked` is INSCRIBED in navfn;
+    ours may be lower, keeping plans a margin off obstacles (what the local planner's padded
+    footprint needs). A blocked, non-lethal cell may only be entered while escaping from one:
+    a robot that stands too near a wall must be able to leave.
     """
     c = inflated[iy, ix]
     if c >= 254:
         return math.inf
-    if c == 253:
+    if c >= blocked:
         return 253.0 if escaping else math.inf
     if unknown[iy, ix]:
         return 253.0 if allow_unknown else math.inf
@@ -100,6 +102,7 @@ def dijkstra(
     run_id,
     goal_iy=-1,
     goal_ix=-1,
+    blocked=253,
 ):
     """Dijkstra navigation function from the start cell (8-connected), with early exit.
 
@@ -149,13 +152,15 @@ def dijkstra(
                 first = d
                 if stop_extra <= 0.0:
                     break
-        escaping = inflated[iy, ix] >= 253
+        escaping = inflated[iy, ix] >= blocked
         for k in range(8):
             jy = iy + _DY[k]
             jx = ix + _DX[k]
             if jy < 0 or jy >= h or jx < 0 or jx >= w:
                 continue
-            c = _cell_cost(inflated, unknown, jy, jx, neutral, factor, allow_unknown, escaping)
+            c = _cell_cost(
+                inflated, unknown, jy, jx, neutral, factor, allow_unknown, escaping, blocked
+            )
             if c == math.inf:
                 continue
             nd = d + c * _DL[k]

@@ -10,13 +10,14 @@ from worker.explore.params import ExploreParams
 
 
 def front_clearance(
-    ranges_m: np.ndarray, angles: np.ndarray, range_max: float, half: float
+    ranges_m: np.ndarray, angles: np.ndarray, range_max: float, half: float, lateral: float
 ) -> tuple[float, float]:
-    """Distance [m] from the footprint's front edge to the nearest scan hit ahead, and its side.
+    """Distance [m] from the footprint's front edge to the nearest scan hit in the robot's way.
 
-    The laser sits at the robot's centre; a hit at (x, y) in the robot frame with x > half and
-    |y| <= half + the returned distance counts as ahead. Returns (inf, 0) when nothing is near;
-    side is +1 for an obstacle on the left (y > 0), -1 on the right.
+    The laser sits at the robot's centre; a hit at (x, y) in the robot frame is in the way
+    when x > half and |y| < half + lateral (the band the robot sweeps driving straight on):
+    a door jamb beside the robot is not. Returns (inf, 0) when nothing is in the way; side
+    is +1 for an obstacle on the left (y > 0), -1 on the right.
     """
     hit = ranges_m < range_max * 0.999
     if not hit.any():
@@ -25,13 +26,10 @@ def front_clearance(
     a = angles[hit]
     x = r * np.cos(a)
     y = r * np.sin(a)
-    ahead = x > half
+    ahead = (x > half) & (np.abs(y) < half + lateral)
     if not ahead.any():
         return math.inf, 0.0
-    # Distance from the point to the front half of the square footprint.
-    dx = x[ahead] - half
-    dy = np.maximum(np.abs(y[ahead]) - half, 0.0)
-    d = np.hypot(dx, dy)
+    d = x[ahead] - half
     k = int(np.argmin(d))
     return float(d[k]), (1.0 if y[ahead][k] > 0 else -1.0)
 
@@ -54,14 +52,17 @@ class SafetyController:
         """The override (v, w) for this period, or None to let the planner drive.
 
         Triggers only while moving forwards (v_cmd > 0) with a hit closer than safety_distance
-        to the footprint's front: backs off at escape_vel, turning away from the obstacle's side.
+        to the footprint's front, in its way: backs off at escape_vel, turning away from the
+        obstacle's side.
         """
         p = self.params
         if t < self._until:
             return (p.escape_vel, self._turn)
         if v_cmd <= 0.0:
             return None
-        d, side = front_clearance(ranges_m, self.angles, self.range_max, p.footprint_half_m)
+        d, side = front_clearance(
+            ranges_m, self.angles, self.range_max, p.footprint_half_m, p.footprint_padding
+        )
         if d >= p.safety_distance:
             return None
         self.n_triggers += 1

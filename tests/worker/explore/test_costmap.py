@@ -139,6 +139,7 @@ def _single_obstacle_layers(cx, cy, n=40):
         pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
         ck.disc_offsets(5 * math.sqrt(2) + 0.01), ck.disc_offsets(4.0),
         np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), n,
+        0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
     return lethal, near, inner
 
@@ -196,3 +197,13 @@ def test_local_costmap_includes_map_obstacles_and_inflation():
     wy = int(round((1.5 - local.origin[1]) / RES))
     assert local.lethal[wy, wx] and local.cost[wy, wx] == 254
     assert local.cost[wy, wx - 6] == cm.inflated[30, 34] < 253
+
+
+def test_local_costmap_clears_the_robots_own_footprint():
+    p = ExploreParams()
+    local = LocalCostmap(p, RES)
+    local.add_points(0.0, np.array([[5.1, 5.0], [5.5, 5.0]]))  # one under the robot
+    local.build(5.0, 5.0, None, 0.0)
+    assert local.lethal.sum() == 1
+    local.build(5.0, 5.0)  # no heading given: nothing cleared
+    assert local.lethal.sum() == 2

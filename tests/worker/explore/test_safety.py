@@ -21,12 +21,14 @@ def _scan_with_point(x, y):
     return ranges
 
 
-def test_front_clearance_measures_from_the_front_edge():
-    d, side = front_clearance(_scan_with_point(0.35, 0.0), ANGLES, 30.0, 0.2)
-    assert abs(d - 0.15) < 1e-3 and side < 0 or side > 0
-    d, side = front_clearance(_scan_with_point(0.3, 0.3), ANGLES, 30.0, 0.2)
-    assert abs(d - math.hypot(0.1, 0.1)) < 5e-3 and side == 1.0
-    d, _ = front_clearance(_scan_with_point(0.0, 0.25), ANGLES, 30.0, 0.2)
+def test_front_clearance_measures_from_the_front_edge_in_the_robots_way():
+    d, side = front_clearance(_scan_with_point(0.35, 0.05), ANGLES, 30.0, 0.2, 0.02)
+    assert abs(d - 0.15) < 2e-3 and side == 1.0
+    d, side = front_clearance(_scan_with_point(0.3, -0.21), ANGLES, 30.0, 0.2, 0.02)
+    assert abs(d - 0.1) < 5e-3 and side == -1.0
+    d, _ = front_clearance(_scan_with_point(0.3, 0.3), ANGLES, 30.0, 0.2, 0.02)
+    assert d == math.inf  # a door jamb beside the robot's way, not in it
+    d, _ = front_clearance(_scan_with_point(0.0, 0.25), ANGLES, 30.0, 0.2, 0.02)
     assert d == math.inf  # beside the robot, not ahead
 
 

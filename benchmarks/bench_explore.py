@@ -1,0 +1,121 @@
+"""Exploration stack speed (and, with --proof, outcomes) on Bormann floorplans.
+
+Default: the wall time the navigation stack (costmap, frontiers, planning, DWA, safety; not the
+simulator nor SLAM) spends per simulated second, on the largest Bormann map (office_g), oracle
+SLAM: mean and 95th percentile over the first --seconds of a run, one core.
+
+    .venv/bin/python benchmarks/bench_explore.py [--world office_g] [--seconds 600]
+    .venv/bin/python benchmarks/bench_explore.py --proof [--slam oracle|rbpf] [--png DIR]
+
+--proof runs whole explorations on a list of worlds (with and without furniture) and prints
+outcome, coverage, simulated and wall time for each: the proof the CI keeps a subset of.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from worker.explore.loop import ExploreParams, explore  # noqa: E402
+from worker.sim.simulator import SimParams, Simulator  # noqa: E402
+from worker.slam.base import make_slam  # noqa: E402
+from worker.slam.params import SlamParams  # noqa: E402
+from worker.world.loader import load_world  # noqa: E402
+
+PROOF_WORLDS = (
+    "Freiburg52_scan",
+    "Freiburg52_scan_furnitures",
+    "lab_ipa",
+    "lab_ipa_furnitures",
+    "lab_c_scan",
+    "lab_c_scan_furnitures",
+    "lab_d_scan",
+    "lab_b_scan",
+    "office_b",
+    "office_d",
+)
+
+
+def run(name: str, slam_name: str, seed: int, time_limit: float):
+    world = load_world(ROOT / "worlds" / "bormann" / f"{name}.yaml")
+    rng = np.random.default_rng(seed)
+    sim_params = SimParams()
+    sim = Simulator(world, sim_params, rng)
+    oracle = slam_name == "oracle"
+    slam = make_slam("odometry" if oracle else slam_name, sim_params.laser, SlamParams(), rng)
+    t0 = time.perf_counter()
+    result = explore(world, sim, slam, ExploreParams(time_limit=time_limit), oracle=oracle)
+    return world, result, time.perf_counter() - t0
+
+
+def per_sim_second(nav_wall_s: np.ndarray, steps_per_s: int = 10) -> np.ndarray:
+    """Navigation wall time [s] summed over each whole simulated second."""
+    n = len(nav_wall_s) // steps_per_s * steps_per_s
+    return nav_wall_s[:n].reshape(-1, steps_per_s).sum(axis=1)
+
+
+def warm_up() -> None:
+    """Compile the numba kernels outside the measurement."""
+    run("Freiburg52_scan", "oracle", 0, 20.0)
+
+
+def bench(args) -> None:
+    warm_up()
+    world, result, wall = run(args.world, "oracle", args.seed, args.seconds)
+    per_s = per_sim_second(result.nav_wall_s) * 1e3
+    h, w = world.occ.shape
+    print(f"world {args.world}: {w} x {h} cells ({w * world.resolution:.0f} x "
+          f"{h * world.resolution:.0f} m), oracle SLAM, seed {args.seed}")  # fmt: skip
+    print(f"simulated {result.t[-1]:.0f} s ({result.outcome}, {result.reason}), "
+          f"coverage {100 * result.coverage:.1f} %, path {result.path_length_m:.0f} m, "
+          f"wall {wall:.1f} s")  # fmt: skip
+    print(f"navigation stack per simulated second: mean {per_s.mean():.2f} ms, "
+          f"p95 {np.percentile(per_s, 95):.2f} ms, max {per_s.max():.2f} ms "
+          f"(target: mean <= 15 ms on one core)")  # fmt: skip
+
+
+def proof(args) -> None:
+    warm_up()
+    worlds = args.worlds.split(",") if args.worlds else PROOF_WORLDS
+    ok = 0
+    for name in worlds:
+        world, result, wall = run(name, args.slam, args.seed, args.time_limit)
+        good = result.completed and result.coverage >= 0.95 and result.collision is None
+        ok += good
+        print(f"{name:28s} {result.outcome:9s} {result.reason:14s} "
+              f"coverage {100 * result.coverage:5.1f} %  sim {result.t[-1]:6.0f} s  "
+              f"path {result.path_length_m:5.0f} m  goals {result.goals_reached:3d} ok "
+              f"{result.goals_failed:2d} failed  wall {wall:6.1f} s", flush=True)  # fmt: skip
+        if args.png:
+            from worker.explore.render import render_run
+
+            Path(args.png).mkdir(parents=True, exist_ok=True)
+            render_run(world, result, Path(args.png) / f"{name}_{args.slam}.png")
+    print(f"{ok}/{len(worlds)} completed with coverage >= 95 % and no collision ({args.slam})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--world", default="office_g", help="Bormann world for the timing")
+    ap.add_argument("--seconds", type=float, default=600.0, help="simulated seconds timed")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--proof", action="store_true", help="whole explorations, outcomes")
+    ap.add_argument("--worlds", default="", help="comma-separated list for --proof")
+    ap.add_argument("--slam", default="oracle", choices=("oracle", "rbpf", "odometry"))
+    ap.add_argument("--time-limit", type=float, default=3600.0, help="per run in --proof [s]")
+    ap.add_argument("--png", default="", help="folder for one PNG per --proof run")
+    args = ap.parse_args()
+    proof(args) if args.proof else bench(args)
+
+
+if __name__ == "__main__":
+    main()
