@@ -48,6 +48,7 @@ def slam(
         None
     ),
     stt: Annotated[float | None, _opt("Motion noise stt [default 0.2].")] = None,
+    threads: Annotated[int | None, _opt("Scan-matching threads; same output [default 1].")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Run SLAM over LOG with the odometry pose of each laser line; write DIR/map.pgm,
@@ -78,6 +79,7 @@ def slam(
         "srt": srt,
         "str_": str_,
         "stt": stt,
+        "threads": threads,
     }
     given.update({k: v for k, v in options.items() if v is not None})
     params = from_dict(SlamParams, given, "slam")

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from worker.slam.map_kernels import ACC_X, ACC_Y, FULL, HITS, OCCUPIED, PATCH_BITS, PATCH_MASK
 
@@ -241,84 +241,110 @@ def optimize(
     return best_pose, cur
 
 
+# layout of the `cfg` array the drivers take (one float64 array instead of eleven arguments)
+CFG_FIELDS = (
+    "res",
+    "usable_range",
+    "max_range",
+    "lskip",
+    "kernel",
+    "sigma",
+    "lsigma",
+    "lstep",
+    "astep",
+    "iterations",
+    "minimum_score",
+)
+
+
 @njit(cache=True)
-def scan_match_all(
-    pool,
-    bits,
-    tables,
-    tpx0,
-    tpy0,
-    poses,
-    ranges,
-    cos_a,
-    sin_a,
-    res,
-    usable_range,
-    max_range,
-    lskip,
-    kernel,
-    sigma,
-    lsigma,
-    lstep,
-    astep,
-    iterations,
-    minimum_score,
+def _match_particle(
+    p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
 ):
+    """Improved proposal of particle p: write its pose, score and log-likelihood at [p]."""
+    res, usable, max_range = cfg[0], cfg[1], cfg[2]
+    lskip, kernel = int(cfg[3]), int(cfg[4])
+    sigma, lsigma, lstep, astep = cfg[5], cfg[6], cfg[7], cfg[8]
+    iterations, minimum_score = int(cfg[9]), cfg[10]
+    table = tables[p]
+    refined, sc = optimize(
+        pool,
+        bits,
+        table,
+        tpx0,
+        tpy0,
+        poses[p],
+        ranges,
+        cos_a,
+        sin_a,
+        res,
+        usable,
+        max_range,
+        lskip,
+        kernel,
+        sigma,
+        lstep,
+        astep,
+        iterations,
+    )
+    if sc > minimum_score:
+        out[p] = refined
+    else:
+        out[p] = poses[p]
+    _, like = score_and_likelihood(
+        pool,
+        bits,
+        table,
+        tpx0,
+        tpy0,
+        out[p, 0],
+        out[p, 1],
+        out[p, 2],
+        ranges,
+        cos_a,
+        sin_a,
+        res,
+        usable,
+        max_range,
+        lskip,
+        kernel,
+        sigma,
+        lsigma,
+        True,
+    )
+    scores[p] = sc
+    likes[p] = like
+
+
+@njit(cache=True)
+def scan_match_all(pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
     """The improved proposal for every particle (GMapping GridSlamProcessor::scanMatch).
 
     Each particle's pose is refined against its own map, kept as drawn from the motion model
     when the match score is not above minimum_score. Returns (poses (N, 3), score (N,),
-    log-likelihood (N,)) with the likelihood at the final pose.
+    log-likelihood (N,)) with the likelihood at the final pose. cfg: see CFG_FIELDS.
     """
     n = poses.shape[0]
-    out = poses.copy()
+    out = np.empty_like(poses)
     scores = np.zeros(n)
     likes = np.zeros(n)
     for p in range(n):
-        table = tables[p]
-        refined, sc = optimize(
-            pool,
-            bits,
-            table,
-            tpx0,
-            tpy0,
-            poses[p],
-            ranges,
-            cos_a,
-            sin_a,
-            res,
-            usable_range,
-            max_range,
-            lskip,
-            kernel,
-            sigma,
-            lstep,
-            astep,
-            iterations,
+        _match_particle(
+            p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
         )
-        if sc > minimum_score:
-            out[p] = refined
-        _, like = score_and_likelihood(
-            pool,
-            bits,
-            table,
-            tpx0,
-            tpy0,
-            out[p, 0],
-            out[p, 1],
-            out[p, 2],
-            ranges,
-            cos_a,
-            sin_a,
-            res,
-            usable_range,
-            max_range,
-            lskip,
-            kernel,
-            sigma,
-            lsigma,
-            True,
+    return out, scores, likes
+
+
+@njit(cache=True, parallel=True)
+def scan_match_all_parallel(pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
+    """scan_match_all with the particles spread over numba's threads; the same result (each
+    particle reads the shared maps and writes only its own row)."""
+    n = poses.shape[0]
+    out = np.empty_like(poses)
+    scores = np.zeros(n)
+    likes = np.zeros(n)
+    for p in prange(n):
+        _match_particle(
+            p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
         )
-        scores[p] = sc
-        likes[p] = like
     return out, scores, likes

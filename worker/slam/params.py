@@ -39,6 +39,9 @@ class SlamParams:
     ogain: float = 3.0  # gain smoothing the likelihood when normalising weights
     lskip: int = 0  # beams skipped between two used ones when matching
     minimum_score: float = 0.0  # below this match score, keep the odometry guess
+    # scan-matching threads (numba prange over particles); results do not depend on it. Keep 1
+    # when runs already execute in parallel processes, or from several Python threads at once.
+    threads: int = 1
     # motion model (GMapping's MotionModel::drawFromMotion)
     srr: float = 0.1  # [m/m] translation noise from translation
     srt: float = 0.2  # [rad/m] rotation noise from translation
@@ -58,6 +61,8 @@ class SlamParams:
                 raise InputError(f"SLAM parameter {name} must be >= 0, got {value}")
         if self.particles < 1:
             raise InputError(f"SLAM parameter particles must be >= 1, got {self.particles}")
+        if self.threads < 1:
+            raise InputError(f"SLAM parameter threads must be >= 1, got {self.threads}")
         if self.kernel_size < 0 or self.iterations < 0 or self.lskip < 0:
             raise InputError("SLAM parameters kernel_size, iterations and lskip must be >= 0")
         if not 0.0 <= self.resample_threshold <= 1.0:

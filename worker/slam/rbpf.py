@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from worker.evaluate.se2 import compose, inverse
 from worker.slam.base import LaserGeometry, beam_angles
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
-from worker.slam.match_kernels import scan_match_all
+from worker.slam.match_kernels import CFG_FIELDS, scan_match_all, scan_match_all_parallel
 from worker.slam.motion import draw_from_motion
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
@@ -38,6 +39,20 @@ class RbpfSlam:
             float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
         )
         self._usable = min(params.max_urange, self._max_range)
+        cfg = {
+            "res": params.delta,
+            "usable_range": self._usable,
+            "max_range": self._max_range,
+            "lskip": params.lskip,
+            "kernel": params.kernel_size,
+            "sigma": params.sigma,
+            "lsigma": params.lsigma,
+            "lstep": params.lstep,
+            "astep": params.astep,
+            "iterations": params.iterations,
+            "minimum_score": params.minimum_score,
+        }
+        self._match_cfg = np.array([cfg[k] for k in CFG_FIELDS], dtype=np.float64)
         self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
         n = params.particles
         self.maps = PatchMaps(n, params.delta, params.map_margin, params.occ_thresh)
@@ -79,9 +94,13 @@ class RbpfSlam:
         return True
 
     def _proposal_and_weights(self, ranges: np.ndarray) -> None:
-        p = self.params
         m = self.maps
-        self.poses, _, likes = scan_match_all(
+        if self.params.threads > 1:
+            numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
+            match = scan_match_all_parallel
+        else:
+            match = scan_match_all
+        self.poses, _, likes = match(
             m.pool,
             m.bits,
             m.tables,
@@ -91,17 +110,7 @@ class RbpfSlam:
             ranges,
             self._cos_a,
             self._sin_a,
-            m.resolution,
-            self._usable,
-            self._max_range,
-            p.lskip,
-            p.kernel_size,
-            p.sigma,
-            p.lsigma,
-            p.lstep,
-            p.astep,
-            p.iterations,
-            p.minimum_score,
+            self._match_cfg,
         )
         self.log_weights += likes
         self.log_weight_sums += likes

@@ -93,3 +93,13 @@ def test_estimate_is_correction_composed_with_odometry():
         assert np.allclose(slam.pose_estimate(), compose(slam.T_map_odom(), odom[k]))
         if k == 0:
             assert updated and np.allclose(slam.T_map_odom(), 0.0)  # map frame = first odom
+
+
+def test_threads_do_not_change_the_result():
+    laser, t, gt, odom, scans = _loop_log(0.3)
+    runs = []
+    for threads in (1, 2):
+        params = SlamParams(particles=6, threads=threads)
+        slam = make_slam("rbpf", laser, params, np.random.default_rng(3))
+        runs.append(_run(slam, t, odom, scans))
+    assert np.array_equal(runs[0], runs[1])
