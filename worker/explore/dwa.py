@@ -69,12 +69,19 @@ class DwaPlanner:
             self._escape_from = None
 
     def command(
-        self, pose: np.ndarray, v0: float, w0: float, local: LocalCostmap, goal_yaw: float | None
+        self,
+        pose: np.ndarray,
+        v0: float,
+        w0: float,
+        local: LocalCostmap,
+        goal_yaw: float | None,
+        no_forward: bool = False,
     ) -> Command:
         """Velocity for this control period from pose `(3,)` [x, y, theta] and current (v0, w0).
 
         Within xy_goal_tolerance of the path's end the robot only turns towards `goal_yaw`
-        (when given), as move_base does before declaring the goal reached.
+        (when given), as move_base does before declaring the goal reached. no_forward: only
+        turning in place or backing off (the safety controller forbids going on).
         """
         if self.path_xy is None:
             return Command(0.0, 0.0, False, "none")
@@ -104,7 +111,7 @@ class DwaPlanner:
             # the exact footprint decides, before backing off is tried
             vx, vth, _, kind = dk.best_command(
                 float(pose[0]), float(pose[1]), float(pose[2]), float(v0), float(w0), goal_gap,
-                self._stuck_left, self._stuck_right, self._escape_from is not None,
+                self._stuck_left, self._stuck_right, no_forward or self._escape_from is not None,
                 p.vx_samples, p.vtheta_samples,
                 local.lethal, local.near, local.inner, local.cost, path_dist, goal_dist,
                 float(local.origin[0]), float(local.origin[1]), local.resolution, prm, last,

@@ -116,7 +116,7 @@ class Navigator:
         self._grow_trail(pose)
         if self.safety.active(t):
             return NavCommand(
-                *self._safe_override(pose, self.safety.check(t, ranges, 0.0)), "safety"
+                *self._safe_override(pose, self.safety.check(t, ranges, 0.0), v0, w0), "safety"
             )
         if self._retrace_to is not None:
             vw = self._retrace(t, pose)
@@ -156,22 +156,26 @@ class Navigator:
             return NavCommand(0.0, 0.0, "recovering")
         override = self.safety.check(t, ranges, cmd.v)
         if override is not None:
-            return NavCommand(*self._safe_override(pose, override), "safety")
+            return NavCommand(*self._safe_override(pose, override, v0, w0), "safety")
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
 
-    def _safe_override(self, pose: np.ndarray, vw: tuple[float, float]) -> tuple[float, float]:
+    def _safe_override(self, pose: np.ndarray, vw, v0: float, w0: float) -> tuple[float, float]:
         """The safety controller backs off blind (the laser does not see behind): check the
         manoeuvre against the local costmap, which holds the map's obstacles; if it would hit
-        something, only turn; if that too, stop."""
+        something, only turn; if that too, let the local planner turn or back off its way."""
         p = self.params
         L = self.local
-        for v, w in (vw, (0.0, vw[1]), (0.0, 0.0)):
-            if (v, w) == (0.0, 0.0) or dk.motion_legal(
+        for v, w in (vw, (0.0, vw[1])):
+            if dk.motion_legal(
                 float(pose[0]), float(pose[1]), float(pose[2]), v, w, p.safety_backoff_time,
                 L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]),
                 L.resolution, p.footprint_half_m, p.sim_granularity,
             ):  # fmt: skip
                 return v, w
+        if self.dwa.path_xy is not None:
+            cmd = self.dwa.command(pose, v0, w0, L, None, no_forward=True)
+            if cmd.legal:
+                return cmd.v, cmd.w
         return 0.0, 0.0
 
     def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
