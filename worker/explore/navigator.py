@@ -156,13 +156,19 @@ class Navigator:
             return NavCommand(0.0, 0.0, "recovering")
         override = self.safety.check(t, ranges, cmd.v)
         if override is not None:
-            return NavCommand(*self._safe_override(pose, override, v0, w0), "safety")
+            return NavCommand(
+                *self._safe_override(pose, override, v0, w0, (cmd.v, cmd.w)), "safety"
+            )
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
 
-    def _safe_override(self, pose: np.ndarray, vw, v0: float, w0: float) -> tuple[float, float]:
+    def _safe_override(
+        self, pose: np.ndarray, vw, v0: float, w0: float, planned=(0.0, 0.0)
+    ) -> tuple[float, float]:
         """The safety controller backs off blind (the laser does not see behind): check the
         manoeuvre against the local costmap, which holds the map's obstacles; if it would hit
-        something, only turn; if that too, let the local planner turn or back off its way."""
+        something, only turn; if that too, let the local planner turn or back off its way;
+        if it cannot either, its own (collision-checked) `planned` command, as the only way
+        out of the corner."""
         p = self.params
         L = self.local
         for v, w in (vw, (0.0, vw[1])):
@@ -176,7 +182,7 @@ class Navigator:
             cmd = self.dwa.command(pose, v0, w0, L, None, no_forward=True)
             if cmd.legal:
                 return cmd.v, cmd.w
-        return 0.0, 0.0
+        return planned
 
     def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
         """Bounding box `(x0, y0, x1, y1)` [m] of the robot and its beams' end points."""

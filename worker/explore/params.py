@@ -74,7 +74,7 @@ class ExploreParams:
     safety_backoff_time: float = 1.0  # [s] duration of one back-off manoeuvre
     safety_turn_vel: float = 0.4  # [rad/s] turn away from the obstacle while backing off
     # --- failure rules ---
-    max_goal_failures: int = 6  # consecutive given-up goals -> run aborted as `stuck`
+    max_goal_failures: int = 10  # consecutive given-up goals -> run aborted as `stuck`
     stuck_timeout: float = 180.0  # [s] no 0.5 m of motion for this long -> `stuck`
     slam_divergence: float = 3.0  # [m] SLAM pose this far from ground truth -> `slam_diverged`
     # --- stop rules (thesis Sec. 4.x: g, e, m) ---
