@@ -61,6 +61,14 @@ def beam_angles(laser: LaserGeometry) -> np.ndarray:
     return float(laser.angle_min) + float(laser.angle_increment) * np.arange(n, dtype=np.float64)
 
 
+def beam_limits(laser: LaserGeometry, params: SlamParams) -> tuple[float, float]:
+    """(max_range, usable_range) [m] as slam_gmapping sets them: maxRange defaults to the
+    laser's maximum minus 1 cm (so no-return readings are ignored), and beams are used up to
+    min(maxUrange, maxRange)."""
+    max_range = float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
+    return max_range, min(params.max_urange, max_range)
+
+
 def make_slam(
     name: SlamName,
     laser: LaserGeometry,

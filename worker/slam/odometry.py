@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.base import LaserGeometry, beam_angles
+from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams
@@ -25,10 +25,7 @@ class OdometrySlam:
         angles = beam_angles(laser)
         self._n_beams = angles.shape[0]
         self._cos_a, self._sin_a = np.cos(angles), np.sin(angles)
-        self._max_range = (
-            float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
-        )
-        self._usable = min(params.max_urange, self._max_range)
+        self._max_range, self._usable = beam_limits(laser, params)
         self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
         self.maps = PatchMaps(1, params.delta, params.map_margin, params.occ_thresh)
         self._pose_odom = np.zeros(3)

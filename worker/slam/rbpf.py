@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 from worker.evaluate.se2 import compose, inverse
-from worker.slam.base import LaserGeometry, beam_angles
+from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
 from worker.slam.match_kernels import CFG_FIELDS, scan_match_all, scan_match_all_parallel
@@ -35,10 +35,7 @@ class RbpfSlam:
         angles = beam_angles(laser)
         self._n_beams = angles.shape[0]
         self._cos_a, self._sin_a = np.cos(angles), np.sin(angles)
-        self._max_range = (
-            float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
-        )
-        self._usable = min(params.max_urange, self._max_range)
+        self._max_range, self._usable = beam_limits(laser, params)
         cfg = {
             "res": params.delta,
             "usable_range": self._usable,
