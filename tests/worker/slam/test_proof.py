@@ -69,5 +69,10 @@ def test_rbpf_beats_odometry_and_maps_the_walls(tmp_path, world_name, odom_model
         k: wall_overlap(r.grid, world.occ, world.resolution, world.origin, tol=0.1)
         for k, r in results.items()
     }
+    print(
+        f"{world_name} {odom_model}: B mean odometry {b_odom:.3f} m, rbpf {b_rbpf:.3f} m; walls "
+        f"rbpf precision {ov['rbpf'].precision:.3f} recall {ov['rbpf'].recall:.3f}, odometry "
+        f"precision {ov['odometry'].precision:.3f} recall {ov['odometry'].recall:.3f}"
+    )  # shown with pytest -s
     assert ov["rbpf"].precision >= 0.95 and ov["rbpf"].recall >= 0.85, ov["rbpf"]
     assert ov["rbpf"].precision > ov["odometry"].precision
