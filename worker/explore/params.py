@@ -23,7 +23,7 @@ class ExploreParams:
     cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
     occupied_thresh: float = 0.25  # [-] SLAM cell probability from which a cell is an obstacle
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
-    full_map_check_period: float = 10.0  # [s] whole-map re-read (catches SLAM map switches)
+    full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
     local_window_m: float = 6.0  # [m] local_costmap width = height (rolling window)
     local_persistence: float = 1.0  # [s] how long scan obstacles stay in the local costmap
