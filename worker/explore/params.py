@@ -41,8 +41,9 @@ class ExploreParams:
     cost_factor: float = 0.8  # [-] navfn COST_FACTOR: costmap value -> step cost
     allow_unknown: bool = True  # plan through unknown space
     # [m] plans keep this much farther from obstacles than the inscribed radius (navfn: 0,
-    # any non-INSCRIBED cell is fine); gaps the padded local footprint cannot take are avoided
-    planner_margin: float = 0.05
+    # any non-INSCRIBED cell is fine): 0.1 m is about the circumscribed radius (0.28 m), so the
+    # robot can turn wherever its plan takes it (gaps between table legs are trapped otherwise)
+    planner_margin: float = 0.1
     planner_patience: float = 5.0  # [s] planning may fail this long before recovery
     # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
     controller_frequency: float = 10.0  # [Hz]
