@@ -104,25 +104,60 @@ class RunResult:
     summary: dict[str, Any]
 
 
-class _LoggingSimulator:
-    """The simulator as the exploration sees it, writing one CARMEN tick per scan taken.
+class _TimedSimulator:
+    """The simulator as the exploration sees it: times its calls and, given a CARMEN writer,
+    logs one tick per scan taken.
 
     The exploration loop takes exactly one scan per 0.1 s step, at the top of the step, so the
     log holds every scan with the odometry and ground truth of the same instant.
     """
 
-    def __init__(self, sim: Simulator, writer: CarmenWriter):
+    def __init__(self, sim: Simulator, writer: CarmenWriter | None):
         self._sim = sim
         self._writer = writer
+        self.wall_s = 0.0  # [s] spent simulating and logging
 
     def scan(self) -> np.ndarray:
+        t0 = time.perf_counter()
         ranges = self._sim.scan()
-        v, w = self._sim.velocity
-        self._writer.write_tick(self._sim.t, self._sim.pose_gt, self._sim.pose_odom, v, w, ranges)
+        if self._writer is not None:
+            v, w = self._sim.velocity
+            sim = self._sim
+            self._writer.write_tick(sim.t, sim.pose_gt, sim.pose_odom, v, w, ranges)
+        self.wall_s += time.perf_counter() - t0
         return ranges
+
+    def step(self, v_cmd: float, w_cmd: float) -> bool:
+        t0 = time.perf_counter()
+        out = self._sim.step(v_cmd, w_cmd)
+        self.wall_s += time.perf_counter() - t0
+        return out
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._sim, name)
+
+
+class _TimedSlam:
+    """A SLAM algorithm with the wall time of its updates and map reads counted."""
+
+    def __init__(self, slam):
+        self._slam = slam
+        self.wall_s = 0.0  # [s]
+
+    def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        t0 = time.perf_counter()
+        out = self._slam.process(t, pose_odom, ranges_m)
+        self.wall_s += time.perf_counter() - t0
+        return out
+
+    def occupancy(self):
+        t0 = time.perf_counter()
+        out = self._slam.occupancy()
+        self.wall_s += time.perf_counter() - t0
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._slam, name)
 
 
 def run_one(
@@ -142,11 +177,9 @@ def run_one(
     """
     wall0 = time.perf_counter()
     rng_sim, rng_slam, rng_eval = np.random.default_rng(seed).spawn(3)
-    sim = Simulator(world, params.sim, rng_sim)
     oracle = params.algorithm == "oracle"
-    slam = make_slam(
-        "odometry" if oracle else params.algorithm, params.sim.laser, params.slam, rng_slam
-    )
+    algorithm = "odometry" if oracle else params.algorithm
+    slam = _TimedSlam(make_slam(algorithm, params.sim.laser, params.slam, rng_slam))
 
     def progress(p: ExploreProgress) -> None:
         wall = time.perf_counter() - wall0
@@ -165,10 +198,13 @@ def run_one(
 
     callback = progress if on_progress is not None else None
     with _open_log(sim_log) as stream:
+        writer = None
         if stream is not None:
             header = f"mapqual run: world {world.name}, seed {seed}, {params.algorithm}"
-            sim = _LoggingSimulator(sim, CarmenWriter(stream, params.sim.laser, comment=header))
+            writer = CarmenWriter(stream, params.sim.laser, comment=header)
+        sim = _TimedSimulator(Simulator(world, params.sim, rng_sim), writer)
         exploration = explore(world, sim, slam, params.explore, oracle=oracle, on_progress=callback)
+    stage_wall = {"simulation_wall_s": sim.wall_s, "slam_wall_s": slam.wall_s}
     wall_explore = time.perf_counter() - wall0
     gt = Trajectory(exploration.t, exploration.pose_gt)
     est = Trajectory(exploration.t, exploration.pose_est)
@@ -176,6 +212,7 @@ def run_one(
     ate = absolute_trajectory_error(gt, est, params.eval.max_gap) if len(gt) > 1 else None
     wall = time.perf_counter() - wall0
     summary = _summary(world, seed, params, exploration, errors, ate, wall_explore, wall)
+    summary["timings"].update(stage_wall)
     return RunResult(world, seed, params, exploration, gt, est, relations, errors, ate, summary)
 
 
