@@ -35,6 +35,11 @@ class ExploreProgress:
     coverage: float  # [0, 1] at the last coverage estimate (every snapshot or 10 s)
     goals_reached: int
     status: str  # what the navigation stack is doing
+    # For live viewers (all in the SLAM map frame; None when there is none):
+    goal_xy: np.ndarray | None = None  # (2,) [m] the current frontier goal
+    plan: np.ndarray | None = None  # (K, 2) [m] the global plan being followed
+    ranges: np.ndarray | None = None  # (B,) [m] the latest scan, taken at pose_gt
+    occupancy: Callable[[], object] | None = None  # the current SLAM map, read on demand
 
 
 @dataclass(frozen=True)
@@ -205,7 +210,9 @@ def explore(
             if int(round(t / dt)) % int(round(10.0 / dt)) == 0:
                 last_cov = _coverage(world, reach, slam, rec)
             done = sum(g.status in ("reached", "explored") for g in nav.stats.goals)
-            on_progress(ExploreProgress(t, pose_gt, pose_est, last_cov, done, status))
+            goal = None if nav.goal is None else np.asarray(nav.goal.goal_xy, dtype=float)
+            live = (goal, nav.path, ranges, slam.occupancy)
+            on_progress(ExploreProgress(t, pose_gt, pose_est, last_cov, done, status, *live))
         if reason is None:
             sim.step(cmd.v, cmd.w)
     return _result(world, sim, slam, nav, rec, reach, reason, detail, n_collisions0, wall0)
