@@ -86,6 +86,12 @@ class RunProgress:
     goals_reached: int
     wall_s: float  # [s] since the run started
     rtf: float  # simulated seconds per wall second so far
+    # For live viewers (SLAM map frame; None when there is none), as ExploreProgress has them:
+    goal_xy: np.ndarray | None = None  # (2,) [m] the current frontier goal
+    plan: np.ndarray | None = None  # (K, 2) [m] the global plan
+    ranges: np.ndarray | None = None  # (B,) [m] the latest scan
+    occupancy: Callable[[], Any] | None = None  # the current OccupancyGrid, read on demand
+    beam_angles: np.ndarray | None = None  # (B,) [rad] of `ranges`, relative to the heading
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,6 +186,7 @@ def run_one(
     oracle = params.algorithm == "oracle"
     algorithm = "odometry" if oracle else params.algorithm
     slam = _TimedSlam(make_slam(algorithm, params.sim.laser, params.slam, rng_slam))
+    angles = params.sim.laser.angles
 
     def progress(p: ExploreProgress) -> None:
         wall = time.perf_counter() - wall0
@@ -193,6 +200,11 @@ def run_one(
                 p.goals_reached,
                 wall,
                 p.t / wall if wall > 0 else 0.0,
+                p.goal_xy,
+                p.plan,
+                p.ranges,
+                p.occupancy,
+                angles,
             )
         )
 
