@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import math
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -92,6 +93,7 @@ class RunProgress:
     ranges: np.ndarray | None = None  # (B,) [m] the latest scan
     occupancy: Callable[[], Any] | None = None  # the current OccupancyGrid, read on demand
     beam_angles: np.ndarray | None = None  # (B,) [rad] of `ranges`, relative to the heading
+    range_max: float = math.inf  # [m] readings at or past this are "no return"
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,6 +207,7 @@ def run_one(
                 p.ranges,
                 p.occupancy,
                 angles,
+                params.sim.laser.range_max,
             )
         )
 
