@@ -176,19 +176,13 @@ def create_job(
         status="queued",
         idempotency_key=idempotency_key,
     )
+    # Runs built through the relationship: one flush inserts the job, then all runs in one
+    # batched statement, and job.runs needs no second query afterwards.
+    job.runs = [
+        Run(owner_id=owner_id, world_id=world_id, seed=int(seed), slam=slam, params=params)
+        for seed in seeds
+    ]
     session.add(job)
-    session.flush()
-    for seed in seeds:
-        session.add(
-            Run(
-                owner_id=owner_id,
-                job_id=job.id,
-                world_id=world_id,
-                seed=int(seed),
-                slam=slam,
-                params=params,
-            )
-        )
     session.flush()
     return job
 
@@ -309,3 +303,39 @@ def _refresh_job_status(session: Session, job: Job) -> None:
     else:
         job.status = "done"
     job.updated_at = utcnow()
+
+
+def add_job_runs(session: Session, job_id: int, seeds: Sequence[int]) -> dict[int, Run]:
+    """The job's run for each seed, adding a queued run (with the job's world, algorithm and
+    parameters) for any seed it lacks; a batch grown by more seeds extends its jobs this way."""
+    job = session.get_one(Job, job_id)
+    by_seed = {r.seed: r for r in job.runs}
+    for seed in seeds:
+        if int(seed) not in by_seed:
+            run = Run(
+                owner_id=job.owner_id, world_id=job.world_id, seed=int(seed), slam=job.slam,
+                params=job.params,
+            )  # fmt: skip
+            job.runs.append(run)
+            by_seed[int(seed)] = run
+    session.flush()
+    _refresh_job_status(session, job)
+    return {int(s): by_seed[int(s)] for s in seeds}
+
+
+def requeue_run(session: Session, run_id: int) -> Run:
+    """Put a run that was interrupted before it finished back to queued (a batch resumes it)."""
+    run = session.get_one(Run, run_id)
+    if run.status == "running":
+        run.status = "queued"
+        run.started_at = None
+        run.progress = {}
+        _refresh_job_status(session, run.job)
+    return run
+
+
+def get_runs(session: Session, run_ids: Sequence[int]) -> list[Run]:
+    """The runs with these ids (any order; missing ids are left out)."""
+    if not run_ids:
+        return []
+    return list(session.scalars(select(Run).where(Run.id.in_([int(i) for i in run_ids]))))

@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Header, HTTPException, Query, status
 from fastapi.responses import JSONResponse
 from sqlalchemy import func, select
+from sqlalchemy.orm import joinedload
 
 from backend.api.deps import CurrentUser, SessionDep, SettingsDep, owned
 from backend.db.models import Job, World
@@ -60,7 +61,6 @@ def submit_job(
         raise HTTPException(
             status.HTTP_503_SERVICE_UNAVAILABLE, "the job queue is unreachable; try again later"
         ) from None
-    session.refresh(job)
     return JSONResponse(JobOut.of(job).model_dump(mode="json"), status_code=202)
 
 
@@ -89,7 +89,9 @@ def list_jobs(
 @router.get("/jobs/{job_id}", response_model=JobOut)
 def get_job(job_id: int, session: SessionDep, user: CurrentUser) -> JobOut:
     """A job's status and its runs with their progress."""
-    return JobOut.of(owned(user, session.get(Job, job_id), "job", job_id))
+    # the job and its runs in one query (a polled endpoint: round trips are its cost)
+    job = session.get(Job, job_id, options=[joinedload(Job.runs)])
+    return JobOut.of(owned(user, job, "job", job_id))
 
 
 @router.post("/jobs/{job_id}/cancel", response_model=JobOut)
