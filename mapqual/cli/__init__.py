@@ -19,11 +19,13 @@ app = typer.Typer(
 # Each command module adds its commands to `app` on import. Heavy imports (numba kernels,
 # matplotlib) stay inside the command functions so that `mapqual --help` starts fast.
 # (command modules are imported here, one line each)
+from mapqual.cli import batch as _batch  # noqa: E402,F401
 from mapqual.cli import evaluate as _evaluate  # noqa: E402,F401
 from mapqual.cli import runs as _runs  # noqa: E402,F401
 from mapqual.cli import service as _service  # noqa: E402,F401
 from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import simulate as _simulate  # noqa: E402,F401
+from mapqual.cli import viewer as _viewer  # noqa: E402,F401
 from mapqual.cli import slam as _slam  # noqa: E402,F401
 from mapqual.cli import world as _world  # noqa: E402,F401
 

@@ -1,0 +1,206 @@
+"""What the viewer shows of one run: live state fed by the worker's messages, or a finished
+run read from the database; and the list of runs to choose from."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy import case, select
+
+from backend.db.models import Run, World
+from backend.db.session import session_scope
+from backend.progress import FREE, OCCUPIED, UNKNOWN, decode_map_patch
+from backend.store import load_map, load_trajectory, world_occupancy
+
+RECENT_FINISHED = 30  # finished runs listed after the running ones
+
+
+@dataclass
+class RunInfo:
+    """A run as the selector lists it."""
+
+    id: int
+    status: str
+    world_id: int
+    world: str
+    seed: int
+    slam: str
+    outcome: str | None
+
+    @property
+    def label(self) -> str:
+        state = self.status if self.status != "done" else (self.outcome or "done")
+        return f"#{self.id} {state} · {self.world} · seed {self.seed} · {self.slam}"
+
+
+def list_runs(url: str) -> list[RunInfo]:
+    """Running runs first, then the most recent finished ones (every owner's: the viewer is a
+    trusted-network tool, see `mapqual viewer --help`)."""
+    live = case((Run.status == "running", 0), else_=1)
+    stmt = (
+        select(Run.id, Run.status, Run.world_id, World.name, Run.seed, Run.slam, Run.outcome)
+        .join(World, World.id == Run.world_id)
+        .where(Run.status.in_(("running", "done")))
+        .order_by(live, Run.id.desc())
+        .limit(RECENT_FINISHED + 20)
+    )
+    with session_scope(url) as s:
+        return [RunInfo(*row) for row in s.execute(stmt)]
+
+
+def run_status(url: str, run_id: int) -> str | None:
+    """The run's status now, or None when it does not exist."""
+    with session_scope(url) as s:
+        return s.scalar(select(Run.status).where(Run.id == run_id))
+
+
+@dataclass
+class Floorplan:
+    """A world's occupancy grid and where it lies."""
+
+    occ: np.ndarray  # (H, W) bool [iy, ix], bottom row first
+    resolution: float  # [m]
+    origin: tuple[float, float]  # [m]
+    name: str
+
+
+def load_floorplan(url: str, run_id: int) -> Floorplan | None:
+    """The floorplan of the run's world."""
+    with session_scope(url) as s:
+        run = s.get(Run, run_id)
+        if run is None:
+            return None
+        w = s.get_one(World, run.world_id)
+        return Floorplan(world_occupancy(w), w.resolution, (w.origin_x, w.origin_y), w.name)
+
+
+@dataclass
+class MapState:
+    """A SLAM map as cell codes (backend.progress UNKNOWN / FREE / OCCUPIED)."""
+
+    codes: np.ndarray  # (H, W) uint8 [iy, ix]
+    resolution: float  # [m]
+    origin: tuple[float, float]  # [m]
+
+
+@dataclass
+class FinishedRun:
+    """A finished run from the database: 10 Hz trajectories, final map and summary."""
+
+    t: np.ndarray  # (N,) [s]
+    gt: np.ndarray  # (N, 3)
+    est: np.ndarray  # (N, 3)
+    map: MapState | None
+    summary: dict[str, Any]
+
+    def index_at(self, t: float) -> int:
+        """Index of the last pose at or before `t` (0 before the start)."""
+        return max(0, int(np.searchsorted(self.t, t, side="right")) - 1)
+
+
+def load_finished(url: str, run_id: int) -> FinishedRun | None:
+    """A done run's trajectories, map and summary; None when it is not done."""
+    with session_scope(url) as s:
+        run = s.get(Run, run_id)
+        if run is None or run.status != "done":
+            return None
+        t, gt = load_trajectory(s, run_id, "gt")
+        _, est = load_trajectory(s, run_id, "est")
+        try:
+            grid, res, origin = load_map(s, run_id)
+            state = MapState(ros_codes(grid), res, origin)
+        except LookupError:
+            state = None
+        return FinishedRun(t, gt, est, state, dict(run.summary or {}))
+
+
+@dataclass
+class Delta:
+    """What one message changed, for the scenes that show the run."""
+
+    progress: dict[str, Any]
+    path_reset: bool = False
+    gt: np.ndarray | None = None  # (K, 2) new points (all of them after a reset)
+    est: np.ndarray | None = None
+    scan: np.ndarray | None = None  # (K, 2)
+    goal: np.ndarray | None = None  # (2,)
+    plan: np.ndarray | None = None  # (K, 2)
+    has_nav: bool = False  # goal and plan were in the message (None = there is none)
+    map_box: tuple[int, int, int, int] | None = None  # changed (iy0, ix0, h, w)
+    map_reset: bool = False  # the map was replaced whole (new size or origin)
+
+
+@dataclass
+class LiveRun:
+    """The state of a running run as its messages built it."""
+
+    run_id: int
+    gt: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    est: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    map: MapState | None = None
+    progress: dict[str, Any] = field(default_factory=dict)
+    scan: np.ndarray | None = None
+    goal: np.ndarray | None = None
+    plan: np.ndarray | None = None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def apply(self, msg: dict[str, Any]) -> Delta:
+        """Fold one message in; the returned Delta says what changed."""
+        with self.lock:
+            self.progress = msg.get("progress", self.progress)
+            d = Delta(self.progress)
+            path = msg.get("path")
+            if path is not None:
+                self._apply_path(path, d)
+            if "scan" in msg:
+                self.scan = d.scan = np.asarray(msg["scan"], dtype=float).reshape(-1, 2)
+            if "goal" in msg:
+                d.has_nav = True
+                self.goal = d.goal = None if msg["goal"] is None else np.asarray(msg["goal"])
+                plan = msg.get("plan")
+                self.plan = d.plan = None if plan is None else np.asarray(plan).reshape(-1, 2)
+            if "map" in msg:
+                self._apply_map(msg["map"], d)
+            return d
+
+    def _apply_path(self, path: dict[str, Any], d: Delta) -> None:
+        i0 = int(path["i0"])
+        gt = np.asarray(path["gt"], dtype=float).reshape(-1, 2)
+        est = np.asarray(path["est"], dtype=float).reshape(-1, 2)
+        if i0 == 0:
+            self.gt, self.est, d.path_reset = gt, est, True
+        elif i0 == len(self.gt):
+            self.gt, self.est = np.vstack((self.gt, gt)), np.vstack((self.est, est))
+        else:
+            return  # a gap (we came in between messages): the next message starts over
+        d.gt, d.est = gt, est
+
+    def _apply_map(self, m: dict[str, Any], d: Delta) -> None:
+        box, patch = decode_map_patch(m)
+        shape = tuple(m["shape"])
+        origin = (float(m["origin"][0]), float(m["origin"][1]))
+        if m["full"] or self.map is None or self.map.codes.shape != shape:
+            if not m["full"]:
+                return  # a patch of a map we never had whole: wait for the next full one
+            self.map = MapState(np.zeros(shape, np.uint8), float(m["resolution"]), origin)
+            d.map_reset = True
+        iy0, ix0, h, w = box
+        self.map.codes[iy0 : iy0 + h, ix0 : ix0 + w] = patch
+        d.map_box = box
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, MapState | None]:
+        """Copies of the paths and map, for a scene that starts showing the run."""
+        with self.lock:
+            m = None
+            if self.map is not None:
+                m = MapState(self.map.codes.copy(), self.map.resolution, self.map.origin)
+            return self.gt.copy(), self.est.copy(), m
+
+
+def ros_codes(grid_ros: np.ndarray) -> np.ndarray:
+    """A stored ROS grid (-1 unknown, 0..100) as cell codes; occupied from 65 (map_saver)."""
+    occupied = np.where(grid_ros >= 65, OCCUPIED, FREE)
+    return np.where(grid_ros < 0, UNKNOWN, occupied).astype(np.uint8)

@@ -1,0 +1,299 @@
+"""One browser tab of the viewer: its GUI (run selector, layers, metrics, replay) and its
+scene, showing one run live or replaying it once finished."""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from frontend.layers import EST_RGB, GT_RGB, Floorplan, MapTiles, Markers, PathLayer, Robot
+from frontend.live import Delta, FinishedRun, LiveRun, RunInfo
+
+if TYPE_CHECKING:
+    from frontend.viewer import ViewerApp
+
+NONE_LABEL = "(choose a run)"
+SPEEDS = ("1x", "2x", "5x", "10x", "20x", "50x", "100x")
+REPLAY_POINTS = 20000  # finished paths are drawn with at most this many points
+LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan", "goal & plan")
+
+
+class RunView:
+    """The GUI and scene of one connected client."""
+
+    def __init__(self, app: ViewerApp, client: Any):
+        self.app, self.client, self.scene = app, client, client.scene
+        self.lock = threading.RLock()
+        self.run_id: int | None = None
+        self.mode = "none"  # none | live | replay
+        self.finished: FinishedRun | None = None
+        self.stride = 1
+        self.shown_i = -1  # replay: last trajectory index drawn
+        self.playing = False
+        self._labels: dict[str, int] = {}
+        self._build_gui(client.gui)
+        self._layers: dict[str, Any] = {}
+
+    # --- GUI ------------------------------------------------------------------------------
+    def _build_gui(self, gui: Any) -> None:
+        with gui.add_folder("Run"):
+            self.selector = gui.add_dropdown("run", (NONE_LABEL,), initial_value=NONE_LABEL)
+            self.selector.on_update(lambda _: self._on_select())
+        with gui.add_folder("Metrics"):
+            self.metrics = gui.add_markdown("No run selected.")
+        with gui.add_folder("Layers"):
+            self.toggles = {name: gui.add_checkbox(name, True) for name in LAYERS}
+        for name, box in self.toggles.items():
+            box.on_update(lambda _, n=name: self._apply_toggle(n))
+        with gui.add_folder("Replay"):
+            self.play = gui.add_button("Play", disabled=True)
+            self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="10x")
+            self.slider = gui.add_slider("time [s]", 0.0, 1.0, 0.1, 0.0, disabled=True)
+        self.play.on_click(lambda _: self._toggle_play())
+        self.slider.on_update(lambda _: self._on_slider())
+
+    def set_runs(self, runs: list[RunInfo]) -> None:
+        """New selector options; the selected run stays selected."""
+        labels = {r.label: r.id for r in runs}
+        if self.run_id is not None and self.run_id not in labels.values():
+            labels[f"#{self.run_id}"] = self.run_id
+        current = next((k for k, v in labels.items() if v == self.run_id), NONE_LABEL)
+        with self.lock:
+            if labels != self._labels:
+                self._labels = labels
+                self.selector.options = (NONE_LABEL, *labels)
+            self.selector.value = current  # (a no-op when unchanged)
+
+    def _on_select(self) -> None:
+        run_id = self._labels.get(self.selector.value)
+        if run_id is not None and run_id != self.run_id:
+            self.app.show(self, run_id)
+
+    def _apply_toggle(self, name: str) -> None:
+        on = self.toggles[name].value
+        with self.lock:
+            L = self._layers
+            if not L:
+                return
+            if name == "floorplan" and L.get("floor") is not None:
+                L["floor"].node.visible = on
+            elif name == "SLAM map":
+                L["map"].set_visible(on)
+            elif name == "ground truth":
+                L["gt"].set_visible(on)
+            elif name == "estimate":
+                L["est"].set_visible(on)
+            elif name == "robots":
+                L["robot_gt"].set_visible(on)
+                L["robot_est"].set_visible(on)
+            elif name == "scan":
+                L["markers"].set_scan_visible(on)
+            else:
+                L["markers"].set_nav_visible(on)
+
+    # --- scene ----------------------------------------------------------------------------
+    def reset(self, run_id: int, floor) -> None:
+        """Clear the scene and lay out the layers for `run_id` over its floorplan."""
+        with self.lock:
+            self._clear()
+            self.run_id, self.mode, self.finished, self.playing = run_id, "none", None, False
+            on = {n: b.value for n, b in self.toggles.items()}
+            sc = self.scene
+            L: dict[str, Any] = {"floor": None}
+            if floor is not None:
+                L["floor"] = Floorplan(sc, "/floor", floor.occ, floor.resolution, floor.origin)
+                L["floor"].node.visible = on["floorplan"]
+                self._frame_camera(L["floor"])
+            L["map"] = MapTiles(sc, "/slam", on["SLAM map"])
+            L["gt"] = PathLayer(sc, "/gt", GT_RGB, 0.08, on["ground truth"])
+            L["est"] = PathLayer(sc, "/est", EST_RGB, 0.05, on["estimate"])
+            L["robot_gt"] = Robot(sc, "/robot_gt", GT_RGB, visible=on["robots"])
+            L["robot_est"] = Robot(sc, "/robot_est", EST_RGB, 0.35, visible=on["robots"])
+            L["markers"] = Markers(sc, "/nav", on["scan"], on["goal & plan"])
+            self._layers = L
+            self._sync_replay_gui()
+
+    def _clear(self) -> None:
+        L = self._layers
+        if L:
+            if L.get("floor") is not None:
+                L["floor"].node.remove()
+            L["map"].clear()
+            L["gt"].clear()
+            L["est"].clear()
+            for k in ("robot_gt", "robot_est"):
+                L[k].node.remove()
+            m = L["markers"]
+            m.scan.remove()
+            m.goal.remove()
+            if m.plan is not None:
+                m.plan.remove()
+        self._layers = {}
+
+    def _frame_camera(self, floor: Floorplan) -> None:
+        cx, cy = floor.centre
+        span = max(floor.size) * 0.6
+        height = span / math.tan(math.radians(35)) + 1.0
+        cam = self.client.camera
+        cam.position = (cx, cy - 0.05 * height, height)
+        cam.look_at = (cx, cy, 0.0)
+
+    def show_live(self, live: LiveRun) -> None:
+        """Start showing a running run from what has arrived so far."""
+        gt, est, m = live.snapshot()
+        with self.lock:
+            self.mode = "live"
+            L = self._layers
+            L["gt"].set(gt)
+            L["est"].set(est)
+            if m is not None:
+                L["map"].show(m.codes, m.resolution, m.origin)
+            self._progress(live.progress)
+            self._sync_replay_gui()
+
+    def on_delta(self, live: LiveRun, d: Delta) -> None:
+        """A message of the run we show arrived."""
+        with self.lock:
+            if self.mode != "live":
+                return
+            L = self._layers
+            if d.gt is not None:
+                (L["gt"].set if d.path_reset else L["gt"].append)(d.gt)
+                (L["est"].set if d.path_reset else L["est"].append)(d.est)
+            if d.map_box is not None and live.map is not None:
+                box = None if d.map_reset else d.map_box
+                L["map"].show(live.map.codes, live.map.resolution, live.map.origin, box)
+            if d.scan is not None:
+                L["markers"].show_scan(d.scan)
+            if d.has_nav:
+                L["markers"].show_nav(d.goal, d.plan)
+            self._progress(d.progress)
+
+    def _progress(self, p: dict[str, Any]) -> None:
+        L = self._layers
+        if "pose_gt" in p:
+            L["robot_gt"].pose(*p["pose_gt"])
+            L["robot_est"].pose(*p["pose_est"])
+        self.metrics.content = metrics_markdown(self.app.info(self.run_id), p, None)
+
+    # --- replay ---------------------------------------------------------------------------
+    def show_finished(self, fin: FinishedRun) -> None:
+        """Show a finished run at its end, ready to replay."""
+        with self.lock:
+            self.mode, self.finished, self.playing = "replay", fin, False
+            self.stride = max(1, math.ceil(len(fin.t) / REPLAY_POINTS))
+            L = self._layers
+            L["markers"].show_scan(None)
+            L["markers"].show_nav(None, None)
+            if fin.map is not None:
+                L["map"].show(fin.map.codes, fin.map.resolution, fin.map.origin)
+            self.shown_i = -1
+            end = float(fin.t[-1]) if len(fin.t) else 0.0
+            self._sync_replay_gui()
+            self.slider.max = max(end, 0.1)
+            if self.slider.value == end:
+                self._render_at(end)
+            else:
+                self.slider.value = end  # renders (the slider's callback)
+
+    def _sync_replay_gui(self) -> None:
+        replay = self.mode == "replay"
+        self.play.disabled = not replay
+        self.slider.disabled = not replay
+        self.play.label = "Pause" if self.playing else "Play"
+
+    def _toggle_play(self) -> None:
+        with self.lock:
+            if self.mode != "replay":
+                return
+            if not self.playing and self.slider.value >= self.slider.max - 1e-6:
+                self.slider.value = 0.0  # play again from the start
+            self.playing = not self.playing
+            self._sync_replay_gui()
+
+    def _on_slider(self) -> None:
+        with self.lock:
+            if self.mode == "replay":
+                self._render_at(float(self.slider.value))
+
+    def tick(self, dt: float) -> None:
+        """Advance a playing replay by `dt` wall seconds at the chosen speed."""
+        with self.lock:
+            if self.mode != "replay" or not self.playing:
+                return
+            t = min(self.slider.max, self.slider.value + dt * float(self.speed.value[:-1]))
+            if t >= self.slider.max:
+                self.playing = False
+                self._sync_replay_gui()
+            self.slider.value = round(t, 1)  # renders (the slider's callback)
+
+    def _render_at(self, t: float) -> None:
+        fin, L = self.finished, self._layers
+        if fin is None or not len(fin.t):
+            return
+        i = fin.index_at(t)
+        idx = np.arange(0, i + 1, self.stride)
+        if idx[-1] != i:
+            idx = np.append(idx, i)
+        if i < self.shown_i or self.shown_i < 0:
+            L["gt"].set(fin.gt[idx, :2])
+            L["est"].set(fin.est[idx, :2])
+        elif i > self.shown_i:
+            new = idx[idx > self.shown_i]
+            L["gt"].append(fin.gt[new, :2])
+            L["est"].append(fin.est[new, :2])
+        self.shown_i = i
+        L["robot_gt"].pose(*fin.gt[i])
+        L["robot_est"].pose(*fin.est[i])
+        p = {"t": float(fin.t[i]), "coverage": fin.summary.get("coverage")}
+        self.metrics.content = metrics_markdown(self.app.info(self.run_id), p, fin.summary)
+
+    def describe(self) -> dict[str, Any]:
+        """What the scene holds now (for tests and the status line)."""
+        with self.lock:
+            L = self._layers
+            if not L:
+                return {"run": self.run_id, "mode": self.mode}
+            return {
+                "run": self.run_id,
+                "mode": self.mode,
+                "floorplan": L["floor"] is not None,
+                "map_tiles": L["map"].n_tiles(),
+                "gt_points": len(L["gt"].points),
+                "est_points": len(L["est"].points),
+                "robot_gt": L["robot_gt"].shown,
+                "robot_est": L["robot_est"].shown,
+                "scan": L["markers"].has_scan,
+                "goal": L["markers"].has_goal,
+            }
+
+
+def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: dict | None) -> str:
+    """The metrics panel: run, simulated time, coverage, real-time factor, B errors when done."""
+    lines = []
+    if info is not None:
+        lines.append(f"**Run #{info.id}** · {info.world} · seed {info.seed} · {info.slam}")
+    t, cov = p.get("t"), p.get("coverage")
+    row = []
+    if t is not None:
+        row.append(f"sim time **{t:.1f} s**")
+    if cov is not None:
+        row.append(f"coverage **{100 * cov:.0f} %**")
+    if p.get("rtf"):
+        row.append(f"RTF **{p['rtf']:.1f}x**")
+    if p.get("status"):
+        row.append(f"{p['status']}, {p.get('goals_reached', 0)} goals")
+    lines.append(" · ".join(row))
+    if summary:
+        lines.append(f"outcome **{summary.get('outcome')}** ({summary.get('stop')})")
+        b = summary.get("relations", {}).get("B")
+        if b and b["translation"]["n"]:
+            tr, rot = b["translation"], b["rotation"]
+            lines.append(
+                f"B error: trans **{tr['mean']:.3f} ± {tr['std']:.3f} m**, "
+                f"rot **{rot['mean']:.4f} ± {rot['std']:.4f} rad** ({tr['n']} relations)"
+            )
+    return "\n\n".join(lines)

@@ -1,0 +1,37 @@
+"""`mapqual viewer`: the live viewer (viser) of running and finished runs."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from typing import Annotated
+
+import typer
+
+from mapqual.cli import app
+
+
+@app.command("viewer")
+def viewer(
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="Port to listen on.")] = 8080,
+) -> None:
+    """Watch runs in the browser: live while they run (over Redis), replayed once done.
+
+    Open http://HOST:PORT/ and pick a run; a job's dashboard page links here (MAPQUAL_VIEWER_URL).
+
+    It shows every owner's runs (DATABASE_URL) without a sign-in: serve it on a trusted network.
+    """
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+    from frontend.viewer import ViewerApp
+
+    settings = get_settings()
+    upgrade(settings.database_url)
+    viewer_app = ViewerApp(settings.database_url, settings.redis_url, host, port)
+    typer.echo(f"mapqual viewer on http://{host}:{viewer_app.port}/ (Ctrl+C stops it)", err=True)
+    done = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: done.set())
+    done.wait()
+    viewer_app.stop()
