@@ -25,6 +25,8 @@ class Settings(BaseSettings):
     # API keys are required unless this is set to "off" explicitly (embedded, single-user use);
     # the server then logs a warning at start and every request acts as the local user.
     auth: Literal["on", "off"] = Field(default="on", alias="MAPQUAL_AUTH")
+    # Where `mapqual viewer` is reached from a browser (the dashboard links runs there).
+    viewer_url: str = Field(default="http://127.0.0.1:8080", alias="MAPQUAL_VIEWER_URL")
     # Largest accepted upload [bytes].
     max_upload_bytes: int = Field(default=20 * 1024 * 1024, alias="MAPQUAL_MAX_UPLOAD_BYTES")
 
