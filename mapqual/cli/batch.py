@@ -1,0 +1,255 @@
+"""`mapqual batch`: worlds x seeds x SLAM algorithms x laser noise on a headless server, in a
+local process pool or through Celery; resumable; tables, figures and report.html in OUT."""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+import shlex
+import signal
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from mapqual.cli import app
+from worker.errors import InputError
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+class BatchProgress:
+    """A rich progress bar with ETA on a terminal; one plain line per finished run otherwise."""
+
+    def __init__(self, total: int, done: int):
+        self.total, self.done, self.done0 = total, done, done
+        self.t0 = time.monotonic()
+        self.running: dict[str, str] = {}
+        self.bar = None
+        if sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self.bar = Progress(
+                TextColumn("[bold]batch"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[running]}"),
+                console=Console(stderr=True),
+            )
+            self.task = self.bar.add_task("batch", total=total, completed=done, running="")
+
+    def __enter__(self) -> BatchProgress:
+        if self.bar is not None:
+            self.bar.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+    def _eta(self) -> str:
+        n = self.done - self.done0
+        if n == 0:
+            return "?"
+        left = (time.monotonic() - self.t0) / n * (self.total - self.done)
+        return time.strftime("%H:%M:%S", time.gmtime(left))
+
+    def __call__(self, ev) -> None:
+        spec = ev.spec
+        if ev.kind == "start":
+            self.running[spec.key] = f"{spec.world} s{spec.seed}"
+        elif ev.kind == "progress":
+            self.running[spec.key] = f"{spec.world} s{spec.seed} {ev.t:.0f}s"
+        else:
+            self.running.pop(spec.key, None)
+            self.done += 1
+            if self.bar is None:
+                print(f"[{self.done:>4}/{self.total}] {spec.label}: {_line(ev.record)}"
+                      f"  (ETA {self._eta()})", file=sys.stderr, flush=True)  # fmt: skip
+        if self.bar is not None:
+            running = ", ".join(list(self.running.values())[:4])
+            self.bar.update(self.task, completed=self.done, running=running)
+
+
+def _line(rec: dict[str, Any]) -> str:
+    from worker.batch.tables import outcome_of, relation_stats
+
+    outcome, reason = outcome_of(rec)
+    text = outcome + (f" ({reason})" if reason else "")
+    if rec["status"] != "done":
+        return f"{text}: {rec['error']}"
+    b = relation_stats(rec)
+    if b is not None:
+        text += f", B {b['translation']['mean']:.3f} m {b['rotation']['mean']:.4f} rad"
+    t = rec["summary"]["timings"]
+    return text + f", {t['sim_time_s']:.0f} s simulated in {t['wall_time_s']:.0f} s"
+
+
+def _overrides(worlds, runs, seeds, slam, laser_noise) -> dict[str, Any]:
+    if runs is not None and seeds is not None:
+        raise InputError("give --runs or --seeds, not both")
+    return {
+        "worlds": [str(w) for w in worlds] or None,
+        "runs": runs,
+        "seeds": seeds,
+        "slam": slam,
+        "laser_noise": laser_noise,
+    }
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM cleans up like Ctrl-C: workers stopped, runs requeued
+
+
+@app.command("batch")
+def batch(
+    worlds: Annotated[
+        list[Path] | None,
+        typer.Argument(metavar="WORLDS...", help="Floorplan files (.yaml, .world) or folders."),
+    ] = None,
+    runs: Annotated[int | None, typer.Option(min=1, help="Seeds 1..N per condition.")] = None,
+    seeds: Annotated[str | None, typer.Option(help="Seeds: A-B or a list, e.g. 1-10.")] = None,
+    slam: Annotated[str | None, typer.Option(help="Algorithms, e.g. rbpf,odometry.")] = None,
+    laser_noise: Annotated[
+        str | None, typer.Option(help="Laser noise sigmas [m], e.g. 0,0.1,0.3.")
+    ] = None,
+    params_file: Annotated[
+        Path | None,
+        typer.Option("--params", help="YAML/JSON with sim, slam, explore, eval sections."),
+    ] = None,
+    time_limit: Annotated[
+        float | None, typer.Option(min=1.0, help="Simulated-time limit of each run [s].")
+    ] = None,
+    experiment: Annotated[
+        str | None, typer.Option(help="Experiment YAML file, or 'thesis' (bundled).")
+    ] = None,
+    only: Annotated[
+        str | None, typer.Option(help="Keep only worlds whose file name matches this glob.")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(min=1, help="Local worker processes (default: cores).")
+    ] = None,
+    celery: Annotated[
+        bool, typer.Option("--celery", help="Run on Celery workers (REDIS_URL) instead.")
+    ] = False,
+    retry_failed: Annotated[
+        bool, typer.Option("--retry-failed", help="Redo runs that stopped on an internal error.")
+    ] = False,
+    sim_log: Annotated[
+        bool, typer.Option("--sim-log", help="Keep each run's full CARMEN log (large).")
+    ] = False,
+    dry_run: Annotated[
+        bool, typer.Option("--dry-run", help="List the runs and how many are left; run none.")
+    ] = False,
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")] = Path("batch"),
+) -> None:
+    """Run an experiment (WORLDS x seeds x --slam x --laser-noise) and write its tables,
+    figures and report.html to OUT. Re-running the same command resumes it."""
+    from worker.batch.experiment import build_groups, expand, load_experiment, load_params, merge
+    from worker.batch.state import BatchDir
+
+    if workers is not None and celery:
+        raise InputError("--workers is for the local pool; Celery workers are started apart")
+    raw, base_dir = load_experiment(experiment) if experiment else ({}, None)
+    base_params = load_params(params_file)
+    if time_limit is not None:
+        base_params = merge(base_params, {"explore": {"time_limit": time_limit}})
+    groups = build_groups(
+        raw, base_dir, _overrides(worlds or [], runs, seeds, slam, laser_noise), base_params
+    )
+    if only is not None:
+        groups = [replace(g, worlds=_match(g.worlds, only)) for g in groups]
+    specs, loaded = expand(groups)
+    bdir = BatchDir(out)
+    records = bdir.load_records(s.key for s in specs)
+    redo = {k for k, r in records.items() if retry_failed and r["status"] != "done"}
+    todo = [s for s in specs if s.key not in records or s.key in redo]
+    print(f"{len(specs)} runs, {len(specs) - len(todo)} finished, {len(todo)} to do -> {out}",
+          file=sys.stderr)  # fmt: skip
+    if dry_run:
+        for s in specs:
+            print(f"{s.key}  {'todo' if s in todo else 'done'}  {s.label}")
+        return
+    command = "mapqual " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
+    _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log)
+
+
+def _match(paths, pattern: str):
+    kept = tuple(p for p in paths if fnmatch.fnmatch(Path(p).stem, pattern))
+    if not kept:
+        raise InputError(f"--only {pattern!r} matches none of the experiment's worlds")
+    return kept
+
+
+def _execute(specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log) -> None:
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+    from mapqual.cli.batch_db import DbBatch, run_celery
+    from worker.batch.local import run_local
+    from worker.batch.results import write_results
+
+    settings = get_settings()
+    upgrade(settings.database_url)
+    db = DbBatch(settings.database_url, bdir.batch_id(), specs, loaded)
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        with BatchProgress(len(specs), len(specs) - len(todo)) as progress:
+            if celery:
+                run_celery(todo, bdir, db, settings.redis_url, progress, retry_failed=retry_failed)
+            else:
+                run_local(todo, bdir, workers, db, progress, sim_log=sim_log)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        records = bdir.load_records(s.key for s in specs)
+        ordered = [records[s.key] for s in specs if s.key in records]
+        if ordered:
+            write_results(ordered, bdir, len(specs))
+    _print_tables(bdir.root)
+
+
+def _print_tables(out: Path) -> None:
+    import csv
+
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    for name, title in (("success.csv", "success"), ("translation.csv", "B translation [m]"),
+                        ("rotation.csv", "B rotation [rad]")):  # fmt: skip
+        with open(out / name, newline="") as fh:
+            rows = list(csv.reader(fh))
+        table = Table(title=title)
+        for col in rows[0]:
+            table.add_column(col, justify="left" if col in ("world", "ENVIRONMENT") else "right")
+        for row in rows[1:]:
+            table.add_row(*[_short(v) for v in row])
+        console.print(table)
+    console.print(f"report: {out / 'report.html'}")
+
+
+def _short(v: str) -> str:
+    try:
+        f = float(v)
+    except ValueError:
+        return v
+    return v if v.isdigit() else f"{f:.4g}"

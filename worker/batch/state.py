@@ -1,0 +1,142 @@
+"""A batch's output folder as its resumable state: one record per finished run, and a journal.
+
+A run is finished once `runs/<key>/record.json` exists; the record is written last and
+atomically (temporary file, then rename), so a batch killed at any moment leaves either a
+complete record or none, and resuming re-does only the runs without one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Iterable
+from dataclasses import asdict
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from worker.batch.experiment import RunSpec
+
+RECORD = "record.json"
+BATCH = "batch.json"
+JOURNAL = "journal.jsonl"
+
+
+def now_iso() -> str:
+    """UTC time stamp, ISO 8601 to the second."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def record_of(
+    spec: RunSpec,
+    *,
+    summary: dict[str, Any] | None,
+    error: str | None = None,
+    run_id: int | None = None,
+    job_id: int | None = None,
+    report_dir: str | None = None,
+) -> dict[str, Any]:
+    """A finished run's record: its labels, and its summary or the error that stopped it.
+
+    `status` is "done" when the pipeline finished the run (whatever the exploration's
+    outcome), "error" when it raised: the tables count such a run as failed, reason "error".
+    """
+    return {
+        **asdict(spec),
+        "status": "done" if summary is not None else "error",
+        "error": error,
+        "summary": summary,
+        "run_id": run_id,
+        "job_id": job_id,
+        "report_dir": report_dir,
+        "finished_at": now_iso(),
+    }
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+class BatchDir:
+    """The output folder OUT of a batch: records, journal, tables, plots, report.html."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.runs = self.root / "runs"
+        self.runs.mkdir(parents=True, exist_ok=True)
+
+    def batch_id(self) -> str:
+        """This folder's batch id, made on first use: it names the batch's jobs in the database."""
+        path = self.root / BATCH
+        if path.exists():
+            return json.loads(path.read_text())["batch_id"]
+        bid = uuid.uuid4().hex[:12]
+        _write_atomic(path, json.dumps({"batch_id": bid, "created": now_iso()}, indent=2) + "\n")
+        return bid
+
+    def describe(self, **info: Any) -> None:
+        """Store what the latest invocation asked for beside the batch id (for the report)."""
+        path = self.root / BATCH
+        doc = json.loads(path.read_text()) if path.exists() else {}
+        doc.setdefault("batch_id", self.batch_id())
+        doc.update(info, updated=now_iso())
+        _write_atomic(path, json.dumps(doc, indent=2) + "\n")
+
+    def info(self) -> dict[str, Any]:
+        """batch.json as a mapping."""
+        path = self.root / BATCH
+        return json.loads(path.read_text()) if path.exists() else {}
+
+    def run_dir(self, key: str) -> Path:
+        """The report folder of one run."""
+        return self.runs / key
+
+    def fresh_run_dir(self, key: str) -> Path:
+        """The run's report folder emptied of an interrupted attempt's leftovers."""
+        d = self.run_dir(key)
+        if d.exists():
+            shutil.rmtree(d)
+        d.mkdir(parents=True)
+        return d
+
+    def load_records(self, keys: Iterable[str]) -> dict[str, dict[str, Any]]:
+        """The records that exist among `keys` (a run without one is not finished)."""
+        out = {}
+        for key in keys:
+            path = self.run_dir(key) / RECORD
+            if path.is_file():
+                out[key] = json.loads(path.read_text())
+        return out
+
+    def write_record(self, record: dict[str, Any]) -> None:
+        """Mark a run finished (atomically; the last thing written for a run)."""
+        d = self.run_dir(record["key"])
+        d.mkdir(parents=True, exist_ok=True)
+        _write_atomic(d / RECORD, json.dumps(record, indent=1) + "\n")
+
+    def journal(self, event: str, key: str | None = None, **fields: Any) -> None:
+        """Append one event (start, done, error, interrupted, enqueued) to journal.jsonl."""
+        line = json.dumps({"time": now_iso(), "event": event, "key": key, **fields})
+        with open(self.root / JOURNAL, "a", encoding="utf-8") as fh:
+            fh.write(line + "\n")
+            fh.flush()
+
+    def read_journal(self) -> list[dict[str, Any]]:
+        """Every journal event, oldest first (a torn last line from a kill is skipped)."""
+        path = self.root / JOURNAL
+        if not path.exists():
+            return []
+        events = []
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                events.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+        return events

@@ -1,0 +1,154 @@
+"""A batch's tables: runs.csv, success.csv (thesis Table 6.3), translation.csv and
+rotation.csv (Tables 6.4 and 6.5: per environment, B errors averaged over completed runs)."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# Thesis 6.3.4: a map is visually bad above these mean B errors.
+GOOD_T = 1.0  # [m]
+GOOD_R = 0.03  # [rad]
+KINDS = (("B", "b"), ("A", "a"), ("SM", "sm"))
+STATS = ("mean", "std", "min", "max")
+REASONS = ("collision", "stuck", "time_limit", "slam_diverged", "error")
+ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES")
+RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
+
+
+def outcome_of(rec: dict[str, Any]) -> tuple[str, str | None]:
+    """(outcome, reason): a run that raised counts as failed with reason "error"."""
+    if rec["status"] != "done":
+        return "failed", "error"
+    return rec["summary"]["outcome"], rec["summary"]["reason"]
+
+
+def relation_stats(rec: dict[str, Any], kind: str = "B") -> dict[str, Any] | None:
+    """The run's {translation, rotation, skipped} figures of relation `kind`, if evaluated."""
+    if rec["status"] != "done":
+        return None
+    rel = rec["summary"]["relations"].get(kind)
+    return rel if rel and rel["translation"]["n"] else None
+
+
+def is_good(rec: dict[str, Any]) -> bool:
+    """Completed, with mean B errors under the thesis's visually-good thresholds."""
+    b = relation_stats(rec)
+    return (
+        outcome_of(rec)[0] == "completed"
+        and b is not None
+        and b["translation"]["mean"] <= GOOD_T
+        and b["rotation"]["mean"] <= GOOD_R
+    )
+
+
+def run_row(rec: dict[str, Any]) -> dict[str, Any]:
+    """One runs.csv row."""
+    outcome, reason = outcome_of(rec)
+    s = rec["summary"] or {}
+    row: dict[str, Any] = {k: rec[k] for k in RUN_LABELS}
+    row.update(outcome=outcome, reason=reason or "", good=is_good(rec))
+    row["coverage"] = s.get("coverage")
+    for kind, prefix in KINDS:
+        rel = relation_stats(rec, kind)
+        for axis, suffix in (("translation", "t"), ("rotation", "r")):
+            for stat in STATS:
+                row[f"{prefix}_{stat}_{suffix}"] = rel[axis][stat] if rel else None
+        row[f"{prefix}_n"] = rel["translation"]["n"] if rel else 0
+    ate = s.get("ate") or {}
+    row["ate_rmse_t"] = (ate.get("translation") or {}).get("rmse")
+    row["ate_rmse_r"] = (ate.get("rotation") or {}).get("rmse")
+    timings = s.get("timings") or {}
+    row["path_length_m"] = s.get("path_length_m")
+    row["sim_time_s"] = timings.get("sim_time_s")
+    row["wall_time_s"] = timings.get("wall_time_s")
+    row["real_time_factor"] = timings.get("real_time_factor")
+    row.update(run_id=rec.get("run_id"), key=rec["key"], error=rec.get("error") or "")
+    return row
+
+
+def _conditions(records: Sequence[dict[str, Any]]) -> dict[tuple, list[dict[str, Any]]]:
+    """Records by (world, slam, noise), in order of first appearance."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for rec in records:
+        groups.setdefault((rec["world"], rec["slam"], rec["noise"]), []).append(rec)
+    return groups
+
+
+def environment_label(records: Sequence[dict[str, Any]], world: str, slam: str, noise: float):
+    """The world's name, with the SLAM algorithm and noise level when the batch varies them."""
+    parts = [world]
+    if len({r["slam"] for r in records}) > 1:
+        parts.append(slam)
+    if len({r["noise"] for r in records}) > 1:
+        parts.append(f"noise {noise:g}")
+    return " ".join(parts)
+
+
+def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per world and condition: runs, completed, good, and failures by reason."""
+    rows = []
+    for (world, slam, noise), recs in _conditions(records).items():
+        outcomes = [outcome_of(r) for r in recs]
+        row = {"world": world, "variant": recs[0]["variant"], "noise": noise, "slam": slam}
+        row["runs"] = len(recs)
+        row["completed"] = sum(o == "completed" for o, _ in outcomes)
+        row["good"] = sum(is_good(r) for r in recs)
+        row["failed"] = row["runs"] - row["completed"]
+        for reason in REASONS:
+            row[reason] = sum(o == "failed" and r == reason for o, r in outcomes)
+        rows.append(row)
+    return rows
+
+
+def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, Any]]:
+    """Thesis Tables 6.4 (axis "translation") and 6.5 ("rotation"): per environment, each B
+    statistic averaged over the completed runs; environments with none are left out."""
+    rows = []
+    for (world, slam, noise), recs in _conditions(records).items():
+        stats = [
+            b[axis] for r in recs if outcome_of(r)[0] == "completed" and (b := relation_stats(r))
+        ]
+        if not stats:
+            continue
+        row = {"ENVIRONMENT": environment_label(records, world, slam, noise)}
+        for col, stat in zip(ERROR_COLUMNS[1:], (*STATS, "n"), strict=True):
+            row[col] = float(np.mean([s[stat] for s in stats]))
+        rows.append(row)
+    return rows
+
+
+def _fmt(v: Any) -> Any:
+    if isinstance(v, bool) or v is None:
+        return "" if v is None else str(v).lower()
+    return repr(v) if isinstance(v, float) else v
+
+
+def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> Path:
+    """Rows as CSV with a header line; None is an empty cell, floats round-trip exactly."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(columns)
+        for row in rows:
+            w.writerow([_fmt(row.get(c)) for c in columns])
+    return path
+
+
+def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
+    """runs.csv, success.csv, translation.csv and rotation.csv in `out`."""
+    runs = [run_row(r) for r in records]
+    success = success_rows(records)
+    run_cols = list(runs[0]) if runs else list(RUN_LABELS)
+    success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good", "failed"]
+    return {
+        "runs": write_csv(out / "runs.csv", runs, run_cols),
+        "success": write_csv(out / "success.csv", success, [*success_cols, *REASONS]),
+        "translation": write_csv(
+            out / "translation.csv", error_rows(records, "translation"), ERROR_COLUMNS
+        ),
+        "rotation": write_csv(out / "rotation.csv", error_rows(records, "rotation"), ERROR_COLUMNS),
+    }
