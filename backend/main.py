@@ -7,7 +7,7 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from backend.api.routes import health, jobs, runs, stats, worlds
+from backend.api.routes import health, jobs, pages, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from worker.errors import InputError
 
@@ -37,6 +37,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     for module in (worlds, jobs, runs, stats):
         app.include_router(module.router, prefix=API_PREFIX)
+    pages.install(app)  # the dashboard at /
     return app
 
 

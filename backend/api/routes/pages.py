@@ -1,0 +1,329 @@
+"""The dashboard: server-rendered pages (Jinja2) over the same handlers and access rules as
+the REST API; a browser signs in with its API key, kept in a cookie."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Annotated, Any
+from urllib.parse import quote
+
+from fastapi import (
+    APIRouter,
+    Depends,
+    FastAPI,
+    File,
+    Form,
+    Header,
+    HTTPException,
+    Request,
+    UploadFile,
+)
+from fastapi.responses import HTMLResponse, RedirectResponse, Response
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from pydantic import ValidationError
+from sqlalchemy import select
+
+from backend.api.deps import (
+    API_KEY_COOKIE,
+    SessionDep,
+    SettingsDep,
+    current_user,
+    owned,
+)
+from backend.api.routes import jobs as jobs_api
+from backend.api.routes import stats as stats_api
+from backend.api.routes import worlds as worlds_api
+from backend.db.models import Job, Run, User, World
+from backend.schemas import JobIn, WorldOut
+from worker.errors import InputError
+
+FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
+templates = Jinja2Templates(directory=FRONTEND / "templates")
+router = APIRouter(include_in_schema=False)
+ACTIVE = ("queued", "running")
+
+
+class SignInRequired(Exception):
+    """A page was asked for without a valid key: the browser is sent to the sign-in page."""
+
+    def __init__(self, next_path: str):
+        self.next_path = next_path
+
+
+def page_user(
+    request: Request,
+    session: SessionDep,
+    settings: SettingsDep,
+    authorization: Annotated[str | None, Header()] = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> User:
+    """The signed-in user, exactly as the API decides it; without one, the sign-in page."""
+    try:
+        return current_user(request, session, settings, authorization, x_api_key)
+    except HTTPException as exc:
+        if exc.status_code == 401:
+            raise SignInRequired(request.url.path) from None
+        raise
+
+
+PageUser = Annotated[User, Depends(page_user)]
+
+
+def install(app: FastAPI) -> None:
+    """Add the pages, their static files and the sign-in redirect to `app`."""
+    app.include_router(router)
+    app.mount("/static", StaticFiles(directory=FRONTEND / "static"), name="static")
+
+    @app.exception_handler(SignInRequired)
+    async def _sign_in(_request: Request, exc: SignInRequired) -> RedirectResponse:
+        return RedirectResponse(f"/login?next={quote(exc.next_path)}", status_code=303)
+
+
+def _render(request: Request, name: str, status_code: int = 200, **ctx: Any) -> HTMLResponse:
+    ctx.setdefault("user", None)
+    return templates.TemplateResponse(request, name, ctx, status_code=status_code)
+
+
+def _safe_next(path: str) -> str:
+    return path if path.startswith("/") and not path.startswith("//") else "/"
+
+
+# --- sign-in --------------------------------------------------------------------------------
+@router.get("/login", response_class=HTMLResponse)
+def login_page(request: Request, next: str = "/") -> HTMLResponse:
+    return _render(request, "login.html", next=_safe_next(next), error=None)
+
+
+@router.post("/login", response_class=HTMLResponse)
+def login(
+    request: Request,
+    session: SessionDep,
+    settings: SettingsDep,
+    key: Annotated[str, Form()],
+    next: Annotated[str, Form()] = "/",
+) -> Response:
+    """Check the key as the API would; keep it in an HTTP-only cookie."""
+    try:
+        current_user(request, session, settings, f"Bearer {key.strip()}", None)
+    except HTTPException as exc:
+        return _render(request, "login.html", 401, next=_safe_next(next), error=str(exc.detail))
+    resp = RedirectResponse(_safe_next(next), status_code=303)
+    resp.set_cookie(API_KEY_COOKIE, key.strip(), httponly=True, samesite="lax", max_age=30 * 86400)
+    return resp
+
+
+@router.post("/logout")
+def logout() -> RedirectResponse:
+    resp = RedirectResponse("/login", status_code=303)
+    resp.delete_cookie(API_KEY_COOKIE)
+    return resp
+
+
+# --- jobs -----------------------------------------------------------------------------------
+def _worlds(session, user: User) -> list[WorldOut]:
+    return worlds_api.list_worlds(session, user)
+
+
+def _jobs_page(request, session, user, error: str | None = None, status_code: int = 200):
+    page = jobs_api.list_jobs(session, user, None, None, 100, 0)
+    names = {w.id: w.name for w in _worlds(session, user)}
+    refresh = any(j.status in ACTIVE for j in page.items)
+    return _render(
+        request, "jobs.html", status_code, user=user, jobs=page.items, total=page.total,
+        worlds=_worlds(session, user), world_names=names, refresh=refresh, error=error,
+    )  # fmt: skip
+
+
+@router.get("/", response_class=HTMLResponse)
+def jobs_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
+    """Jobs with status and progress bars (refreshing while any runs); a submit form."""
+    return _jobs_page(request, session, user)
+
+
+@router.post("/jobs", response_class=HTMLResponse)
+def submit_job_form(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    settings: SettingsDep,
+    world_id: Annotated[int, Form()],
+    runs: Annotated[int, Form()] = 1,
+    slam: Annotated[str, Form()] = "rbpf",
+    time_limit: Annotated[float | None, Form()] = None,
+) -> Response:
+    """Submit through the API's own handler; errors come back on the page."""
+    params: dict[str, Any] = {}
+    if time_limit is not None:
+        params["explore"] = {"time_limit": time_limit}
+    try:
+        body = JobIn(world_id=world_id, runs=runs, slam=slam, params=params)
+        resp = jobs_api.submit_job(body, session, user, settings, None)
+    except ValidationError as exc:
+        msg = "; ".join(e["msg"] for e in exc.errors())
+        return _jobs_page(request, session, user, f"invalid job: {msg}", 400)
+    except (HTTPException, InputError) as exc:
+        session.rollback()
+        return _jobs_page(request, session, user, str(getattr(exc, "detail", exc)), 400)
+    job_id = json.loads(resp.body)["id"]
+    return RedirectResponse(f"/jobs/{job_id}", status_code=303)
+
+
+@router.get("/jobs/{job_id}", response_class=HTMLResponse)
+def job_page(
+    request: Request, job_id: int, session: SessionDep, user: PageUser, settings: SettingsDep
+) -> HTMLResponse:
+    """A job's runs: outcome, coverage, errors, plots, downloads and the live-view link."""
+    from frontend.viewer import run_link
+
+    job = owned(user, session.get(Job, job_id), "job", job_id)
+    runs = [_run_row(r, settings.viewer_url, run_link) for r in job.runs]
+    return _render(
+        request, "job.html", user=user, job=job, world=session.get(World, job.world_id),
+        runs=runs, refresh=job.status in ACTIVE,
+    )  # fmt: skip
+
+
+def _run_row(run: Run, viewer_url: str, run_link) -> dict[str, Any]:
+    b = (run.summary or {}).get("relations", {}).get("B") or {}
+    report = bool(run.report_dir) and Path(run.report_dir).is_dir()
+    return {
+        "run": run,
+        "b": b,
+        "report": report,
+        "errors_plot": report and (Path(run.report_dir) / "errors.png").is_file(),
+        "viewer": run_link(viewer_url, run.id),
+        "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),
+    }
+
+
+@router.get("/runs/{run_id}/plot/{name}.png")
+def run_plot(run_id: int, name: str, session: SessionDep, user: PageUser) -> Response:
+    """The run's trajectories or errors plot: the report's file, else drawn from the database."""
+    from backend.store import load_trajectory, world_occupancy
+    from worker.report.plots import trajectories_png
+
+    if name not in ("trajectories", "errors"):
+        raise HTTPException(404, f"no plot {name!r}")
+    run = owned(user, session.get(Run, run_id), "run", run_id)
+    if run.status != "done":
+        raise HTTPException(404, f"run {run_id} is {run.status}: no results yet")
+    if run.report_dir and (Path(run.report_dir) / f"{name}.png").is_file():
+        return Response((Path(run.report_dir) / f"{name}.png").read_bytes(), media_type="image/png")
+    if name == "errors":
+        raise HTTPException(404, f"run {run_id} has no report folder with its errors")
+    w = session.get_one(World, run.world_id)
+    _, gt = load_trajectory(session, run_id, "gt")
+    _, est = load_trajectory(session, run_id, "est")
+    buf = io.BytesIO()
+    trajectories_png(
+        buf, world_occupancy(w), w.resolution, (w.origin_x, w.origin_y), gt, est,
+        f"{w.name}, seed {run.seed}, {run.slam}: {run.outcome}",
+    )  # fmt: skip
+    return Response(buf.getvalue(), media_type="image/png")
+
+
+# --- worlds ---------------------------------------------------------------------------------
+def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
+    return _render(
+        request, "worlds.html", status_code, user=user, worlds=_worlds(session, user),
+        error=error, notice=notice,
+    )  # fmt: skip
+
+
+@router.get("/worlds", response_class=HTMLResponse)
+def worlds_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
+    """Worlds as thumbnails with their facts; an upload form."""
+    return _worlds_page(request, session, user)
+
+
+@router.post("/worlds", response_class=HTMLResponse)
+def upload_world_form(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    settings: SettingsDep,
+    file: Annotated[list[UploadFile], File()],
+    resolution: Annotated[str, Form()] = "",
+) -> Response:
+    """Upload through the API's own handler; its answer (or its error) is shown on the page."""
+    try:
+        res = float(resolution) if resolution.strip() else None
+    except ValueError:
+        res = -1.0
+    if res is not None and not res > 0:
+        msg = f"the resolution must be a positive number of metres per pixel, not {resolution!r}"
+        return _worlds_page(request, session, user, msg, None, 400)
+    try:
+        resp = worlds_api.upload_world(request, session, user, settings, file, res)
+    except (HTTPException, InputError) as exc:
+        session.rollback()
+        msg = str(getattr(exc, "detail", exc))
+        return _worlds_page(request, session, user, msg, None, getattr(exc, "status_code", 400))
+    doc = json.loads(resp.body)
+    verb = "stored" if resp.status_code == 201 else "already stored"
+    notice = f"world {doc['name']!r} {verb} as #{doc['id']}"
+    return _worlds_page(request, session, user, None, notice, resp.status_code)
+
+
+# --- compare --------------------------------------------------------------------------------
+@router.get("/compare", response_class=HTMLResponse)
+def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
+    """Success and B errors per world (thesis Tables 6.4, 6.5) and error bars (Figs. 6.8, 6.9)."""
+    rows = stats_api.stats(session, user, "world")
+    counts = _relation_counts(session, user)
+    for row in rows:
+        row["relations"] = counts.get(row["world_id"], 0)
+    return _render(request, "compare.html", user=user, rows=rows)
+
+
+def _relation_counts(session, user: User) -> dict[int, int]:
+    """Per world: B relations evaluated over its completed runs."""
+    stmt = select(Run.world_id, Run.summary).where(Run.status == "done", Run.outcome == "completed")
+    if not user.is_admin:
+        stmt = stmt.where(Run.owner_id == user.id)
+    out: dict[int, int] = {}
+    for wid, summary in session.execute(stmt):
+        b = (summary or {}).get("relations", {}).get("B") or {}
+        out[wid] = out.get(wid, 0) + int(b.get("translation", {}).get("n", 0))
+    return out
+
+
+@router.get("/compare/{kind}.png")
+def compare_plot(kind: str, session: SessionDep, user: PageUser) -> Response:
+    """Mean B error per world with a 1-std error bar and the min-max range."""
+    if kind not in ("translation", "rotation"):
+        raise HTTPException(404, f"no chart {kind!r}")
+    rows = [r for r in stats_api.stats(session, user, "world") if r[kind]["mean"] is not None]
+    buf = io.BytesIO()
+    error_bar_chart(buf, rows, kind)
+    return Response(buf.getvalue(), media_type="image/png")
+
+
+def error_bar_chart(out, rows: list[dict], kind: str) -> None:
+    """Thesis Figs. 6.8/6.9: per world, mean +- std (bar) and min..max (thin line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    unit = "m" if kind == "translation" else "rad"
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.9 * len(rows) + 2), 3.6), dpi=100)
+    x = list(range(len(rows)))
+    mean = [r[kind]["mean"] for r in rows]
+    std = [r[kind]["std"] for r in rows]
+    lo = [r[kind]["mean"] - r[kind]["min"] for r in rows]
+    hi = [r[kind]["max"] - r[kind]["mean"] for r in rows]
+    ax.errorbar(x, mean, yerr=[lo, hi], fmt="none", ecolor="#999999", elinewidth=1, capsize=3)
+    ax.errorbar(x, mean, yerr=std, fmt="o", color="#1f5fbf", elinewidth=2.5, capsize=5)
+    ax.set_xticks(x, [r["world"] for r in rows], rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel(f"mean {kind} error [{unit}]")
+    ax.set_title(f"B relations, {kind}: mean ± std (blue), min–max (grey)", fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    if not rows:
+        ax.text(0.5, 0.5, "no completed runs yet", ha="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(out, format="png")
+    plt.close(fig)
