@@ -35,15 +35,22 @@ def _parse_mapqual(argv: list[str]) -> str:
 
 def test_compose_has_the_services_with_health_checks_and_volumes():
     services = COMPOSE["services"]
-    assert {"redis", "postgres", "api", "worker"} <= set(services)
-    for name in ("redis", "postgres", "api"):
+    assert {"redis", "postgres", "api", "worker", "viewer"} <= set(services)
+    for name in ("redis", "postgres", "api", "viewer"):
         assert "healthcheck" in services[name], name
     assert set(COMPOSE["volumes"]) >= {"pgdata", "runs"}
     assert "ports" not in services["worker"]  # workers scale with --scale worker=N
     assert services["api"]["environment"]["DATABASE_URL"].startswith("postgresql+psycopg://")
+    # the viewer reads the same database and Redis, and the dashboard links to its port
+    assert (
+        services["viewer"]["environment"]["REDIS_URL"]
+        == services["worker"]["environment"]["REDIS_URL"]
+    )
+    assert services["viewer"]["ports"] == ["8080:8080"]
+    assert services["api"]["environment"]["MAPQUAL_VIEWER_URL"].endswith(":8080")
 
 
-@pytest.mark.parametrize("service", ["api", "worker"])
+@pytest.mark.parametrize("service", ["api", "worker", "viewer"])
 def test_service_commands_are_valid_mapqual_invocations(service):
     argv = COMPOSE["services"][service]["command"]
     assert argv[0] == "mapqual"
