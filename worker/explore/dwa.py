@@ -124,9 +124,11 @@ class DwaPlanner:
         return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
 
     def _track_oscillation(self, pose, kind: int, vth: float) -> None:
-        """TrajectoryPlanner's flags: a second in-place turn the same way since the robot last
-        moved marks that way as stuck, until it travels oscillation_reset_dist; after backing
-        off, no forward motion until escape_reset_dist / escape_reset_theta from there."""
+        """TrajectoryPlanner's oscillation flags: an in-place turn one way after one the other
+        way since the robot last moved blocks the first way (left = positive vth), until the
+        robot travels oscillation_reset_dist, so it cannot dither left-right on the spot but
+        may keep turning the same way as long as it needs; after backing off, no forward
+        motion until escape_reset_dist / escape_reset_theta from there."""
         p = self.params
         if kind == 2 and self._escape_from is None:
             self._escape_from = (float(pose[0]), float(pose[1]), float(pose[2]))
@@ -144,10 +146,10 @@ class DwaPlanner:
             self._rotating_left = self._rotating_right = False
         if kind == 1:
             if vth < 0:
-                self._stuck_right |= self._rotating_right
+                self._stuck_left |= self._rotating_left
                 self._rotating_right = True
             else:
-                self._stuck_left |= self._rotating_left
+                self._stuck_right |= self._rotating_right
                 self._rotating_left = True
             self._prev_xy = (float(pose[0]), float(pose[1]))
         moved = math.hypot(pose[0] - self._prev_xy[0], pose[1] - self._prev_xy[1])

@@ -72,15 +72,17 @@ def wavefront(seeds, cost, resolution):
 
 @njit(cache=True)
 def score_trajectory(
-    x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm, half=-1.0
-):
+    x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm,
+    half=-1.0, bound=np.inf,
+):  # fmt: skip
     """Roll out constant (vx, vth) for sim_time and score it; negative when illegal.
 
     -1: the footprint hits an obstacle cell of the local costmap at some step; -2: a point has
     no path or goal distance (off the window, or cut off by obstacles). Otherwise the score of
     the end point, base_local_planner's (thesis eq. 5.1):
     pdist * path_dist + gdist * goal_dist + occdist * max centre cost along the trajectory
-    (the caller folds meter_scoring into the weights).
+    (the caller folds meter_scoring into the weights). bound: a trajectory whose score would
+    be `>= bound` cannot win, so its footprint is not tested (the costly part): -3.
     """
     h, w = lethal.shape
     if half < 0.0:
@@ -90,19 +92,21 @@ def score_trajectory(
     n = int(max(dist_lin / prm[P_SIM_GRAN], dist_ang / prm[P_ANG_GRAN]) + 0.5)
     n = max(n, 1)
     dt = prm[P_SIM_TIME] / n
+    # pass 1: the score from the centre's cells alone (cheap)
     occ = 0.0
     pd = 0.0
     gd = 0.0
+    px = x
+    py = y
+    pth = th
     for _ in range(n):
-        x += vx * math.cos(th) * dt
-        y += vx * math.sin(th) * dt
-        th += vth * dt
-        ix = int(math.floor((x - ox) / res))
-        iy = int(math.floor((y - oy) / res))
+        px += vx * math.cos(pth) * dt
+        py += vx * math.sin(pth) * dt
+        pth += vth * dt
+        ix = int(math.floor((px - ox) / res))
+        iy = int(math.floor((py - oy) / res))
         if ix < 0 or ix >= w or iy < 0 or iy >= h:
             return -2.0
-        if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, half):
-            return -1.0
         c = float(cost[iy, ix])
         if c > occ:
             occ = c
@@ -110,7 +114,17 @@ def score_trajectory(
         gd = goal_dist[iy, ix]
         if pd == np.inf or gd == np.inf:
             return -2.0
-    return prm[P_PDIST] * pd + prm[P_GDIST] * gd + prm[P_OCCDIST] * occ
+    score = prm[P_PDIST] * pd + prm[P_GDIST] * gd + prm[P_OCCDIST] * occ
+    if score >= bound:
+        return -3.0
+    # pass 2: the footprint at every step, on the same sample points
+    for _ in range(n):
+        x += vx * math.cos(th) * dt
+        y += vx * math.sin(th) * dt
+        th += vth * dt
+        if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, half):
+            return -1.0
+    return score
 
 
 @njit(cache=True)
@@ -175,8 +189,9 @@ def best_command(
         for j in range(-1, n_vth):
             vth = 0.0 if j < 0 else vth_lo + dvth * j
             s = score_trajectory(
-                x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
-            )
+                x, y, th, vx, vth, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res,
+                prm, -1.0, best if best >= 0.0 else np.inf,
+            )  # fmt: skip
             if s >= 0.0 and (best < 0.0 or s < best):
                 best, bvx, bvth, kind = s, vx, vth, 0
     heading_dist = np.inf
@@ -187,12 +202,17 @@ def best_command(
         if (vth > 0.0 and stuck_left) or (vth < 0.0 and stuck_right):
             continue
         vlim = max(vth, prm[P_MIN_INPLACE_VTH]) if vth > 0 else min(vth, -prm[P_MIN_INPLACE_VTH])
+        # rotations tie with the best (score <= best): bound just above it
         s = score_trajectory(
-            x, y, th, 0.0, vlim, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res, prm
-        )
+            x, y, th, 0.0, vlim, lethal, near, inner, cost, path_dist, goal_dist, ox, oy, res,
+            prm, -1.0, best + 1e-9 * (1.0 + best) if best >= 0.0 else np.inf,
+        )  # fmt: skip
         if s >= 0.0 and (best < 0.0 or s <= best):
             ahead = lookahead_goal_dist(x, y, th, vlim, goal_dist, ox, oy, res, prm)
-            if ahead < heading_dist:
+            # the first legal rotation is taken even when it looks at no reachable cell (inf),
+            # as TrajectoryPlanner's DBL_MAX start does: otherwise a robot among obstacles
+            # could never turn on the spot
+            if kind != 1 or ahead < heading_dist:
                 heading_dist = ahead
                 best, bvx, bvth, kind = s, 0.0, vlim, 1
     if kind < 0 and allow_escape:

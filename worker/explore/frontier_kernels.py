@@ -181,3 +181,79 @@ def first_with_sight(order, cand, members, lethal, unknown, width, max_tries):
             if line_of_sight(lethal, unknown, cy, cx, members[j, 0], members[j, 1]):
                 return k
     return -1
+
+
+@njit(cache=True)
+def open_frontier_cells(cells, unknown, state, stamp, run_id, max_cells):
+    """Which frontier cells border unknown space larger than `max_cells` cells.
+
+    cells: (K, 2) int64 [iy, ix] frontier cells; unknown: (H, W) bool. An unknown region
+    (4-connected) of at most max_cells cells is enclosed by known cells: the inside of a
+    table leg or a wall the laser never sees into, which no viewpoint can ever reveal, so
+    the free cells next to it are no frontier. The grid's edge counts as open. state (H, W)
+    int8 and stamp (H, W) int64 are reusable buffers (valid where stamp == run_id): each
+    region is flooded once, at most max_cells + 1 cells deep. Returns `(K,) bool`.
+    """
+    h, w = unknown.shape
+    out = np.zeros(cells.shape[0], dtype=np.bool_)
+    queue = np.empty(max_cells + 8, dtype=np.int64)
+    for i in range(cells.shape[0]):
+        cy = cells[i, 0]
+        cx = cells[i, 1]
+        for k in range(4):
+            sy = cy + (1 if k == 0 else (-1 if k == 1 else 0))
+            sx = cx + (1 if k == 2 else (-1 if k == 3 else 0))
+            if sy < 0 or sy >= h or sx < 0 or sx >= w:
+                out[i] = True
+                break
+            if not unknown[sy, sx]:
+                continue
+            if stamp[sy, sx] != run_id:
+                _flood_unknown(unknown, state, stamp, run_id, sy, sx, queue, max_cells)
+            if state[sy, sx] == 2:
+                out[i] = True
+                break
+    return out
+
+
+@njit(cache=True)
+def _flood_unknown(unknown, state, stamp, run_id, sy, sx, queue, max_cells):
+    """Label the unknown region holding (sy, sx): state 1 small (enclosed), 2 large."""
+    h, w = unknown.shape
+    head = 0
+    tail = 0
+    stamp[sy, sx] = run_id
+    state[sy, sx] = 3  # being flooded
+    queue[tail] = sy * w + sx
+    tail += 1
+    large = False
+    while head < tail and not large:
+        idx = queue[head]
+        head += 1
+        iy = idx // w
+        ix = idx - iy * w
+        for k in range(4):
+            jy = iy + (1 if k == 0 else (-1 if k == 1 else 0))
+            jx = ix + (1 if k == 2 else (-1 if k == 3 else 0))
+            if jy < 0 or jy >= h or jx < 0 or jx >= w:
+                large = True
+                break
+            if not unknown[jy, jx]:
+                continue
+            if stamp[jy, jx] == run_id:
+                if state[jy, jx] == 2:
+                    large = True
+                    break
+                continue
+            if tail > max_cells:
+                large = True
+                break
+            stamp[jy, jx] = run_id
+            state[jy, jx] = 3
+            queue[tail] = jy * w + jx
+            tail += 1
+    result = 2 if large else 1
+    for q in range(tail):
+        idx = queue[q]
+        iy = idx // w
+        state[iy, idx - iy * w] = result

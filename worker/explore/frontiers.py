@@ -37,6 +37,8 @@ class FrontierSearch:
         self._owner = np.zeros((0, 0), dtype=np.int64)
         self._labels = np.zeros((0, 0), dtype=np.int64)
         self._stamp = np.zeros((0, 0), dtype=np.int64)
+        self._unk_state = np.zeros((0, 0), dtype=np.int8)
+        self._unk_stamp = np.zeros((0, 0), dtype=np.int64)
         self._run_id = 0
         self._frame_id = -1
 
@@ -49,6 +51,8 @@ class FrontierSearch:
             self._owner = np.zeros((h, w), dtype=np.int64)
             self._labels = np.zeros((h, w), dtype=np.int64)
             self._stamp = np.zeros((h, w), dtype=np.int64)
+            self._unk_state = np.zeros((h, w), dtype=np.int8)
+            self._unk_stamp = np.zeros((h, w), dtype=np.int64)
             self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0
             bbox = None
@@ -74,6 +78,14 @@ class FrontierSearch:
         labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
         return cells, labels
 
+    def open_cells(self, costmap: GlobalCostmap, cells: np.ndarray) -> np.ndarray:
+        """`(K,) bool`: frontier cells next to unknown space larger than min_unknown_area
+        (the others border the unseen inside of furniture or walls: nothing to explore)."""
+        max_cells = int(self.params.min_unknown_area / costmap.resolution**2)
+        return fk.open_frontier_cells(
+            cells, costmap.unknown, self._unk_state, self._unk_stamp, self._run_id, max_cells
+        )
+
     def choose(
         self,
         costmap: GlobalCostmap,
@@ -94,8 +106,9 @@ class FrontierSearch:
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
             return None
         cells, labels = self.clusters()
-        sizes = np.bincount(labels) * res
-        cell_valid = sizes[labels] >= p.min_frontier_size
+        is_open = self.open_cells(costmap, cells)
+        sizes = np.bincount(labels, weights=is_open) * res
+        cell_valid = is_open & (sizes[labels] >= p.min_frontier_size)
         if blacklist:
             # A cluster with a cell near a failed goal is dropped whole: a shifted goal on the
             # same frontier would most likely fail the same way.

@@ -29,6 +29,9 @@ class ExploreParams:
     local_persistence: float = 1.0  # [s] how long scan obstacles stay in the local costmap
     # --- frontiers (explore_lite) ---
     min_frontier_size: float = 0.5  # [m] clusters smaller than this are ignored
+    # [m^2] unknown regions up to this size enclosed by known cells (the inside of table legs,
+    # of walls) are not worth a frontier: no viewpoint reveals them
+    min_unknown_area: float = 0.5
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
     frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
@@ -44,6 +47,9 @@ class ExploreParams:
     # any non-INSCRIBED cell is fine): 0.1 m is about the circumscribed radius (0.28 m), so the
     # robot can turn wherever its plan takes it (gaps between table legs are trapped otherwise)
     planner_margin: float = 0.1
+    # [m] near the robot, plans may cross the margin (not the inscribed radius): a pocket the
+    # map closed around the robot as it mapped obstacles better must not trap it
+    escape_radius: float = 0.5
     planner_patience: float = 5.0  # [s] planning may fail this long before recovery
     # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
     controller_frequency: float = 10.0  # [Hz]
@@ -86,7 +92,7 @@ class ExploreParams:
 
     def __post_init__(self) -> None:
         signed = ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
-        may_be_zero = ("footprint_padding", "blacklist_retries", "planner_margin")
+        may_be_zero = ("footprint_padding", "blacklist_retries", "planner_margin", "escape_radius")
         bad = []
         for f in fields(self):
             value = getattr(self, f.name)

@@ -57,6 +57,7 @@ class DijkstraSearch:
             -1 if goal_cell is None else goal_cell[1],
             -1 if goal_cell is None else goal_cell[0],
             planner_blocked_cost(params),
+            int(round(params.escape_radius / costmap.resolution)),
         )
 
     def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:

@@ -20,16 +20,18 @@ def _cell_cost(inflated, unknown, iy, ix, neutral, factor, allow_unknown, escapi
     Costs below `blocked` become neutral + factor * cost; unknown cells cost COST_OBS - 1
     (253) when planning through unknown space is allowed. `blocked` is INSCRIBED in navfn;
     ours may be lower, keeping plans a margin off obstacles (what the local planner's padded
-    footprint needs). A blocked, non-lethal cell may only be entered while escaping from one:
-    a robot that stands too near a wall must be able to leave.
+    footprint needs). Blocked cells may be entered only while escaping: 2 from a blocked
+    cell (a robot that stands too near a wall must be able to leave; any non-lethal cell),
+    1 near the start (a pocket the map closed around the robot must not trap the plan;
+    cells below INSCRIBED).
     """
     c = inflated[iy, ix]
-    if c >= 254:
+    if c >= 254 or (unknown[iy, ix] and not allow_unknown):
         return math.inf
     if c >= blocked:
-        return 253.0 if escaping else math.inf
+        return 253.0 if escaping == 2 or (escaping == 1 and c < 253) else math.inf
     if unknown[iy, ix]:
-        return 253.0 if allow_unknown else math.inf
+        return 253.0
     return neutral + factor * c
 
 
@@ -103,6 +105,7 @@ def dijkstra(
     goal_iy=-1,
     goal_ix=-1,
     blocked=253,
+    escape_cells=0,
 ):
     """Dijkstra navigation function from the start cell (8-connected), with early exit.
 
@@ -112,6 +115,9 @@ def dijkstra(
     (H, W) float64, parent (H, W) int64 (flat index) and stamp (H, W) int64 are reusable
     buffers: a cell's entries are valid only where stamp == run_id, so no buffer is cleared.
     Returns `(K,) int64` flat indices of the target cells settled, nearest first.
+
+    Within `escape_cells` of the start, blocked cells below INSCRIBED cost 253 a step instead
+    of being impassable: the robot stands there, so it can drive out.
 
     With a goal cell (goal_iy >= 0) the queue is ordered by potential plus the octile
     distance to it times the cheapest step cost (A*): an admissible bound, so the goal's
@@ -128,6 +134,7 @@ def dijkstra(
     parent[start_iy, start_ix] = -1
     stamp[start_iy, start_ix] = run_id
     use_h = goal_iy >= 0
+    escape2 = escape_cells * escape_cells
     keys, vals, n = _push(keys, vals, 0, 0.0, s)
     while n > 0:
         key, idx, n = _pop(keys, vals, n)
@@ -152,7 +159,12 @@ def dijkstra(
                 first = d
                 if stop_extra <= 0.0:
                     break
-        escaping = inflated[iy, ix] >= blocked
+        if inflated[iy, ix] >= blocked:
+            escaping = 2
+        elif (iy - start_iy) ** 2 + (ix - start_ix) ** 2 <= escape2:
+            escaping = 1
+        else:
+            escaping = 0
         for k in range(8):
             jy = iy + _DY[k]
             jx = ix + _DX[k]

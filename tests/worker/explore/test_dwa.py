@@ -121,3 +121,69 @@ def test_goal_alignment_then_reached():
     pose[2] = math.pi / 2 - 0.1
     assert dwa.goal_reached(pose, math.pi / 2)
     assert dwa.command(pose, 0.0, 0.0, local, math.pi / 2).kind == "aligned"
+
+
+def _ring(radius, gap_centre, gap_half, step=0.01):
+    """Obstacle points on a circle around (3, 3) but for a gap (angles in rad)."""
+    a = np.arange(-math.pi, math.pi, step / radius)
+    keep = np.abs((a - gap_centre + math.pi) % (2 * math.pi) - math.pi) > gap_half
+    return np.column_stack((3.0 + radius * np.cos(a[keep]), 3.0 + radius * np.sin(a[keep])))
+
+
+def test_turns_in_place_when_no_turn_looks_at_a_reachable_cell():
+    # inside a ring of 0.5 m radius whose only gap is behind: every in-place turn ends looking
+    # at a cell within the inscribed radius of the ring (no goal distance there), yet turning
+    # towards the gap is what the robot must do
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    dwa = DwaPlanner(p)
+    dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
+    cmd = dwa.command(pose, 0.0, 0.0, _local(_ring(0.5, math.pi, 1.0), pose, p), None)
+    assert cmd.legal and cmd.kind == "rotate"
+
+
+def test_keeps_turning_the_same_way_until_it_faces_a_path_behind():
+    p = ExploreParams()
+    x = np.array([3.0, 3.0, 0.3])
+    dwa = DwaPlanner(p)
+    dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
+    v = w = 0.0
+    for _ in range(60):  # 6 s at 10 Hz: half a turn at 0.7 rad/s takes 4.5 s
+        cmd = dwa.command(x, v, w, _local([], x, p), None)
+        v, w = cmd.v, cmd.w
+        x[0] += v * math.cos(x[2]) * 0.1
+        x[1] += v * math.sin(x[2]) * 0.1
+        x[2] += w * 0.1
+    assert abs((x[2] + math.pi) % (2 * math.pi) - math.pi) > 2.5  # facing -x
+    assert x[0] < 2.9  # and on its way along the path
+
+
+def test_oscillation_flags_block_a_way_only_after_a_reversal():
+    dwa = DwaPlanner(ExploreParams())
+    pose = np.array([3.0, 3.0, 0.0])
+    for _ in range(3):  # turning left (positive) again and again is no oscillation
+        dwa._track_oscillation(pose, 1, 0.5)
+    assert not dwa._stuck_left and not dwa._stuck_right
+    dwa._track_oscillation(pose, 1, -0.5)  # left, then right: left is blocked
+    assert dwa._stuck_left and not dwa._stuck_right
+    dwa._track_oscillation(pose + np.array([0.3, 0.0, 0.0]), 0, 0.0)  # moved 0.3 m: cleared
+    assert not dwa._stuck_left and not dwa._stuck_right
+
+
+def test_score_bound_skips_only_trajectories_that_cannot_win():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, 0.0])
+    local = _local(_wall(3.0, 3.05, 3.25, 3.3), pose, p)  # a post 0.25 m to the left
+    path = _straight_path(3.0, 8.0, 3.0)
+    dwa = DwaPlanner(p)
+    dwa.set_plan(path)
+    seeds, goal = dwa._local_plan(pose, local)
+    pd = dk.wavefront(seeds, local.cost, local.resolution)
+    gd = dk.wavefront(goal, local.cost, local.resolution)
+    args = (local.lethal, local.near, local.inner, local.cost, pd, gd,
+            float(local.origin[0]), float(local.origin[1]), RES, dwa.prm)  # fmt: skip
+    free = dk.score_trajectory(3.0, 3.0, 0.0, 0.3, 0.0, *args)
+    hits = dk.score_trajectory(3.0, 3.0, 0.0, 0.0, 0.7, *args)  # a corner sweeps the post
+    assert free > 0 and hits == -1.0
+    assert dk.score_trajectory(3.0, 3.0, 0.0, 0.3, 0.0, *args, -1.0, free + 1e-6) == free
+    assert dk.score_trajectory(3.0, 3.0, 0.0, 0.3, 0.0, *args, -1.0, free) == -3.0

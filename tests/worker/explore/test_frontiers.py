@@ -46,8 +46,8 @@ def test_incremental_frontier_update_tracks_the_map():
 def test_clusters_and_minimum_size():
     prob = np.full((60, 60), 0.9)
     prob[5:55, 5:55] = 0.05
-    prob[20:40, 54] = np.nan  # a 1.0 m opening to the unknown on the right
-    prob[30:33, 5] = np.nan  # a 0.15 m gap on the left: too small (< 0.5 m)
+    prob[20:40, 54:] = np.nan  # a 1.0 m opening to the unknown on the right
+    prob[30:33, :6] = np.nan  # a 0.15 m gap on the left: too small (< 0.5 m)
     cm, fs = _setup(prob)
     cells, labels = fs.clusters()
     sizes = sorted(np.bincount(labels))
@@ -67,8 +67,8 @@ def _corridor_world():
     prob[10:30, 10:110] = 0.05  # lower branch
     prob[50:70, 10:110] = 0.05  # upper branch
     prob[10:70, 90:110] = 0.05  # the bend joining them on the right
-    prob[50:70, 9] = np.nan  # opening A at the upper branch's left end
-    prob[10:30, 110] = np.nan  # opening B at the lower branch's right end
+    prob[50:70, :10] = np.nan  # opening A at the upper branch's left end
+    prob[10:30, 110:] = np.nan  # opening B at the lower branch's right end
     return prob
 
 
@@ -112,9 +112,38 @@ def test_unreachable_frontier_is_not_chosen():
     prob = np.full((60, 100), 0.9)
     prob[10:50, 5:45] = 0.05  # the robot's room, closed
     prob[10:50, 55:95] = 0.05  # another room seen through the wall, open to the unknown
-    prob[20:40, 95] = np.nan
+    prob[20:40, 95:] = np.nan
     cm, fs = _setup(prob)
     assert fs.n_frontier_cells > 0
     assert fs.choose(cm, (1.0, 1.5), []) is None
     assert fs.frontier_near(cm, (4.8, 1.5), 0.3)
     assert not fs.frontier_near(cm, (1.0, 1.5), 0.3)
+
+
+def test_unknown_enclosed_by_known_cells_is_no_frontier():
+    # a room open to the unknown through a 1 m door on the right, with the inside of a
+    # 0.3 m x 0.3 m table leg (9 unknown cells in a ring of obstacle cells whose ring has a
+    # gap, as a scan often leaves one) and of a 0.2 m x 1.5 m wall pillar unseen
+    prob = np.full((60, 80), 0.9)
+    prob[5:55, 5:60] = 0.05
+    prob[25:45, 60:] = np.nan  # the door into the unknown
+    prob[10:15, 10:15] = 0.9
+    prob[11:14, 11:14] = np.nan
+    prob[12, 10] = 0.05  # the gap in the leg's ring: its free cell is a frontier cell
+    prob[30:60, 30:34] = 0.9
+    prob[30:54, 31:33] = np.nan
+    prob[30, 31:33] = 0.05
+    cm, fs = _setup(prob)
+    cells, labels = fs.clusters()
+    is_open = fs.open_cells(cm, cells)
+    assert fs.frontier[12, 10] and fs.frontier[30, 31] and fs.frontier[30, 59]
+    open_set = {tuple(c) for c in cells[is_open]}
+    assert open_set == {(r, 59) for r in range(25, 45)}
+    # the enclosed pillar region is 46 cells: with a smaller limit it counts as open
+    p = ExploreParams(min_unknown_area=40 * RES**2)
+    cm2, fs2 = _setup(prob, p)
+    cells2, _ = fs2.clusters()
+    is_open2 = fs2.open_cells(cm2, cells2)
+    assert {tuple(c) for c in cells2[is_open2]} == open_set | {(30, 31), (30, 32)}
+    goal = fs.choose(cm, (1.0, 1.0), [])
+    assert goal is not None and goal.goal_xy[0] > 2.4  # the door, not the leg nearby

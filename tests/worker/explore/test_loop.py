@@ -82,10 +82,12 @@ def test_room_behind_a_narrow_door_is_explored(door_m):
     occ[:, _cells(4.0) : _cells(4.1)] = True
     lo = _cells(2.0 - door_m / 2)
     occ[lo : lo + _cells(door_m), _cells(4.0) : _cells(4.1)] = False
+    # a partition in the second room hides its lower right part from the door
+    occ[: _cells(2.8), _cells(5.5) : _cells(5.6)] = True
     world = World.from_array(occ, RES, start_pose=(1.0, 1.0, 0.0), name="narrow_door")
     result, _ = _run(world, time_limit=600.0)
     _assert_clean_completion(result)
-    assert result.pose_gt[:, 0].max() > 4.5  # went through the door
+    assert result.pose_gt[:, 0].max() > 5.6  # went through the door and past the partition
 
 
 def test_unreachable_regions_do_not_keep_the_robot_busy():
