@@ -38,6 +38,9 @@ app.conf.update(
         # sweep for abandoned messages often enough to honour a short visibility timeout
         "unacked_restore_interval": max(1, min(10, VISIBILITY_TIMEOUT_S // 4)),
         "unacked_restore_throttle": 1,
+        # A worker killed during a sweep leaves the sweep's mutex held until it expires (kombu's
+        # default: 300 s), and nobody restores anything meanwhile; a sweep takes milliseconds.
+        "unacked_mutex_expire": max(5, min(300, VISIBILITY_TIMEOUT_S // 2)),
     },
     broker_connection_retry_on_startup=True,
     worker_send_task_events=False,

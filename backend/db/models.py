@@ -80,8 +80,9 @@ class World(Base):
     height_px: Mapped[int] = mapped_column(Integer)
     start_pose: Mapped[list[Any]] = mapped_column(JSON)  # [x, y, theta]
     facts: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    # The occupancy grid as the pipeline sees it (bool [iy, ix], bottom row first), packed.
-    occupancy: Mapped[bytes] = mapped_column(LargeBinary)
+    # The occupancy grid as the pipeline sees it (bool [iy, ix], bottom row first), packed;
+    # deferred (as are the other blobs): loaded only when read, not with every row.
+    occupancy: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     jobs: Mapped[list[Job]] = relationship(back_populates="world")
@@ -158,7 +159,7 @@ class RunTrajectory(Base):
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
     kind: Mapped[str] = mapped_column(String(8), primary_key=True)  # gt | est
     n_poses: Mapped[int] = mapped_column(Integer)
-    data: Mapped[bytes] = mapped_column(LargeBinary)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
 
     run: Mapped[Run] = relationship(back_populates="trajectories")
 
@@ -174,6 +175,6 @@ class RunMap(Base):
     origin_y: Mapped[float] = mapped_column(Float)  # [m]
     width: Mapped[int] = mapped_column(Integer)
     height: Mapped[int] = mapped_column(Integer)
-    data: Mapped[bytes] = mapped_column(LargeBinary)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
 
     run: Mapped[Run] = relationship(back_populates="map")
