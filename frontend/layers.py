@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from backend.progress import FREE, OCCUPIED
+
 TILE = 128  # [cells] side of a SLAM map tile: a patch re-sends only the tiles it touches
 MAX_CHUNKS = 40  # path chunks before they are merged into one node
 FLOOR_MAX_PX = 2048  # the floorplan image is shown at most this wide or high
@@ -26,14 +28,21 @@ def _segments(points: np.ndarray, z: float) -> np.ndarray:
     return np.stack((p[:-1], p[1:]), axis=1).astype(np.float32)
 
 
+FLOOR_FREE, FLOOR_WALL, BACKGROUND = 235, 95, 250  # greys of the floorplan and of no plan
+MAP_FREE_RGB = np.array([120, 170, 255])  # blended half into the floorplan under free cells
+MAP_OCC_RGB = np.array([20, 40, 140])
+
+
 class Floorplan:
     """The world's floorplan as a grey image plane (walls dark grey, free light grey)."""
 
     def __init__(self, scene: Any, name: str, occ: np.ndarray, resolution: float, origin):
         h, w = occ.shape
+        self.occ, self.resolution = occ, float(resolution)
+        self.origin = (float(origin[0]), float(origin[1]))
         step = max(1, int(math.ceil(max(h, w) / FLOOR_MAX_PX)))
         shown = occ[::-1][::step, ::step]  # top row first, as images are
-        img = np.where(shown, 70, 215).astype(np.uint8)
+        img = np.where(shown, FLOOR_WALL, FLOOR_FREE).astype(np.uint8)
         width, height = w * resolution, h * resolution
         centre = (origin[0] + width / 2, origin[1] + height / 2, Z_FLOOR)
         self.node = scene.add_image(
@@ -42,18 +51,34 @@ class Floorplan:
         self.centre = centre[:2]
         self.size = (width, height)
 
+    def grey_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The floorplan's grey at world points [m] (BACKGROUND outside it)."""
+        ix = np.floor((x - self.origin[0]) / self.resolution).astype(np.int64)
+        iy = np.floor((y - self.origin[1]) / self.resolution).astype(np.int64)
+        h, w = self.occ.shape
+        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        out = np.full(x.shape, BACKGROUND, dtype=np.int64)
+        walls = self.occ[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)]
+        out[inside] = np.where(walls[inside], FLOOR_WALL, FLOOR_FREE)
+        return out
+
 
 class MapTiles:
-    """The SLAM map as RGBA image tiles: unknown transparent, free pale blue, occupied navy."""
+    """The SLAM map as opaque image tiles over the floorplan: unknown cells show the floorplan,
+    free cells tint it blue, occupied cells are navy.
 
-    # indexed by backend.progress's cell codes UNKNOWN, FREE, OCCUPIED
-    PALETTE = np.array([[0, 0, 0, 0], [120, 170, 255, 70], [10, 30, 120, 235]], dtype=np.uint8)
+    Opaque on purpose: the browser sorts translucent planes by their centres, and a tile
+    sorted before the floorplan would hide the floorplan under its see-through cells.
+    """
 
     def __init__(self, scene: Any, name: str, visible: bool = True):
         self.scene, self.name = scene, name
         self.visible = visible
+        self.floor: Floorplan | None = None
+        self.floor_on = True
         self.tiles: dict[tuple[int, int], Any] = {}
         self.key: tuple | None = None
+        self._last: tuple | None = None  # (codes, resolution, origin) last shown
 
     def show(self, codes: np.ndarray, resolution: float, origin, box=None) -> None:
         """Draw the map; with `box = (iy0, ix0, h, w)` only the tiles that box touches."""
@@ -61,6 +86,7 @@ class MapTiles:
         if key != self.key:
             self.clear()
             self.key, box = key, None
+        self._last = (codes, resolution, origin)
         H, W = codes.shape
         iy0, ix0, h, w = box if box is not None else (0, 0, H, W)
         for ty in range(iy0 // TILE, (iy0 + h - 1) // TILE + 1):
@@ -74,14 +100,36 @@ class MapTiles:
             old.remove()
         if not (part != 0).any():
             return
-        rgba = self.PALETTE[np.clip(part[::-1], 0, 2)]
         h, w = part.shape
-        cx = origin[0] + (tx * TILE + w / 2) * resolution
-        cy = origin[1] + (ty * TILE + h / 2) * resolution
+        x0, y0 = origin[0] + tx * TILE * resolution, origin[1] + ty * TILE * resolution
         self.tiles[(ty, tx)] = self.scene.add_image(
-            f"{self.name}/t{ty}_{tx}", rgba, w * resolution, h * resolution, format="png",
-            position=(cx, cy, Z_MAP), visible=self.visible, receive_shadow=False,
+            f"{self.name}/t{ty}_{tx}", self._rgb(part, resolution, x0, y0),
+            w * resolution, h * resolution, format="png",
+            position=(x0 + w * resolution / 2, y0 + h * resolution / 2, Z_MAP),
+            visible=self.visible, receive_shadow=False,
         )  # fmt: skip
+
+    def _rgb(self, part: np.ndarray, resolution: float, x0: float, y0: float) -> np.ndarray:
+        """(h, w, 3) uint8, top row first, of one tile of codes whose corner is (x0, y0)."""
+        h, w = part.shape
+        xs = x0 + (np.arange(w) + 0.5) * resolution
+        ys = y0 + (np.arange(h) + 0.5) * resolution
+        if self.floor is not None and self.floor_on:
+            grey = self.floor.grey_at(*np.meshgrid(xs, ys))
+        else:
+            grey = np.full((h, w), BACKGROUND)
+        rgb = np.repeat(grey[..., None], 3, axis=2)
+        free, occ = part == FREE, part == OCCUPIED
+        rgb[free] = (rgb[free] + MAP_FREE_RGB) // 2
+        rgb[occ] = MAP_OCC_RGB
+        return np.ascontiguousarray(rgb[::-1].astype(np.uint8))
+
+    def set_floor(self, floor: Floorplan | None, on: bool) -> None:
+        """The floorplan under unknown cells (redraws every tile when that changes)."""
+        self.floor, self.floor_on = floor, on
+        if self._last is not None:
+            codes, resolution, origin = self._last
+            self.show(codes, resolution, origin)
 
     def set_visible(self, on: bool) -> None:
         self.visible = on

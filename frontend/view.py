@@ -80,6 +80,7 @@ class RunView:
                 return
             if name == "floorplan" and L.get("floor") is not None:
                 L["floor"].node.visible = on
+                L["map"].set_floor(L["floor"], on)
             elif name == "SLAM map":
                 L["map"].set_visible(on)
             elif name == "ground truth":
@@ -108,6 +109,7 @@ class RunView:
                 L["floor"].node.visible = on["floorplan"]
                 self._frame_camera(L["floor"])
             L["map"] = MapTiles(sc, "/slam", on["SLAM map"])
+            L["map"].floor, L["map"].floor_on = L["floor"], on["floorplan"]
             L["gt"] = PathLayer(sc, "/gt", GT_RGB, 0.08, on["ground truth"])
             L["est"] = PathLayer(sc, "/est", EST_RGB, 0.05, on["estimate"])
             L["robot_gt"] = Robot(sc, "/robot_gt", GT_RGB, visible=on["robots"])

@@ -1,0 +1,137 @@
+"""The dashboard and the viewer in headless Chromium, over a real Celery worker, Redis and
+PostgreSQL: upload a world through the form, submit a job, watch it run to done, open the job
+page and the viewer, and check that the viewer's scene holds the map, both paths and the
+robots while the run is live. Screenshots go to tests/artifacts/."""
+
+from __future__ import annotations
+
+import io
+import re
+import time
+
+import numpy as np
+from PIL import Image
+
+from tests.frontend.test_pages import rooms
+
+LIVE_TIMEOUT_S = 60.0
+
+
+def _wait(predicate, timeout: float, what: str, step: float = 0.2):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(step)
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+
+
+def _sign_in(page, site) -> None:
+    page.goto(site.url + "/")
+    assert "/login" in page.url
+    page.fill('input[name="key"]', site.service.key)
+    page.click('button:has-text("Sign in")')
+    page.wait_for_url(site.url + "/")
+
+
+def _upload_world(page, site, tmp_path, artifacts) -> int:
+    png = tmp_path / "rooms.png"
+    Image.fromarray(np.where(rooms(4, 2), 0, 255).astype(np.uint8)).save(png)
+    page.goto(site.url + "/worlds")
+    page.set_input_files('input[name="file"]', str(png))
+    page.fill('input[name="resolution"]', "0.05")
+    page.click('button:has-text("Upload")')
+    notice = page.locator(".notice").inner_text()
+    world_id = int(re.search(r"as #(\d+)", notice).group(1))
+    assert page.locator(f"#world-{world_id} img").evaluate("img => img.naturalWidth") == 481
+    page.screenshot(path=artifacts / "worlds.png", full_page=True)
+    return world_id
+
+
+def _shoot(page, path) -> None:
+    """A screenshot without the software-WebGL notice that headless Chromium triggers."""
+    close = page.locator(".mantine-Notification-closeButton")
+    for i in range(close.count()):
+        close.nth(i).click()
+    page.screenshot(path=path)
+
+
+def _live_scene(site, run_id: int) -> dict:
+    """The viewer's scene of a client watching `run_id` live, once it holds everything."""
+
+    def ready():
+        for view in list(site.viewer.views.values()):
+            d = view.describe()
+            if d.get("run") == run_id and d.get("mode") == "live":
+                full = d["map_tiles"] > 0 and d["gt_points"] >= 3 and d["est_points"] >= 3
+                if full and d["robot_gt"] and d["robot_est"] and d["floorplan"]:
+                    return d
+        return None
+
+    return _wait(ready, LIVE_TIMEOUT_S, f"the viewer's live scene of run {run_id}")
+
+
+def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, artifacts):
+    context = browser.new_context(viewport={"width": 1400, "height": 900})
+    page = context.new_page()
+    _sign_in(page, site)
+    world_id = _upload_world(page, site, tmp_path, artifacts)
+
+    page.goto(site.url + "/")
+    page.select_option('select[name="world_id"]', str(world_id))
+    page.fill('input[name="runs"]', "1")
+    page.select_option('select[name="slam"]', "rbpf")
+    page.fill('input[name="time_limit"]', "60")
+    page.click('button:has-text("Submit")')
+    page.wait_for_url(re.compile(r".*/jobs/\d+$"))
+    job_id = int(page.url.rsplit("/", 1)[1])
+    run_id = int(page.locator("tr[data-run]").first.get_attribute("data-run"))
+
+    # the run page's link opens the viewer on this run while it is live
+    running = f'tr[data-run="{run_id}"][data-status="running"]'
+    _wait(lambda: page.goto(page.url) and page.locator(running).count(), 30, "the run to start")
+    with context.expect_page() as new:
+        page.click(f'tr[data-run="{run_id}"] a.viewer-link')
+    viewer = new.value
+    scene = _live_scene(site, run_id)
+    assert scene["scan"] and viewer.url.startswith(site.viewer_url)
+    time.sleep(1.0)  # let the browser draw what it received
+    _shoot(viewer, artifacts / "viewer-live.png")
+    page.screenshot(path=artifacts / "job-running.png", full_page=True)
+
+    # the jobs list refreshes by itself until the job is done
+    page.goto(site.url + "/")
+    done = f'tr[data-job="{job_id}"][data-status="done"]'
+    _wait(lambda: page.locator(done).count() or page.wait_for_timeout(500), 120, "job done")
+    assert page.locator(f'tr[data-job="{job_id}"] progress').get_attribute("value") == "100"
+    page.screenshot(path=artifacts / "jobs.png", full_page=True)
+
+    page.goto(f"{site.url}/jobs/{job_id}")
+    images = page.locator(f"#run-{run_id} img")
+    assert images.count() == 3
+    page.wait_for_function(
+        f"Array.from(document.querySelectorAll('#run-{run_id} img'))"
+        ".every(i => i.complete && i.naturalWidth > 0)"
+    )
+    page.screenshot(path=artifacts / "job.png", full_page=True)
+
+    # the viewer turns the finished run into a replay from the database
+    replay = _wait(
+        lambda: next(
+            (v.describe() for v in site.viewer.views.values() if v.mode == "replay"), None
+        ),
+        15,
+        "the viewer's replay",
+    )
+    assert replay["run"] == run_id and replay["gt_points"] > scene["gt_points"]
+    time.sleep(1.0)
+    _shoot(viewer, artifacts / "viewer-replay.png")
+
+    page.goto(site.url + "/compare")
+    assert page.locator("#compare-table tbody tr").count() == 1
+    page.screenshot(path=artifacts / "compare.png", full_page=True)
+    for name in ("worlds", "viewer-live", "job-running", "jobs", "job", "viewer-replay"):
+        shot = Image.open(io.BytesIO((artifacts / f"{name}.png").read_bytes()))
+        assert shot.size[0] == 1400, name
+    context.close()
