@@ -9,6 +9,7 @@ import typer
 from worker.errors import InputError
 
 app = typer.Typer(
+    rich_markup_mode=None,
     name="mapqual",
     help="Score how good a map a SLAM algorithm builds of a building.",
     no_args_is_help=True,
@@ -21,12 +22,12 @@ app = typer.Typer(
 # (command modules are imported here, one line each)
 from mapqual.cli import batch as _batch  # noqa: E402,F401
 from mapqual.cli import evaluate as _evaluate  # noqa: E402,F401
+from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import runs as _runs  # noqa: E402,F401
 from mapqual.cli import service as _service  # noqa: E402,F401
-from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import simulate as _simulate  # noqa: E402,F401
-from mapqual.cli import viewer as _viewer  # noqa: E402,F401
 from mapqual.cli import slam as _slam  # noqa: E402,F401
+from mapqual.cli import viewer as _viewer  # noqa: E402,F401
 from mapqual.cli import world as _world  # noqa: E402,F401
 
 

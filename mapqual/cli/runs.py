@@ -10,8 +10,8 @@ import typer
 from mapqual.cli import app
 from worker.errors import InputError
 
-runs_app = typer.Typer(help="Stored runs.", no_args_is_help=True)
-db_app = typer.Typer(help="The database.", no_args_is_help=True)
+runs_app = typer.Typer(rich_markup_mode=None, help="Stored runs.", no_args_is_help=True)
+db_app = typer.Typer(rich_markup_mode=None, help="The database.", no_args_is_help=True)
 app.add_typer(runs_app, name="runs")
 app.add_typer(db_app, name="db")
 

@@ -9,7 +9,9 @@ import typer
 from mapqual.cli import app
 from worker.errors import InputError
 
-users_app = typer.Typer(help="API users and their keys.", no_args_is_help=True)
+users_app = typer.Typer(
+    rich_markup_mode=None, help="API users and their keys.", no_args_is_help=True
+)
 app.add_typer(users_app, name="users")
 
 

@@ -12,7 +12,9 @@ import typer
 from mapqual.cli import app
 
 world_app = typer.Typer(
-    help="Floorplans: facts, start pose and the worlds catalogue.", no_args_is_help=True
+    rich_markup_mode=None,
+    help="Floorplans: facts, start pose and the worlds catalogue.",
+    no_args_is_help=True,
 )
 app.add_typer(world_app, name="world")
 
