@@ -8,20 +8,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-# map_server's trinary colours (map_saver): free 254, occupied 0, unknown 205.
-FREE_GREY, OCC_GREY, UNKNOWN_GREY = 254, 0, 205
-
-
-def ros_grid_to_grey(grid_ros: np.ndarray) -> np.ndarray:
-    """`(H, W) int8` (-1 unknown, 0..100) to a top-row-first uint8 image as map_saver writes it.
-
-    map_saver's thresholds: occupied when p >= 65, free when p <= 19.6 (0.196), else unknown.
-    """
-    grey = np.full(grid_ros.shape, UNKNOWN_GREY, dtype=np.uint8)
-    known = grid_ros >= 0
-    grey[known & (grid_ros <= 19)] = FREE_GREY
-    grey[known & (grid_ros >= 65)] = OCC_GREY
-    return np.flipud(grey)
+from worker.slam.grid import ros_to_image
 
 
 def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
@@ -34,7 +21,7 @@ def map_png(path: str | Path, grid_ros: np.ndarray, lines: Sequence[str], min_wi
     Small maps are scaled up by an integer factor (nearest neighbour) so that the text stays
     readable and every map cell remains a crisp square of pixels.
     """
-    grey = ros_grid_to_grey(grid_ros)
+    grey = ros_to_image(grid_ros)
     scale = max(1, int(np.ceil(min_width / max(grey.shape[1], 1))))
     img = Image.fromarray(grey, mode="L").convert("RGB")
     if scale > 1:

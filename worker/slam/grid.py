@@ -78,12 +78,7 @@ class OccupancyGrid:
 
     def to_image(self) -> np.ndarray:
         """(H, W) uint8 image, TOP row first, with map_saver's levels (0 / 254 / 205)."""
-        ros = self.to_ros()
-        img = np.full(ros.shape, PGM_UNKNOWN, dtype=np.uint8)
-        # map_saver: 0 <= v <= threshold_free (25) -> free; v >= threshold_occupied (65) -> occ
-        img[(ros >= 0) & (ros <= 25)] = PGM_FREE
-        img[ros >= 65] = PGM_OCCUPIED
-        return np.flipud(img)
+        return ros_to_image(self.to_ros())
 
     def save_map_server(self, stem: str | Path) -> tuple[Path, Path]:
         """Write `stem.pgm` and `stem.yaml` as ROS map_server's map_saver does; return both."""
@@ -110,3 +105,13 @@ class OccupancyGrid:
         path = Path(path)
         Image.fromarray(self.to_image()).save(path)
         return path
+
+
+def ros_to_image(grid_ros: np.ndarray) -> np.ndarray:
+    """`(H, W) int8` ROS occupancy (-1 unknown, 0..100), bottom row first, to the `(H, W) uint8`
+    image map_saver writes, top row first."""
+    img = np.full(grid_ros.shape, PGM_UNKNOWN, dtype=np.uint8)
+    # map_saver: 0 <= v <= threshold_free (25) -> free; v >= threshold_occupied (65) -> occ
+    img[(grid_ros >= 0) & (grid_ros <= 25)] = PGM_FREE
+    img[grid_ros >= 65] = PGM_OCCUPIED
+    return np.flipud(img)

@@ -69,10 +69,11 @@ def get_trajectory(
 
 
 def _map_files(run: Run, session) -> dict[str, bytes]:
-    from worker.report.plots import map_png, ros_grid_to_grey
+    from worker.report.plots import map_png
+    from worker.slam.grid import ros_to_image
 
     grid, res, origin = load_map(session, run.id)
-    grey = ros_grid_to_grey(grid)
+    grey = ros_to_image(grid)
     h, w = grey.shape
     pgm = f"P5\n# mapqual run {run.id}\n{w} {h}\n255\n".encode() + grey.tobytes()
     yaml = (

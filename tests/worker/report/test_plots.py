@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-from worker.report.plots import errors_png, map_png, ros_grid_to_grey, trajectories_png
+from worker.report.plots import errors_png, map_png, trajectories_png
+from worker.slam.grid import ros_to_image
 
 
 def test_grey_levels_and_orientation_follow_map_saver():
@@ -13,11 +14,14 @@ def test_grey_levels_and_orientation_follow_map_saver():
     grid[0, 0] = 0  # bottom-left free
     grid[3, 2] = 100  # top-right occupied
     grid[1, 1] = 50  # in between: unknown for map_saver
-    grey = ros_grid_to_grey(grid)  # image rows: top first
+    grid[2, 0] = 25  # map_saver's threshold_free is 25: still free
+    grid[2, 2] = 64  # below threshold_occupied (65): unknown
+    grey = ros_to_image(grid)  # image rows: top first
     assert grey[3, 0] == 254
     assert grey[0, 2] == 0
     assert grey[2, 1] == 205
     assert grey[0, 0] == 205
+    assert grey[1, 0] == 254 and grey[1, 2] == 205
 
 
 def test_map_png_is_scaled_by_whole_cells_and_keeps_the_grid(tmp_path):
