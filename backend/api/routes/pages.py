@@ -322,6 +322,7 @@ def error_bar_chart(out, rows: list[dict], kind: str) -> None:
     ax.set_ylabel(f"mean {kind} error [{unit}]")
     ax.set_title(f"B relations, {kind}: mean ± std (blue), min–max (grey)", fontsize=9)
     ax.grid(axis="y", alpha=0.3)
+    ax.set_ylim(bottom=0.0)
     if not rows:
         ax.text(0.5, 0.5, "no completed runs yet", ha="center", transform=ax.transAxes)
     fig.tight_layout()
