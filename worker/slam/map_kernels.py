@@ -4,11 +4,14 @@ The map of every particle is a table of patch ids into one shared pool of 32 x 3
 patches (GMapping's HierarchicalArray2D, patch magnitude 5). A patch referenced by several
 particles is copied before a particle writes into it (GMapping copies the patches of the
 active area before registering a scan); `counts` holds the exact reference counts.
-Each cell keeps GMapping's PointAccumulator: hits, visits, and the sum of the hit points
-(relative to the cell's lower-left corner, so float32 keeps sub-millimetre precision).
-Beside the pool, `bits` (P, 2, 32) int64 holds per patch row two bit masks over the row's
+Each cell keeps GMapping's PointAccumulator, stored as separate planes of the pool so that
+each pass touches only what it needs: `visits` (P, 32, 32) float32 (the only plane a free
+cell's update writes), `hits` (P, 32, 32) float32 and `mean` (P, 32, 32, 2) float32, the
+running mean of the hit points relative to the cell's lower-left corner [m] (what the scan
+matcher reads; float32 keeps sub-millimetre precision there).
+Beside them, `bits` (P, 2, 32) int64 holds per patch row two bit masks over the row's
 cells, kept current by every write: OCCUPIED (hits / visits > 0.1) and FULL (>= 0.1). The
-scan matcher reads these first and touches the pool only for occupied cells.
+scan matcher reads these first and touches `mean` only for occupied cells.
 """
 
 from __future__ import annotations
@@ -19,14 +22,12 @@ from numba import njit
 PATCH_BITS = 5
 PATCH = 1 << PATCH_BITS  # [cells] patch side
 PATCH_MASK = PATCH - 1
-HITS, VISITS, ACC_X, ACC_Y = 0, 1, 2, 3  # channels of a pool cell
-N_CHANNELS = 4
 OCCUPIED, FULL = 0, 1  # bit-mask planes of `bits`
 FULLNESS = 0.1  # GMapping's m_fullnessThreshold on hits / visits
 
 
 @njit(cache=True)
-def _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty):
+def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty):
     """Patch id that this particle may write at table cell (tx, ty); -1 if the pool is full."""
     e = table[ty, tx]
     if e >= 0 and counts[e] == 1:
@@ -36,10 +37,14 @@ def _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty):
     n_free[0] -= 1
     new = free_stack[n_free[0]]
     if e < 0:
-        pool[new] = 0.0
+        visits[new] = 0.0
+        hits[new] = 0.0
+        mean[new] = 0.0
         bits[new] = 0
     else:
-        pool[new] = pool[e]  # copy-on-write of a shared patch
+        visits[new] = visits[e]  # copy-on-write of a shared patch
+        hits[new] = hits[e]
+        mean[new] = mean[e]
         bits[new] = bits[e]
         counts[e] -= 1
     counts[new] = 1
@@ -48,16 +53,16 @@ def _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty):
 
 
 @njit(cache=True, inline="always")
-def _update_bits(pool, bits, e, ly, lx):
+def _update_bits(visits, hits, bits, e, ly, lx):
     """Refresh the OCCUPIED / FULL bits of cell (ly, lx) of patch e after a write."""
-    hits = pool[e, ly, lx, HITS]
-    limit = FULLNESS * pool[e, ly, lx, VISITS]
+    h = hits[e, ly, lx]
+    limit = FULLNESS * visits[e, ly, lx]
     bit = np.int64(1) << lx
-    if hits > limit:
+    if h > limit:
         bits[e, OCCUPIED, ly] |= bit
     else:
         bits[e, OCCUPIED, ly] &= ~bit
-    if hits >= limit and hits > 0:
+    if h >= limit and h > 0:
         bits[e, FULL, ly] |= bit
     else:
         bits[e, FULL, ly] &= ~bit
@@ -65,7 +70,9 @@ def _update_bits(pool, bits, e, ly, lx):
 
 @njit(cache=True)
 def _register_one(
-    pool,
+    visits,
+    hits,
+    mean,
     bits,
     counts,
     free_stack,
@@ -86,8 +93,9 @@ def _register_one(
     Beams longer than max_range (or 0 / NaN) are ignored; beams longer than usable_range are
     cut to it and mark free cells only. Cells on the Bresenham line before the end cell get
     one visit; the end cell, for a beam shorter than usable_range, a hit at the end point.
-    Returns the number of cell updates dropped for lack of pool space (0 when the caller
-    reserved enough patches).
+    The Bresenham steps are branch-free (selects), the patch is looked up only when the line
+    leaves one. Returns the number of cell updates dropped for lack of pool space (0 when
+    the caller reserved enough patches).
     """
     th, tw = table.shape
     x, y, theta = pose[0], pose[1], pose[2]
@@ -127,7 +135,9 @@ def _register_one(
                 last_tx, last_ty = tx, ty
                 e = -1
                 if 0 <= tx < tw and 0 <= ty < th:
-                    e = _writable_patch(pool, bits, counts, free_stack, n_free, table, tx, ty)
+                    e = _writable_patch(
+                        visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty
+                    )
             if e < 0:
                 dropped += 1
             else:
@@ -135,30 +145,33 @@ def _register_one(
                 ue = np.uintp(e)
                 ly = np.uintp(cy & PATCH_MASK)
                 lx = np.uintp(cx & PATCH_MASK)
-                pool[ue, ly, lx, VISITS] += 1.0
+                visits[ue, ly, lx] += 1.0
                 if at_end:
-                    pool[ue, ly, lx, HITS] += 1.0
-                    pool[ue, ly, lx, ACC_X] += hx - cx * res
-                    pool[ue, ly, lx, ACC_Y] += hy - cy * res
-                    _update_bits(pool, bits, e, ly, lx)
+                    h = hits[ue, ly, lx] + 1.0
+                    hits[ue, ly, lx] = h
+                    # running mean of the hit points (GMapping keeps their sum)
+                    mean[ue, ly, lx, 0] += (hx - cx * res - mean[ue, ly, lx, 0]) / h
+                    mean[ue, ly, lx, 1] += (hy - cy * res - mean[ue, ly, lx, 1]) / h
+                    _update_bits(visits, hits, bits, ue, ly, lx)
                 elif (bits[ue, FULL, ly] >> lx) & 1:
                     # a visit alone can only clear bits, and only of a cell that has them
-                    _update_bits(pool, bits, e, ly, lx)
+                    _update_bits(visits, hits, bits, ue, ly, lx)
             if at_end:
                 break
             e2 = 2 * err
-            if e2 >= dy:
-                err += dy
-                cx += sx
-            if e2 <= dx:
-                err += dx
-                cy += sy
+            step_x = e2 >= dy
+            step_y = e2 <= dx
+            err += (dy if step_x else 0) + (dx if step_y else 0)
+            cx += sx if step_x else 0
+            cy += sy if step_y else 0
     return dropped
 
 
 @njit(cache=True)
 def register_scans(
-    pool,
+    visits,
+    hits,
+    mean,
     bits,
     counts,
     free_stack,
@@ -186,7 +199,9 @@ def register_scans(
         if n_free[0] < need[p]:
             return p, dropped
         dropped += _register_one(
-            pool,
+            visits,
+            hits,
+            mean,
             bits,
             counts,
             free_stack,
@@ -206,7 +221,7 @@ def register_scans(
 
 
 @njit(cache=True)
-def dense_prob(pool, table):
+def dense_prob(visits, hits, table):
     """(TH*32, TW*32) float32 hits / visits of one particle's map, NaN where never visited."""
     th, tw = table.shape
     out = np.full((th * PATCH, tw * PATCH), np.nan, dtype=np.float32)
@@ -217,7 +232,7 @@ def dense_prob(pool, table):
                 continue
             for ly in range(PATCH):
                 for lx in range(PATCH):
-                    v = pool[e, ly, lx, VISITS]
+                    v = visits[e, ly, lx]
                     if v > 0:
-                        out[ty * PATCH + ly, tx * PATCH + lx] = pool[e, ly, lx, HITS] / v
+                        out[ty * PATCH + ly, tx * PATCH + lx] = hits[e, ly, lx] / v
     return out

@@ -8,6 +8,12 @@ The distance mu from the end point to the mean of the hits in the best such cell
   likelihood l = sum over beams of -mu^2 / lsigma, or -0.5 / lsigma when nothing matched
 (GMapping ScanMatcher::score and ::likelihoodAndScore, with its fullness threshold 0.1, read
 from the OCCUPIED / FULL bit masks the map keeps).
+
+Speed, with the same score: the used beams' end and free points are computed once per update
+in the robot frame (`prepare_beams`); a window row is read as one bit mask; and a candidate
+pose of the hill climbing stops being scored as soon as it can no longer beat the current
+pose (each beam adds at most 1), with the beams taken worst-matched first (their order at the
+particle's initial pose), so that a losing candidate falls behind early.
 """
 
 from __future__ import annotations
@@ -17,168 +23,194 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from worker.slam.map_kernels import ACC_X, ACC_Y, FULL, HITS, OCCUPIED, PATCH_BITS, PATCH_MASK
+from worker.slam.map_kernels import FULL, OCCUPIED, PATCH, PATCH_BITS, PATCH_MASK
 
 NULL_LIKELIHOOD = -0.5  # GMapping's nullLikelihood: a beam with no match
+FREE_CELL_RATIO = math.sqrt(2.0)  # GMapping's freeCellRatio: free point this many cells back
+MAX_KERNEL = 15  # [cells] a window row must fit in two patches
+_SLACK = 1e-6  # abort margin: far above the rounding of a sum of <= 1e5 terms <= 1
+
+# layout of the `cfg` array the kernels take (one float64 array instead of eleven arguments)
+CFG_FIELDS = (
+    "res",
+    "usable_range",
+    "max_range",
+    "lskip",
+    "kernel",
+    "sigma",
+    "lsigma",
+    "lstep",
+    "astep",
+    "iterations",
+    "minimum_score",
+)
+C_RES, C_USABLE, C_MAX, C_LSKIP, C_KERNEL, C_SIGMA, C_LSIGMA = 0, 1, 2, 3, 4, 5, 6
+C_LSTEP, C_ASTEP, C_ITERATIONS, C_MINIMUM_SCORE = 7, 8, 9, 10
 
 
-@njit(cache=True, inline="always")
-def _patch(table, tpx0, tpy0, gx, gy):
-    """Pool id of the patch holding cell (gx, gy), -1 when unknown."""
-    tx = (gx >> PATCH_BITS) - tpx0
-    ty = (gy >> PATCH_BITS) - tpy0
-    if tx < 0 or ty < 0 or ty >= table.shape[0] or tx >= table.shape[1]:
-        return -1
-    return table[ty, tx]
+def match_config(**fields: float) -> np.ndarray:
+    """The cfg array from keyword values named as CFG_FIELDS (all required)."""
+    missing = set(CFG_FIELDS) - set(fields)
+    if missing or len(fields) != len(CFG_FIELDS):
+        raise ValueError(f"match_config needs exactly {CFG_FIELDS}; missing {sorted(missing)}")
+    if not 0 <= fields["kernel"] <= MAX_KERNEL:
+        raise ValueError(f"kernel must be in [0, {MAX_KERNEL}] cells, got {fields['kernel']}")
+    return np.array([fields[k] for k in CFG_FIELDS], dtype=np.float64)
 
 
 @njit(cache=True)
-def score_and_likelihood(
-    pool,
-    bits,
-    table,
-    tpx0,
-    tpy0,
-    x,
-    y,
-    theta,
-    ranges,
-    cos_a,
-    sin_a,
-    res,
-    usable_range,
-    max_range,
-    lskip,
-    kernel,
-    sigma,
-    lsigma,
-    want_l,
-):
-    """(score, log-likelihood) of the scan at pose (x, y, theta) in one particle's map.
+def prepare_beams(ranges, cos_a, sin_a, cfg):
+    """(M, 4) [hx, hy, fx, fy] robot frame [m]: end point and free point of each used beam.
 
-    Every (lskip + 1)-th beam is used, from beam lskip; beams beyond usable_range or
-    max_range (no return) are left out. want_l = False skips the likelihood (it is then 0).
-    One flat loop (no helper calls): this is the innermost loop of the whole filter. Indices
-    are cast to unsigned after their bounds checks, which spares numba's wraparound code.
+    Every (lskip + 1)-th beam is used, from beam lskip (GMapping's likelihoodSkip); beams
+    beyond usable_range or max_range (no return), 0 or NaN are left out. The free point lies
+    FREE_CELL_RATIO cells back along the beam.
     """
-    c = math.cos(theta)
-    s = math.sin(theta)
-    free_delta = res * math.sqrt(2.0)  # GMapping: one cell diagonal back towards the laser
-    inv_res = 1.0 / res
-    no_hit = NULL_LIKELIHOOD / lsigma
-    th, tw = table.shape
-    score = 0.0
-    like = 0.0
+    res, usable, max_range = cfg[C_RES], cfg[C_USABLE], cfg[C_MAX]
+    lskip = int(cfg[C_LSKIP])
+    back = res * FREE_CELL_RATIO
+    out = np.empty((ranges.shape[0], 4))
+    m = 0
     for i in range(lskip, ranges.shape[0], lskip + 1):
         r = ranges[i]
-        if not r > 0.0 or r > usable_range or r > max_range:
+        if not r > 0.0 or r > usable or r > max_range:
             continue
-        ca = c * cos_a[i] - s * sin_a[i]
-        sa = s * cos_a[i] + c * sin_a[i]
-        hx = x + r * ca
-        hy = y + r * sa
+        out[m, 0] = r * cos_a[i]
+        out[m, 1] = r * sin_a[i]
+        out[m, 2] = (r - back) * cos_a[i]
+        out[m, 3] = (r - back) * sin_a[i]
+        m += 1
+    return out[:m].copy()
+
+
+@njit(cache=True)
+def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms):
+    """(score, log-likelihood, complete) of the beams at pose (x, y, theta), in `order`.
+
+    Stops (complete = False, partial sums) once the score can no longer exceed `bound`.
+    terms: (M,) gets each beam's score term when complete (pass an empty array to skip).
+    """
+    res, kernel, sigma, lsigma = cfg[C_RES], int(cfg[C_KERNEL]), cfg[C_SIGMA], cfg[C_LSIGMA]
+    inv_res = 1.0 / res
+    no_hit = NULL_LIKELIHOOD / lsigma
+    nb = 2 * kernel + 1
+    wmask = (np.int64(1) << nb) - 1
+    c = math.cos(theta)
+    s = math.sin(theta)
+    th, tw = table.shape
+    n = order.shape[0]
+    keep = terms.shape[0] == n
+    score = 0.0
+    like = 0.0
+    for k in range(n):
+        if score + (n - k) + _SLACK < bound:
+            return score, like, False
+        i = order[k]
+        hx = x + c * beams[i, 0] - s * beams[i, 1]
+        hy = y + s * beams[i, 0] + c * beams[i, 1]
         ihx = int(math.floor(hx * inv_res))
         ihy = int(math.floor(hy * inv_res))
-        ofx = int(math.floor((hx - free_delta * ca) * inv_res)) - ihx
-        ofy = int(math.floor((hy - free_delta * sa) * inv_res)) - ihy
-        best = -1.0
+        ofx = int(math.floor((x + c * beams[i, 2] - s * beams[i, 3]) * inv_res)) - ihx
+        ofy = int(math.floor((y + s * beams[i, 2] + c * beams[i, 3]) * inv_res)) - ihy
+        # the window's rows as bit masks (bit j = cell gx0 + j); a row spans at most two
+        # patches, and so does the row of free cells one step back along the beam
+        gx0 = ihx - kernel
+        tx0 = (gx0 >> PATCH_BITS) - tpx0
+        lx0 = gx0 & PATCH_MASK
+        in0 = 0 <= tx0 < tw
+        in1 = lx0 + nb > PATCH and 0 <= tx0 + 1 < tw
+        gf0 = gx0 + ofx
+        tf0 = (gf0 >> PATCH_BITS) - tpx0
+        lf0 = gf0 & PATCH_MASK
+        inf0 = 0 <= tf0 < tw
+        inf1 = lf0 + nb > PATCH and 0 <= tf0 + 1 < tw
+        best = np.inf
         for gy in range(ihy - kernel, ihy + kernel + 1):
             ty = (gy >> PATCH_BITS) - tpy0
             if ty < 0 or ty >= th:
                 continue
-            ly = np.uintp(gy & PATCH_MASK)
             uty = np.uintp(ty)
-            last_tx = -1
-            row = np.int64(0)
-            e = -1
-            for gx in range(ihx - kernel, ihx + kernel + 1):
-                tx = (gx >> PATCH_BITS) - tpx0
-                if tx != last_tx:  # the window's row crosses at most one patch border
-                    last_tx = tx
-                    e = table[uty, np.uintp(tx)] if 0 <= tx < tw else -1
-                    row = bits[np.uintp(e), OCCUPIED, ly] if e >= 0 else np.int64(0)
-                lx = np.uintp(gx & PATCH_MASK)
-                if not (row >> lx) & 1:
-                    continue
-                # the cell before must not be full: the near side of an obstacle only
-                gfx = gx + ofx
-                gfy = gy + ofy
-                tfx = (gfx >> PATCH_BITS) - tpx0
-                tfy = (gfy >> PATCH_BITS) - tpy0
-                if 0 <= tfx < tw and 0 <= tfy < th:
-                    ef = table[np.uintp(tfy), np.uintp(tfx)]
-                    if ef >= 0:
-                        row_f = bits[np.uintp(ef), FULL, np.uintp(gfy & PATCH_MASK)]
-                        if (row_f >> np.uintp(gfx & PATCH_MASK)) & 1:
-                            continue
-                ue = np.uintp(e)
-                hits = pool[ue, ly, lx, HITS]
-                mx = gx * res + pool[ue, ly, lx, ACC_X] / hits
-                my = gy * res + pool[ue, ly, lx, ACC_Y] / hits
-                d2 = (hx - mx) * (hx - mx) + (hy - my) * (hy - my)
-                if best < 0 or d2 < best:
-                    best = d2
-        if best >= 0:
-            score += math.exp(-best / sigma)
-            if want_l:
-                like -= best / lsigma
-        elif want_l:
+            ly = np.uintp(gy & PATCH_MASK)
+            e0 = table[uty, np.uintp(tx0)] if in0 else -1
+            e1 = table[uty, np.uintp(tx0 + 1)] if in1 else -1
+            occ = bits[np.uintp(e0), OCCUPIED, ly] >> lx0 if e0 >= 0 else np.int64(0)
+            if e1 >= 0:
+                occ |= bits[np.uintp(e1), OCCUPIED, ly] << (PATCH - lx0)
+            occ &= wmask
+            if occ == 0:
+                continue
+            # the cell one step back along the beam must not be full (near side of a wall)
+            gfy = gy + ofy
+            tfy = (gfy >> PATCH_BITS) - tpy0
+            if 0 <= tfy < th:
+                utf = np.uintp(tfy)
+                lfy = np.uintp(gfy & PATCH_MASK)
+                f0 = table[utf, np.uintp(tf0)] if inf0 else -1
+                f1 = table[utf, np.uintp(tf0 + 1)] if inf1 else -1
+                if f0 >= 0:
+                    occ &= ~(bits[np.uintp(f0), FULL, lfy] >> lf0)
+                if f1 >= 0:
+                    occ &= ~(bits[np.uintp(f1), FULL, lfy] << (PATCH - lf0))
+            j = 0
+            while occ != 0:
+                if occ & 1:
+                    gx = gx0 + j
+                    e = np.uintp(e0 if lx0 + j < PATCH else e1)
+                    lx = np.uintp(gx & PATCH_MASK)
+                    mx = hx - (gx * res + mean[e, ly, lx, 0])
+                    my = hy - (gy * res + mean[e, ly, lx, 1])
+                    d2 = mx * mx + my * my
+                    if d2 < best:
+                        best = d2
+                occ >>= 1
+                j += 1
+        if best < np.inf:
+            term = math.exp(-best / sigma)
+            like -= best / lsigma
+        else:
+            term = 0.0
             like += no_hit
-    return score, like
+        score += term
+        if keep:
+            terms[i] = term
+    return score, like, True
 
 
 @njit(cache=True)
-def optimize(
-    pool,
-    bits,
-    table,
-    tpx0,
-    tpy0,
-    pose,
-    ranges,
-    cos_a,
-    sin_a,
-    res,
-    usable_range,
-    max_range,
-    lskip,
-    kernel,
-    sigma,
-    lstep,
-    astep,
-    iterations,
-):
-    """Hill climbing from pose (GMapping ScanMatcher::optimize); returns (pose (3,), score).
+def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
+    """(score, log-likelihood) of the prepared beams at pose (3,) in one particle's map."""
+    order = np.arange(beams.shape[0])
+    sc, like, _ = _score(
+        mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, order, cfg, -np.inf,
+        np.empty(0),
+    )  # fmt: skip
+    return sc, like
+
+
+@njit(cache=True)
+def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
+    """Hill climbing from pose (GMapping ScanMatcher::optimize): (pose (3,), score, like,
+    score at the start, like at the start).
 
     Tries steps of +-ldelta in x and y (map frame) and +-adelta in theta, moves to the best
     one while it improves the score, and halves both steps when none does, `iterations` times.
     The step straight back to where the last move came from is not scored again: that pose
-    scored lower than the current one, so it can never be chosen (a pure saving).
+    scored lower than the current one, so it can never be chosen. A candidate is dropped as
+    soon as it cannot beat the current score, so only the poses it moves to are scored whole.
     """
-    best_pose = pose.copy()
-    cur, _ = score_and_likelihood(
-        pool,
-        bits,
-        table,
-        tpx0,
-        tpy0,
-        pose[0],
-        pose[1],
-        pose[2],
-        ranges,
-        cos_a,
-        sin_a,
-        res,
-        usable_range,
-        max_range,
-        lskip,
-        kernel,
-        sigma,
-        1.0,
-        False,
-    )
-    ldelta = lstep
-    adelta = astep
+    lstep, astep, iterations = cfg[C_LSTEP], cfg[C_ASTEP], int(cfg[C_ITERATIONS])
+    m = beams.shape[0]
+    terms = np.empty(m)
+    natural = np.arange(m)
+    cur, cur_like, _ = _score(
+        mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
+        terms,
+    )  # fmt: skip
+    start_score, start_like = cur, cur_like
+    order = np.argsort(terms, kind="mergesort")  # worst matched first; stable, deterministic
+    none = np.empty(0)
+    bx, by, bt = pose[0], pose[1], pose[2]
+    ldelta, adelta = lstep, astep
     refinement = 0
     best = -1.0
     came_by = -1  # the move that led to the current pose at the current step size
@@ -189,7 +221,6 @@ def optimize(
             adelta *= 0.5
             came_by = -1
         best = cur
-        bx, by, bt = best_pose[0], best_pose[1], best_pose[2]
         nx, ny, nt = bx, by, bt
         chosen = -1
         for move in range(6):
@@ -208,143 +239,63 @@ def optimize(
                 t += adelta
             else:
                 t -= adelta
-            sc, _ = score_and_likelihood(
-                pool,
-                bits,
-                table,
-                tpx0,
-                tpy0,
-                x,
-                y,
-                t,
-                ranges,
-                cos_a,
-                sin_a,
-                res,
-                usable_range,
-                max_range,
-                lskip,
-                kernel,
-                sigma,
-                1.0,
-                False,
+            sc, lk, whole = _score(
+                mean, bits, table, tpx0, tpy0, x, y, t, beams, order, cfg, cur, none
             )
-            if sc > cur:
-                cur = sc
+            if whole and sc > cur:
+                cur, cur_like = sc, lk
                 nx, ny, nt = x, y, t
                 chosen = move
-        best_pose[0], best_pose[1], best_pose[2] = nx, ny, nt
+        bx, by, bt = nx, ny, nt
         came_by = chosen
         if not (cur > best or refinement < iterations):
             break
-    best_pose[2] = (best_pose[2] + math.pi) % (2 * math.pi) - math.pi
-    return best_pose, cur
-
-
-# layout of the `cfg` array the drivers take (one float64 array instead of eleven arguments)
-CFG_FIELDS = (
-    "res",
-    "usable_range",
-    "max_range",
-    "lskip",
-    "kernel",
-    "sigma",
-    "lsigma",
-    "lstep",
-    "astep",
-    "iterations",
-    "minimum_score",
-)
+    out = np.array([bx, by, (bt + math.pi) % (2 * math.pi) - math.pi])
+    return out, cur, cur_like, start_score, start_like
 
 
 @njit(cache=True)
-def _match_particle(
-    p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
-):
+def _match_particle(p, out, scores, likes, mean, bits, tables, tpx0, tpy0, poses, beams, cfg):
     """Improved proposal of particle p: write its pose, score and log-likelihood at [p]."""
-    res, usable, max_range = cfg[0], cfg[1], cfg[2]
-    lskip, kernel = int(cfg[3]), int(cfg[4])
-    sigma, lsigma, lstep, astep = cfg[5], cfg[6], cfg[7], cfg[8]
-    iterations, minimum_score = int(cfg[9]), cfg[10]
-    table = tables[p]
-    refined, sc = optimize(
-        pool,
-        bits,
-        table,
-        tpx0,
-        tpy0,
-        poses[p],
-        ranges,
-        cos_a,
-        sin_a,
-        res,
-        usable,
-        max_range,
-        lskip,
-        kernel,
-        sigma,
-        lstep,
-        astep,
-        iterations,
+    refined, sc, like, _, start_like = optimize(
+        mean, bits, tables[p], tpx0, tpy0, poses[p], beams, cfg
     )
-    if sc > minimum_score:
+    if sc > cfg[C_MINIMUM_SCORE]:
         out[p] = refined
+        likes[p] = like
     else:
         out[p] = poses[p]
-    _, like = score_and_likelihood(
-        pool,
-        bits,
-        table,
-        tpx0,
-        tpy0,
-        out[p, 0],
-        out[p, 1],
-        out[p, 2],
-        ranges,
-        cos_a,
-        sin_a,
-        res,
-        usable,
-        max_range,
-        lskip,
-        kernel,
-        sigma,
-        lsigma,
-        True,
-    )
+        likes[p] = start_like
     scores[p] = sc
-    likes[p] = like
 
 
 @njit(cache=True)
-def scan_match_all(pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
+def scan_match_all(mean, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
     """The improved proposal for every particle (GMapping GridSlamProcessor::scanMatch).
 
     Each particle's pose is refined against its own map, kept as drawn from the motion model
     when the match score is not above minimum_score. Returns (poses (N, 3), score (N,),
     log-likelihood (N,)) with the likelihood at the final pose. cfg: see CFG_FIELDS.
     """
+    beams = prepare_beams(ranges, cos_a, sin_a, cfg)
     n = poses.shape[0]
     out = np.empty_like(poses)
     scores = np.zeros(n)
     likes = np.zeros(n)
     for p in range(n):
-        _match_particle(
-            p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
-        )
+        _match_particle(p, out, scores, likes, mean, bits, tables, tpx0, tpy0, poses, beams, cfg)
     return out, scores, likes
 
 
 @njit(cache=True, parallel=True)
-def scan_match_all_parallel(pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
+def scan_match_all_parallel(mean, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
     """scan_match_all with the particles spread over numba's threads; the same result (each
     particle reads the shared maps and writes only its own row)."""
+    beams = prepare_beams(ranges, cos_a, sin_a, cfg)
     n = poses.shape[0]
     out = np.empty_like(poses)
     scores = np.zeros(n)
     likes = np.zeros(n)
     for p in prange(n):
-        _match_particle(
-            p, out, scores, likes, pool, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg
-        )
+        _match_particle(p, out, scores, likes, mean, bits, tables, tpx0, tpy0, poses, beams, cfg)
     return out, scores, likes

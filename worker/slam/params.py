@@ -31,7 +31,7 @@ class SlamParams:
     map_margin: float = 8.0  # [m] growth margin when a scan leaves the allocated map area
     # scan matcher (improved proposal)
     sigma: float = 0.05  # [m] sigma of the matching score (GMapping: exp(-mu^2 / sigma))
-    kernel_size: int = 1  # [cells] search window around each beam end point
+    kernel_size: int = 1  # [cells] search window around each beam end point (at most 15)
     lstep: float = 0.05  # [m] initial translational step of the hill climbing
     astep: float = 0.05  # [rad] initial angular step of the hill climbing
     iterations: int = 5  # step halvings of the hill climbing
@@ -65,6 +65,8 @@ class SlamParams:
             raise InputError(f"SLAM parameter threads must be >= 1, got {self.threads}")
         if self.kernel_size < 0 or self.iterations < 0 or self.lskip < 0:
             raise InputError("SLAM parameters kernel_size, iterations and lskip must be >= 0")
+        if self.kernel_size > 15:
+            raise InputError(f"SLAM parameter kernel_size must be <= 15, got {self.kernel_size}")
         if not 0.0 <= self.resample_threshold <= 1.0:
             raise InputError(
                 "SLAM parameter resample_threshold must be in [0, 1], "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.grid import OccupancyGrid
-from worker.slam.map_kernels import N_CHANNELS, PATCH, PATCH_BITS, dense_prob, register_scans
+from worker.slam.map_kernels import PATCH, PATCH_BITS, dense_prob, register_scans
 
 
 class PatchMaps:
@@ -15,7 +15,8 @@ class PatchMaps:
     indexes the same cells; `tables` (N, TH, TW) int32 maps patch (px, py) to a pool id,
     -1 = never seen, with table cell (0, 0) = patch (tpx0, tpy0). The table grows (all
     particles alike) when a scan reaches past it, so a map covers the explored area only.
-    Resampling copies table rows, never patches (`select`).
+    Resampling copies table rows, never patches (`select`). The pool's cell planes (`visits`,
+    `hits`, `mean`) and row bit masks (`bits`) are described in worker.slam.map_kernels.
     """
 
     def __init__(self, n_particles: int, resolution: float, margin_m: float, occ_thresh: float):
@@ -25,7 +26,9 @@ class PatchMaps:
         self.tables = np.full((n_particles, 0, 0), -1, dtype=np.int32)
         self.tpx0 = 0
         self.tpy0 = 0
-        self.pool = np.zeros((0, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
+        self.visits = np.zeros((0, PATCH, PATCH), dtype=np.float32)
+        self.hits = np.zeros((0, PATCH, PATCH), dtype=np.float32)
+        self.mean = np.zeros((0, PATCH, PATCH, 2), dtype=np.float32)  # [m] in the cell
         self.bits = np.zeros((0, 2, PATCH), dtype=np.int64)  # occupied / full row bit masks
         self.counts = np.zeros(0, dtype=np.int32)
         self.dropped = 0  # cell updates lost for lack of pool space (always 0 in practice)
@@ -34,13 +37,19 @@ class PatchMaps:
     def n_particles(self) -> int:
         return self.tables.shape[0]
 
+    @property
+    def capacity(self) -> int:
+        """Patches the pool holds (live or free)."""
+        return self.visits.shape[0]
+
     def live_patches(self) -> int:
         """Distinct patches referenced by any particle."""
         return int(np.count_nonzero(self.counts))
 
     def nbytes(self) -> int:
         """Bytes held by the pool and the tables."""
-        return int(self.pool.nbytes + self.bits.nbytes + self.tables.nbytes + self.counts.nbytes)
+        planes = self.visits.nbytes + self.hits.nbytes + self.mean.nbytes + self.bits.nbytes
+        return int(planes + self.tables.nbytes + self.counts.nbytes)
 
     def select(self, indices: np.ndarray) -> None:
         """Resampling: particle k becomes a copy of old particle indices[k] (shares patches)."""
@@ -49,7 +58,7 @@ class PatchMaps:
 
     def _recount(self) -> None:
         flat = self.tables.ravel()
-        self.counts = np.bincount(flat[flat >= 0], minlength=self.pool.shape[0]).astype(np.int32)
+        self.counts = np.bincount(flat[flat >= 0], minlength=self.capacity).astype(np.int32)
 
     def _ensure_table(self, lo_x: float, lo_y: float, hi_x: float, hi_y: float) -> None:
         """Grow the tables so that the box [lo, hi] (map frame, [m]) lies inside, plus margin."""
@@ -78,17 +87,16 @@ class PatchMaps:
         self.tables, self.tpx0, self.tpy0 = grown, nx0, ny0
 
     def _grow_pool(self, extra: int) -> None:
-        old = self.pool.shape[0]
+        old = self.capacity
         new = max(old + extra, int(old * 1.5), 256)
-        pool = np.zeros((new, PATCH, PATCH, N_CHANNELS), dtype=np.float32)
-        pool[:old] = self.pool
-        self.pool = pool
-        bits = np.zeros((new, 2, PATCH), dtype=np.int64)
-        bits[:old] = self.bits
-        self.bits = bits
-        counts = np.zeros(new, dtype=np.int32)
-        counts[:old] = self.counts
-        self.counts = counts
+
+        def grown(a: np.ndarray) -> np.ndarray:
+            out = np.zeros((new, *a.shape[1:]), dtype=a.dtype)  # new patches are set on use
+            out[:old] = a
+            return out
+
+        self.visits, self.hits, self.mean = grown(self.visits), grown(self.hits), grown(self.mean)
+        self.bits, self.counts = grown(self.bits), grown(self.counts)
 
     def register(
         self,
@@ -127,7 +135,9 @@ class PatchMaps:
                 continue
             n_free = np.array([free_stack.size], dtype=np.int64)
             start, dropped = register_scans(
-                self.pool,
+                self.visits,
+                self.hits,
+                self.mean,
                 self.bits,
                 self.counts,
                 free_stack,
@@ -149,7 +159,7 @@ class PatchMaps:
 
     def occupancy(self, particle: int) -> OccupancyGrid:
         """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none)."""
-        prob = dense_prob(self.pool, self.tables[particle])
+        prob = dense_prob(self.visits, self.hits, self.tables[particle])
         known = ~np.isnan(prob)
         side = self.resolution * PATCH
         origin = np.array([self.tpx0 * side, self.tpy0 * side])

@@ -9,7 +9,7 @@ from worker.evaluate.se2 import compose, inverse
 from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
-from worker.slam.match_kernels import CFG_FIELDS, scan_match_all, scan_match_all_parallel
+from worker.slam.match_kernels import match_config, scan_match_all, scan_match_all_parallel
 from worker.slam.motion import draw_from_motion
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
@@ -36,20 +36,19 @@ class RbpfSlam:
         self._n_beams = angles.shape[0]
         self._cos_a, self._sin_a = np.cos(angles), np.sin(angles)
         self._max_range, self._usable = beam_limits(laser, params)
-        cfg = {
-            "res": params.delta,
-            "usable_range": self._usable,
-            "max_range": self._max_range,
-            "lskip": params.lskip,
-            "kernel": params.kernel_size,
-            "sigma": params.sigma,
-            "lsigma": params.lsigma,
-            "lstep": params.lstep,
-            "astep": params.astep,
-            "iterations": params.iterations,
-            "minimum_score": params.minimum_score,
-        }
-        self._match_cfg = np.array([cfg[k] for k in CFG_FIELDS], dtype=np.float64)
+        self._match_cfg = match_config(
+            res=params.delta,
+            usable_range=self._usable,
+            max_range=self._max_range,
+            lskip=params.lskip,
+            kernel=params.kernel_size,
+            sigma=params.sigma,
+            lsigma=params.lsigma,
+            lstep=params.lstep,
+            astep=params.astep,
+            iterations=params.iterations,
+            minimum_score=params.minimum_score,
+        )
         self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
         n = params.particles
         self.maps = PatchMaps(n, params.delta, params.map_margin, params.occ_thresh)
@@ -98,7 +97,7 @@ class RbpfSlam:
         else:
             match = scan_match_all
         self.poses, _, likes = match(
-            m.pool,
+            m.mean,
             m.bits,
             m.tables,
             m.tpx0,

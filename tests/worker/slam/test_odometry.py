@@ -96,6 +96,8 @@ def test_bad_inputs_are_input_errors():
         SlamParams(particles=0)
     with pytest.raises(InputError, match="delta must be a positive"):
         SlamParams(delta=0.0)
+    with pytest.raises(InputError, match="kernel_size must be <= 15"):
+        SlamParams(kernel_size=16)  # the matcher reads a window row from at most two patches
 
 
 def test_occupancy_is_cached_until_the_next_update():

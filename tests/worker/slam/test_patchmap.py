@@ -22,9 +22,8 @@ def test_single_beam_free_cells_and_hit():
     assert np.all(g.prob[0, :10] == 0.0) and g.prob[0, 10] == 1.0
     # the hit's mean position (GMapping's cell.mean()) is kept relative to the cell
     e = maps.tables[0, -maps.tpy0, -maps.tpx0]
-    cell = maps.pool[e, 0, 10]
-    assert cell[0] == 1 and cell[1] == 1
-    assert abs(cell[2] - 0.08) < 1e-6 and abs(cell[3] - 0.05) < 1e-6
+    assert maps.hits[e, 0, 10] == 1 and maps.visits[e, 0, 10] == 1
+    assert np.allclose(maps.mean[e, 0, 10], [0.08, 0.05], atol=1e-6)
 
 
 def test_usable_range_cuts_beam_without_hit_and_max_range_ignores():
@@ -45,6 +44,9 @@ def test_hits_over_visits():
     _beam(maps, [0.05, 0.05, 0.0], 1.0)
     g = maps.occupancy(0)
     assert np.isclose(g.prob[0, 5], 1 / 3) and g.prob[0, 10] == 1.0
+    # the mean of cell 10 over its two hits (both at x = 1.05 + 0.0 in the cell: 0.05)
+    e = maps.tables[0, -maps.tpy0, -maps.tpx0]
+    assert maps.hits[e, 0, 10] == 2 and np.allclose(maps.mean[e, 0, 10], [0.05, 0.05], atol=1e-6)
 
 
 def test_map_grows_with_explored_area_negative_side():

@@ -68,7 +68,7 @@ def test_rbpf_corrects_drifting_odometry_and_maps_the_room():
     # but patches left behind are recycled: no leak, the pool stays near the live set
     one_map = np.count_nonzero(slam.maps.tables[0] >= 0)
     assert slam.maps.live_patches() <= 20 * one_map
-    assert slam.maps.pool.shape[0] <= 2 * 20 * one_map + 256
+    assert slam.maps.capacity <= 2 * 20 * one_map + 256
     assert slam.maps.dropped == 0
 
 
