@@ -1,17 +1,22 @@
 """A process pool that survives its tasks: an exception, or a worker process dying, fails one
-task and the rest carry on (concurrent.futures would break the whole pool on a dead worker)."""
+task and the rest carry on (concurrent.futures would break the whole pool on a dead worker).
+
+Each worker talks to the parent over its own pipe. A shared multiprocessing.Queue would not
+do: a worker killed while writing to it dies holding the queue's writer lock, and every other
+worker then blocks forever on its next message.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
-import queue
 import signal
-import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
 from typing import Any
 
 POLL_S = 0.5  # [s] how often the parent checks its workers are alive
@@ -30,7 +35,7 @@ class ParentGone(SystemExit):
     """Raised inside a worker whose parent died: the run stops instead of running orphaned."""
 
 
-def _child(fn: Callable, tasks: Any, results: Any, parent_pid: int) -> None:
+def _child(fn: Callable, conn: Connection, parent_pid: int) -> None:
     """A worker process: run tasks until told to stop or until the parent is gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides on Ctrl-C
 
@@ -38,10 +43,9 @@ def _child(fn: Callable, tasks: Any, results: Any, parent_pid: int) -> None:
         return os.getppid() == parent_pid
 
     while parent_alive():
-        try:
-            item = tasks.get(timeout=1.0)
-        except queue.Empty:
+        if not conn.poll(1.0):
             continue
+        item = conn.recv()
         if item is None:
             return
         index, arg = item
@@ -49,7 +53,7 @@ def _child(fn: Callable, tasks: Any, results: Any, parent_pid: int) -> None:
         def progress(payload: Any, index: int = index) -> None:
             if not parent_alive():
                 raise ParentGone(1)
-            results.put(("progress", index, payload))
+            conn.send(("progress", index, payload))
 
         try:
             out = fn(arg, progress)
@@ -58,21 +62,29 @@ def _child(fn: Callable, tasks: Any, results: Any, parent_pid: int) -> None:
         except BaseException as exc:  # noqa: BLE001 - any failure fails this task only
             last = traceback.extract_tb(exc.__traceback__)[-1:]
             where = f" (at {last[0].filename}:{last[0].lineno})" if last else ""
-            results.put(("error", index, f"{type(exc).__name__}: {exc}{where}"))
+            conn.send(("error", index, f"{type(exc).__name__}: {exc}{where}"))
             continue
-        results.put(("result", index, out))
+        conn.send(("result", index, out))
 
 
 class _Slot:
-    """One worker process, its private task queue, and the task it holds."""
+    """One worker process, its pipe, and the task it holds."""
 
-    def __init__(self, ctx: Any, fn: Callable, results: Any):
-        self.tasks = ctx.Queue()
-        self.proc = ctx.Process(
-            target=_child, args=(fn, self.tasks, results, os.getpid()), daemon=True
-        )
+    def __init__(self, ctx: Any, fn: Callable):
+        self.conn, child_conn = ctx.Pipe(duplex=True)
+        self.proc = ctx.Process(target=_child, args=(fn, child_conn, os.getpid()), daemon=True)
         self.proc.start()
+        child_conn.close()
         self.index: int | None = None
+
+    def give(self, index: int, arg: Any) -> None:
+        self.index = index
+        self.conn.send((index, arg))
+
+    def died(self) -> str:
+        code = self.proc.exitcode
+        how = f"signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+        return f"worker process died ({how})"
 
 
 def run_pool(
@@ -89,56 +101,56 @@ def run_pool(
     threads, such as a progress bar's, that a fork would copy in a locked state).
     """
     ctx = mp.get_context("spawn")
-    results = ctx.Queue()
     pending = deque(enumerate(items))
-    slots = [_Slot(ctx, fn, results) for _ in range(max(1, min(workers, len(items))))]
-    finished: set[int] = set()
-    checked = time.monotonic()
+    slots = [_Slot(ctx, fn) for _ in range(max(1, min(workers, len(items))))]
     try:
         while pending or any(s.index is not None for s in slots):
             for s in slots:
                 if s.index is None and pending:
-                    s.index, arg = pending.popleft()
-                    s.tasks.put((s.index, arg))
-                    on_message(PoolMessage("started", s.index))
-            try:
-                kind, index, payload = results.get(timeout=POLL_S)
-            except queue.Empty:
-                kind = None
-            if kind is not None and index not in finished:
-                if kind != "progress":
-                    finished.add(index)
-                    for s in slots:
-                        if s.index == index:
-                            s.index = None
-                on_message(PoolMessage(kind, index, payload))
-            if time.monotonic() - checked >= POLL_S:
-                checked = time.monotonic()
-                _replace_dead(ctx, fn, results, slots, finished, on_message)
+                    index, arg = pending.popleft()
+                    s.give(index, arg)
+                    on_message(PoolMessage("started", index))
+            busy = {s.conn: s for s in slots if s.index is not None}
+            for conn in wait(list(busy), timeout=POLL_S):
+                _receive(busy[conn], on_message)
+            for i, s in enumerate(slots):
+                if not s.proc.is_alive():
+                    _fail_dead(s, on_message)
+                    slots[i] = _Slot(ctx, fn)
     finally:
         _shutdown(slots)
 
 
-def _replace_dead(
-    ctx: Any, fn: Callable, results: Any, slots: list[_Slot], finished: set[int], on_message
-) -> None:
-    """A worker that died holding a task (killed, out of memory) fails that task only."""
-    for i, s in enumerate(slots):
-        if s.proc.is_alive():
-            continue
-        if s.index is not None:
-            finished.add(s.index)  # a result it sent just before dying is ignored
-            code = s.proc.exitcode
-            how = f"signal {-code}" if code is not None and code < 0 else f"exit code {code}"
-            index, s.index = s.index, None
-            on_message(PoolMessage("error", index, f"worker process died ({how})"))
-        slots[i] = _Slot(ctx, fn, results)
+def _receive(slot: _Slot, on_message: Callable[[PoolMessage], None]) -> bool:
+    """Pass on one message of the slot's worker; False at the end of its pipe (it died)."""
+    try:
+        kind, index, payload = slot.conn.recv()
+    except (EOFError, OSError):
+        slot.proc.join(timeout=1)  # the liveness check reports it
+        return False
+    if kind != "progress":
+        slot.index = None
+    on_message(PoolMessage(kind, index, payload))
+    return True
+
+
+def _fail_dead(slot: _Slot, on_message: Callable[[PoolMessage], None]) -> None:
+    """A worker that died holding a task (killed, out of memory) fails that task only, once
+    whatever it sent before dying has been passed on."""
+    slot.proc.join(timeout=1)
+    while slot.index is not None and slot.conn.poll() and _receive(slot, on_message):
+        pass
+    if slot.index is not None:
+        index, slot.index = slot.index, None
+        on_message(PoolMessage("error", index, slot.died()))
+    slot.conn.close()
 
 
 def _shutdown(slots: list[_Slot]) -> None:
     for s in slots:
         if s.proc.is_alive() and s.index is None:
-            s.tasks.put(None)
+            with contextlib.suppress(OSError):  # it may have just died
+                s.conn.send(None)
     for s in slots:
         if s.index is not None and s.proc.is_alive():
             s.proc.terminate()  # a run in flight is lost; its task is redone on resume
@@ -146,3 +158,4 @@ def _shutdown(slots: list[_Slot]) -> None:
         if s.proc.is_alive():
             s.proc.kill()
             s.proc.join(timeout=5)
+        s.conn.close()

@@ -1,0 +1,97 @@
+"""Batch tables from hand-made records, against figures worked out by hand; figures and page."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from worker.batch.experiment import RunSpec
+from worker.batch.results import write_results
+from worker.batch.state import BatchDir, record_of
+
+
+def _stats(mean, std, lo, hi, n):
+    return {"mean": mean, "std": std, "min": lo, "max": hi, "n": n, "mean_squared": None}
+
+
+def _rec(world, seed, outcome="completed", reason=None, t=(0.5, 0.2, 0.0, 2.0, 100),
+         r=(0.01, 0.005, 0.0, 0.05, 100), noise=0.0, error=None):  # fmt: skip
+    base = world.removesuffix("_furnitures")
+    variant = "furniture" if world != base else "no_furniture"
+    spec = RunSpec(f"{world}{seed}{noise}", f"/w/{world}.yaml", world, base, variant, "rbpf",
+                   noise, seed, {})  # fmt: skip
+    if error:
+        return record_of(spec, summary=None, error=error)
+    rel = {"translation": _stats(*t), "rotation": _stats(*r), "skipped": 0}
+    a = {"translation": _stats(0.01, 0, 0, 0.1, 50), "rotation": _stats(0.001, 0, 0, 0.01, 50)}
+    summary = {
+        "outcome": outcome, "reason": reason, "coverage": 0.9, "path_length_m": 10.0,
+        "relations": {"B": rel, "A": {**a, "skipped": 0}}, "ate": None,
+        "timings": {"sim_time_s": 100.0, "wall_time_s": 10.0, "real_time_factor": 10.0},
+    }  # fmt: skip
+    return record_of(spec, summary=summary)
+
+
+@pytest.fixture
+def records():
+    return [
+        _rec("office", 1, t=(0.4, 0.2, 0.01, 2.0, 100), r=(0.010, 0.004, 0.0, 0.04, 100)),
+        _rec("office", 2, t=(0.6, 0.4, 0.03, 4.0, 300), r=(0.020, 0.006, 0.0, 0.08, 300)),
+        _rec("office", 3, "failed", "collision", t=(5.0, 1.0, 0.0, 9.0, 10)),
+        _rec("office", 4, error="ValueError: boom"),
+        _rec("office_furnitures", 1, t=(1.5, 0.5, 0.1, 3.0, 200)),
+        _rec("office_furnitures", 2, "failed", "stuck"),
+        _rec("office", 1, noise=0.3, t=(0.9, 0.3, 0.0, 3.0, 80)),
+    ]
+
+
+def _read(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_tables_match_hand_computed_figures(tmp_path, records):
+    files = write_results(records, BatchDir(tmp_path), expected=8)
+    runs = _read(files["runs"])
+    assert len(runs) == 7
+    assert runs[3]["outcome"] == "failed" and runs[3]["reason"] == "error"
+    assert runs[3]["error"] == "ValueError: boom" and runs[3]["b_mean_t"] == ""
+    assert float(runs[1]["b_max_t"]) == 4.0 and runs[1]["good"] == "true"
+    assert runs[4]["good"] == "false"  # completed, but 1.5 m > 1 m: visually bad
+    success = {(r["world"], r["noise"]): r for r in _read(files["success"])}
+    office = success[("office", "0.0")]
+    assert (office["runs"], office["completed"], office["good"], office["failed"]) == (
+        "4", "2", "2", "2"
+    )  # fmt: skip
+    assert (office["collision"], office["error"], office["stuck"]) == ("1", "1", "0")
+    assert success[("office_furnitures", "0.0")]["stuck"] == "1"
+    trans = {r["ENVIRONMENT"]: r for r in _read(files["translation"])}
+    # the noise varies in this batch, so it names the environment; averages of completed runs
+    assert list(trans) == ["office noise 0", "office_furnitures noise 0", "office noise 0.3"]
+    row = trans["office noise 0"]
+    expect = {"MEAN": 0.5, "STD": 0.3, "MIN": 0.02, "MAX": 3.0, "NUMMEASURES": 200.0}
+    assert {k: pytest.approx(float(row[k])) for k in expect} == expect
+    rot = {r["ENVIRONMENT"]: r for r in _read(files["rotation"])}["office noise 0"]
+    assert float(rot["MEAN"]) == pytest.approx(0.015) and float(rot["MAX"]) == pytest.approx(0.06)
+    assert list(rot) == ["ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES"]
+
+
+def test_every_figure_is_drawn_and_embedded_in_the_page(tmp_path, records):
+    files = write_results(records, BatchDir(tmp_path), expected=8)
+    page = files["report"].read_text()
+    for name in ("errors_by_world.png", "furniture.png", "noise.png", "a_vs_b.png"):
+        assert files[name].read_bytes()[:4] == b"\x89PNG"
+        assert f'alt="{name}" src="data:image/png;base64,' in page
+    assert "7 of 8 runs finished: 4 completed" in page
+    assert "ValueError: boom" in page
+
+
+def test_figures_without_data_are_left_out_and_said_so(tmp_path):
+    recs = [_rec("office", 1, "failed", "stuck"), _rec("office", 2, error="RuntimeError: x")]
+    files = write_results(recs, BatchDir(tmp_path), expected=2)
+    assert files["errors_by_world.png"] is None and files["furniture.png"] is None
+    assert files["noise.png"] is None
+    assert _read(files["translation"]) == []
+    page = files["report"].read_text()
+    assert "not drawn (no completed run with B relations yet)" in page
