@@ -135,9 +135,11 @@ def _register_one(
                 last_tx, last_ty = tx, ty
                 e = -1
                 if 0 <= tx < tw and 0 <= ty < th:
-                    e = _writable_patch(
-                        visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty
-                    )
+                    e = table[ty, tx]
+                    if e < 0 or counts[e] != 1:  # a call costs more than the checks
+                        e = _writable_patch(
+                            visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty
+                        )
             if e < 0:
                 dropped += 1
             else:
