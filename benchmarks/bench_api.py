@@ -11,7 +11,13 @@ fresh database) and a Redis database of its own, then measures each endpoint thr
 - 50 clients back to back (closed loop): the saturation throughput, where latency is only
   50 / throughput and says nothing about the server's speed.
 
+Then the queue's throughput: the same job of `--queue-runs` small runs (odometry SLAM, a 3 x 2
+room world, `--queue-time-limit` simulated seconds) done by one worker process and then by two
+(target, issue 7: two workers >= 1.8x the runs per hour of one). Workers are started and warmed
+(numba caches, one run each) before the clock starts.
+
     .venv/bin/python benchmarks/bench_api.py [--requests 2000] [--clients 50] [--period 0.5]
+        [--queue-runs 12] [--queue-time-limit 60]
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import argparse
 import asyncio
 import io
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -37,10 +44,19 @@ sys.path.insert(0, str(ROOT))
 from tests.services import ensure_postgres, ensure_redis  # noqa: E402
 
 
-def _png() -> bytes:
-    img = np.full((60, 80), 255, np.uint8)
-    img[[0, -1], :] = 0
-    img[:, [0, -1]] = 0
+def _png(rooms: tuple[int, int] = (1, 1), room_px: int = 80) -> bytes:
+    """rooms[0] x rooms[1] square rooms of room_px pixels joined by 1 m doors (0.05 m/px)."""
+    nx, ny = rooms
+    img = np.full((ny * room_px + 1, nx * room_px + 1), 255, np.uint8)
+    img[::room_px, :] = 0
+    img[:, ::room_px] = 0
+    door = np.arange(room_px // 2 - 10, room_px // 2 + 10)  # 1 m in the middle of a wall
+    for i in range(1, nx):
+        for j in range(ny):
+            img[j * room_px + door, i * room_px] = 255
+    for j in range(1, ny):
+        for i in range(nx):
+            img[j * room_px, i * room_px + door] = 255
     buf = io.BytesIO()
     Image.fromarray(img).save(buf, format="PNG")
     return buf.getvalue()
@@ -106,6 +122,45 @@ async def _measure(base, key, args, make_request):
     return seq, opn, rate
 
 
+def _wait_done(base, hdr, job_id, timeout=1800.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        job = httpx.get(f"{base}/api/v1/jobs/{job_id}", headers=hdr).json()
+        if job["status"] in ("done", "failed", "cancelled"):
+            if job["status"] != "done":
+                raise RuntimeError(f"job {job_id} ended {job['status']}")
+            return
+        time.sleep(0.2)
+    raise TimeoutError(f"job {job_id} not done after {timeout} s")
+
+
+def _queue_rate(base, hdr, env, n_workers, body_for) -> float:
+    """Runs per hour of n_workers worker processes (one run at a time each)."""
+    mq = [sys.executable, "-m", "mapqual"]
+    workers = [
+        subprocess.Popen(
+            [*mq, "worker", "--concurrency", "1", "--loglevel", "WARNING"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        for _ in range(n_workers)
+    ]
+    try:
+        warm = httpx.post(f"{base}/api/v1/jobs", headers=hdr, json=body_for(n_workers)).json()
+        _wait_done(base, hdr, warm["id"])
+        job = httpx.post(f"{base}/api/v1/jobs", headers=hdr, json=body_for(None)).json()
+        t0 = time.perf_counter()
+        _wait_done(base, hdr, job["id"])
+        return len(job["runs"]) / (time.perf_counter() - t0) * 3600
+    finally:
+        for w in workers:
+            os.killpg(w.pid, signal.SIGTERM)
+        for w in workers:
+            w.wait(timeout=30)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=2000)
@@ -114,6 +169,8 @@ def main() -> None:
         "--period", type=float, default=0.5, help="[s] between one client's requests (open loop)"
     )
     ap.add_argument("--port", type=int, default=8765)
+    ap.add_argument("--queue-runs", type=int, default=12, help="0 skips the queue figures")
+    ap.add_argument("--queue-time-limit", type=float, default=60.0, help="[s] simulated")
     args = ap.parse_args()
 
     admin_url = ensure_postgres()
@@ -185,6 +242,34 @@ def main() -> None:
                 f"p99 {o99:6.1f} ms  (target p99 < {target} ms: {verdict})"
             )
             print(f"  {args.clients} clients back to back saturate at {rate:6.0f} req/s")
+        if args.queue_runs:
+            import redis
+
+            redis.Redis.from_url(redis_url).flushdb()  # the latency phase's runs stay unrun
+            rooms = httpx.post(
+                f"{base}/api/v1/worlds",
+                headers=hdr,
+                files={"file": ("rooms.png", _png((3, 2), 120))},
+                data={"resolution": "0.05"},
+            ).json()
+
+            def body_for(n):
+                return {
+                    "world_id": rooms["id"],
+                    "seeds": list(range(1000, 1000 + n)) if n else list(range(args.queue_runs)),
+                    "slam": "odometry",
+                    "params": {"explore": {"time_limit": args.queue_time_limit}},
+                }
+
+            one = _queue_rate(base, hdr, env, 1, body_for)
+            two = _queue_rate(base, hdr, env, 2, body_for)
+            verdict = "ok" if two >= 1.8 * one else "MISSED"
+            print(
+                f"queue: {args.queue_runs} runs of {args.queue_time_limit:.0f} s simulated: "
+                f"1 worker {one:6.0f} runs/h, 2 workers {two:6.0f} runs/h, "
+                f"ratio {two / one:.2f} (target >= 1.8: {verdict}); load average "
+                f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+            )
     finally:
         server.terminate()
         server.wait(timeout=10)
