@@ -7,7 +7,16 @@ import math
 import numpy as np
 
 from worker.errors import InputError
-from worker.evaluate.se2 import wrap_angle
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_scalar(a: float) -> float:
+    """Angle [rad] wrapped to [-pi, pi), as worker.evaluate.se2.wrap_angle, for one float."""
+    if -math.pi <= a < math.pi:
+        return a
+    w = (a + math.pi) % TWO_PI - math.pi
+    return w - TWO_PI if w >= math.pi else w
 
 
 def check_scan(t: float, pose_odom: np.ndarray, ranges_m: np.ndarray, n_beams: int):
@@ -16,7 +25,7 @@ def check_scan(t: float, pose_odom: np.ndarray, ranges_m: np.ndarray, n_beams: i
     if not math.isfinite(t):
         raise InputError(f"scan time must be finite, got {t}")
     pose = np.asarray(pose_odom, dtype=np.float64).reshape(-1)
-    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+    if pose.shape != (3,) or not all(math.isfinite(v) for v in pose.tolist()):
         raise InputError(f"odometry pose must be 3 finite numbers [x, y, theta], got {pose_odom}")
     ranges = np.ascontiguousarray(ranges_m, dtype=np.float64).reshape(-1)
     if ranges.shape[0] != n_beams:
@@ -47,10 +56,11 @@ class UpdateGate:
         if self.last_t is not None and t < self.last_t:
             raise InputError(f"scan times must not decrease: {t} after {self.last_t}")
         self.last_t = t
+        x, y, theta = pose_odom.tolist()  # floats: numpy scalars cost more per operation
         if self.last_pose is not None:
-            move = pose_odom - self.last_pose
-            self.linear_m += math.hypot(move[0], move[1])
-            self.angular_rad += abs(float(wrap_angle(move[2])))
+            x0, y0, theta0 = self.last_pose.tolist()
+            self.linear_m += math.hypot(x - x0, y - y0)
+            self.angular_rad += abs(wrap_scalar(theta - theta0))
         self.last_pose = pose_odom.copy()
         update = (
             self.last_update_t is None

@@ -1,10 +1,54 @@
-"""GMapping's odometry motion model (MotionModel::drawFromMotion), vectorised over particles."""
+"""GMapping's odometry motion model (MotionModel::drawFromMotion) and scalar SE(2) helpers for
+the per-scan path (numpy's call overhead dominates on a handful of numbers)."""
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from worker.evaluate.se2 import compose, relative
+import numpy as np
+from numba import njit
+
+TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def wrap(a: float) -> float:
+    """Angle [rad] wrapped to [-pi, pi); angles already inside are returned bit for bit (as
+    worker.evaluate.se2.wrap_angle)."""
+    if -math.pi <= a < math.pi:
+        return a
+    w = (a + math.pi) % TWO_PI - math.pi
+    return w - TWO_PI if w >= math.pi else w
+
+
+@njit(cache=True)
+def compose3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a (+) b for two (3,) poses [x, y, theta]."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap(a[2] + b[2])])
+
+
+@njit(cache=True)
+def relative3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """inv(a) (+) b for two (3,) poses: the motion from a to b in a's frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2])])
+
+
+@njit(cache=True)
+def _noisy_steps(poses, delta, std, noise):
+    """Each pose (N, 3) composed with delta (3,) + noise (N, 3) * std (3,)."""
+    out = np.empty_like(poses)
+    for p in range(poses.shape[0]):
+        bx = delta[0] + noise[p, 0] * std[0]
+        by = delta[1] + noise[p, 1] * std[1]
+        bt = delta[2] + noise[p, 2] * std[2]
+        c, s = math.cos(poses[p, 2]), math.sin(poses[p, 2])
+        out[p, 0] = poses[p, 0] + c * bx - s * by
+        out[p, 1] = poses[p, 1] + s * bx + c * by
+        out[p, 2] = wrap(poses[p, 2] + bt)
+    return out
 
 
 def draw_from_motion(
@@ -26,15 +70,18 @@ def draw_from_motion(
       theta: stt |dtheta| + srt sqrt(dx^2 + dy^2)
     and is composed onto each particle. One (N, 3) standard normal draw per call.
     """
-    delta = relative(odom_old, odom_new)
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    delta = relative3(
+        np.asarray(odom_old, dtype=np.float64), np.asarray(odom_new, dtype=np.float64)
+    )
     dx, dy, dth = abs(delta[0]), abs(delta[1]), abs(delta[2])
     sxy = 0.3 * srr
     std = np.array(
         [
             srr * dx + str_ * dth + sxy * dy,
             srr * dy + str_ * dth + sxy * dx,
-            stt * dth + srt * np.hypot(dx, dy),
+            stt * dth + srt * math.hypot(dx, dy),
         ]
     )
-    noisy = delta + rng.standard_normal((poses.shape[0], 3)) * std
-    return compose(poses, noisy)
+    noise = rng.standard_normal((poses.shape[0], 3))
+    return _noisy_steps(poses, delta, std, noise)

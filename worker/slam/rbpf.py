@@ -10,7 +10,7 @@ from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
 from worker.slam.match_kernels import match_config, scan_match_all, scan_match_all_parallel
-from worker.slam.motion import draw_from_motion
+from worker.slam.motion import compose3, draw_from_motion
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
 from worker.slam.resample import normalized_weights, systematic_indices
@@ -124,7 +124,7 @@ class RbpfSlam:
         self.resamplings += 1
 
     def pose_estimate(self) -> np.ndarray:
-        return compose(self._T_map_odom, self._pose_odom)
+        return compose3(self._T_map_odom, self._pose_odom)
 
     def T_map_odom(self) -> np.ndarray:
         return self._T_map_odom.copy()

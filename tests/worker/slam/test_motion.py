@@ -30,3 +30,17 @@ def test_motion_noise_follows_gmapping_formula(rng):
     out = draw_from_motion(poses, np.array([0, 0, 0.5]), np.zeros(3), 0.1, 0.2, 0.1, 0.2, rng)
     assert abs(out[:, 2].std() - 0.1) < 0.005
     assert abs(out[:, 0].std() - 0.05) < 0.003 and abs(out[:, 1].std() - 0.05) < 0.003
+
+
+def test_scalar_helpers_equal_the_vectorised_se2(rng):
+    from worker.evaluate.se2 import compose, relative, wrap_angle
+    from worker.slam.gating import wrap_scalar
+    from worker.slam.motion import compose3, relative3, wrap
+
+    angles = np.concatenate([rng.uniform(-20, 20, 200), [-math.pi, math.pi, 3 * math.pi, 0.0]])
+    for a in angles:
+        assert wrap(a) == wrap_scalar(a) == float(wrap_angle(a))
+    for _ in range(50):
+        a, b = rng.uniform(-5, 5, 3), rng.uniform(-5, 5, 3)
+        assert np.allclose(compose3(a, b), compose(a, b), rtol=0, atol=1e-12)
+        assert np.allclose(relative3(a, b), relative(a, b), rtol=0, atol=1e-12)
