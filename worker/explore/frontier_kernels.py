@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -257,3 +259,26 @@ def _flood_unknown(unknown, state, stamp, run_id, sy, sx, queue, max_cells):
         idx = queue[q]
         iy = idx // w
         state[iy, idx - iy * w] = result
+
+
+@njit(cache=True)
+def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_fov):
+    """Count a close look at each frontier cell the robot at cell (ry, rx), heading rth [rad],
+    sees now: within `radius` cells, inside the laser's field of view (+-half_fov [rad]) and
+    with a line of sight over known free cells. seen: (H, W) uint8, saturating."""
+    h, w = frontier.shape
+    r = int(radius)
+    for jy in range(max(0, ry - r), min(h, ry + r + 1)):
+        for jx in range(max(0, rx - r), min(w, rx + r + 1)):
+            if not frontier[jy, jx] or seen[jy, jx] == 255:
+                continue
+            dy = jy - ry
+            dx = jx - rx
+            if dx * dx + dy * dy > radius * radius:
+                continue
+            a = math.atan2(dy, dx) - rth
+            a = (a + math.pi) % (2.0 * math.pi) - math.pi
+            if abs(a) > half_fov:
+                continue
+            if line_of_sight(lethal, unknown, ry, rx, jy, jx):
+                seen[jy, jx] += 1

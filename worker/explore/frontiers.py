@@ -39,6 +39,8 @@ class FrontierSearch:
         self._stamp = np.zeros((0, 0), dtype=np.int64)
         self._unk_state = np.zeros((0, 0), dtype=np.int8)
         self._unk_stamp = np.zeros((0, 0), dtype=np.int64)
+        self.seen = np.zeros((0, 0), dtype=np.uint8)  # close looks at each frontier cell
+        self._seen_origin = np.zeros(2)
         self._run_id = 0
         self._frame_id = -1
 
@@ -53,6 +55,7 @@ class FrontierSearch:
             self._stamp = np.zeros((h, w), dtype=np.int64)
             self._unk_state = np.zeros((h, w), dtype=np.int8)
             self._unk_stamp = np.zeros((h, w), dtype=np.int64)
+            self._carry_seen(costmap)
             self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0
             bbox = None
@@ -70,6 +73,36 @@ class FrontierSearch:
             max(0, x0 - 1),
             min(w, x1 + 1),
         )
+
+    def _carry_seen(self, costmap: GlobalCostmap) -> None:
+        """Move the look counts into the costmap's new frame (it grew or was reset)."""
+        old, self.seen = self.seen, np.zeros(costmap.shape, dtype=np.uint8)
+        if old.size == 0 or costmap.resolution <= 0:
+            self._seen_origin = costmap.origin.copy()
+            return
+        oy, ox = (
+            int(round(v)) for v in (self._seen_origin - costmap.origin)[::-1] / costmap.resolution
+        )
+        h, w = old.shape
+        H, W = self.seen.shape
+        y0, x0 = max(0, oy), max(0, ox)
+        y1, x1 = min(H, oy + h), min(W, ox + w)
+        if y1 > y0 and x1 > x0:
+            self.seen[y0:y1, x0:x1] = old[y0 - oy : y1 - oy, x0 - ox : x1 - ox]
+        self._seen_origin = costmap.origin.copy()
+
+    def observe(self, costmap: GlobalCostmap, pose: np.ndarray, half_fov: float) -> None:
+        """Count a close look at the frontier cells the robot at `pose (3,)` sees now: within
+        dead_frontier_radius, in the field of view, in line of sight. A cell still frontier
+        after dead_frontier_looks of them borders what the laser cannot reveal (the unseen
+        inside of an obstacle whose face it glances off): a dead frontier."""
+        ix, iy = costmap.world_to_cell(pose[0], pose[1])
+        if self.seen.shape != costmap.shape or not costmap.in_bounds(ix, iy):
+            return
+        fk.observe_frontier(
+            self.frontier, costmap.lethal, costmap.unknown, self.seen, iy, ix, float(pose[2]),
+            self.params.dead_frontier_radius / costmap.resolution, half_fov,
+        )  # fmt: skip
 
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:
         """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
@@ -107,6 +140,7 @@ class FrontierSearch:
             return None
         cells, labels = self.clusters()
         is_open = self.open_cells(costmap, cells)
+        is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
         sizes = np.bincount(labels, weights=is_open) * res
         cell_valid = is_open & (sizes[labels] >= p.min_frontier_size)
         if blacklist:

@@ -14,6 +14,7 @@ from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, path_length
 from worker.explore.safety import SafetyController
+from worker.explore.shim import HeadingShim
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,7 @@ class Navigator:
         self.frontiers = FrontierSearch(params)
         self.planner = GlobalPlanner(params)
         self.dwa = DwaPlanner(params)
+        self.shim = HeadingShim(params)
         self.safety = SafetyController(params, self.angles, self.range_max)
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
@@ -82,6 +84,8 @@ class Navigator:
         self._best_gap = math.inf
         self._progress_t = 0.0
         self._frontier_changed = False
+        self._map_updated = False
+        self._half_fov = float(np.max(np.abs(self.angles))) - 0.05  # [rad]
         self._beams_box: tuple[float, float, float, float] | None = None
         self._trail: list[np.ndarray] = []  # (2,) positions 5 cm apart, newest last
         self._retrace_to: np.ndarray | None = None
@@ -101,6 +105,7 @@ class Navigator:
         self.frontiers.update(self.costmap, changed)
         if changed[1] > changed[0]:
             self._frontier_changed = True
+        self._map_updated = True
         if self.local is None:
             self.local = LocalCostmap(self.params, resolution)
 
@@ -114,6 +119,9 @@ class Navigator:
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
         self.local.build(pose[0], pose[1], self.costmap, pose[2])
         self._grow_trail(pose)
+        if self._map_updated:
+            self._map_updated = False
+            self.frontiers.observe(self.costmap, pose, self._half_fov)
         if self.safety.active(t):
             return NavCommand(
                 *self._safe_override(pose, self.safety.check(t, ranges, 0.0), v0, w0), "safety"
@@ -133,6 +141,14 @@ class Navigator:
             if t - self._plan_fail_since >= p.planner_patience:
                 self._give_up(t, "no plan")
             return NavCommand(0.0, 0.0, "planning")
+        shim = self.shim.command(pose, w0, self.path, self.local)
+        if shim is not None:
+            self._ctrl_fail_since = None
+            if self._no_progress(t, pose):
+                self._give_up(t, "no progress")
+                return NavCommand(0.0, 0.0, "recovering")
+            status = "aligning" if shim[2] == "rotate" else "recovering"
+            return NavCommand(shim[0], shim[1], status)
         # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
         # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
         cmd = self.dwa.command(pose, v0, w0, self.local, None)
@@ -345,4 +361,5 @@ class Navigator:
         self.goal = None
         self.path = None
         self.dwa.set_plan(None)
+        self.shim.reset()
         self._next_choice_t = t

@@ -32,6 +32,11 @@ class ExploreParams:
     # [m^2] unknown regions up to this size enclosed by known cells (the inside of table legs,
     # of walls) are not worth a frontier: no viewpoint reveals them
     min_unknown_area: float = 0.5
+    # a frontier cell the robot looked at this many times from within dead_frontier_radius
+    # (in view, in line of sight) and that stayed frontier is dead: what lies beyond it is
+    # the inside of an obstacle whose face the beams only glanced off
+    dead_frontier_looks: int = 6
+    dead_frontier_radius: float = 1.0  # [m]
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
     frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
@@ -72,6 +77,11 @@ class ExploreParams:
     oscillation_reset_dist: float = 0.25  # [m] travel that clears the rotation-oscillation flags
     escape_reset_dist: float = 0.15  # [m] back-off distance before driving forwards again
     escape_reset_theta: float = 0.15  # [rad] or this much turning
+    # heading shim (nav2 RotationShimController-like): turn on the spot (or back out) while
+    # the path point shim_lookahead ahead lies more than shim_angle off the heading
+    shim_angle: float = 1.2  # [rad]
+    shim_release: float = 0.5  # [rad] the DWA takes over again below this
+    shim_lookahead: float = 0.5  # [m]
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up

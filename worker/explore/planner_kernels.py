@@ -20,10 +20,11 @@ def _cell_cost(inflated, unknown, iy, ix, neutral, factor, allow_unknown, escapi
     Costs below `blocked` become neutral + factor * cost; unknown cells cost COST_OBS - 1
     (253) when planning through unknown space is allowed. `blocked` is INSCRIBED in navfn;
     ours may be lower, keeping plans a margin off obstacles (what the local planner's padded
-    footprint needs). Blocked cells may be entered only while escaping: 2 from a blocked
-    cell (a robot that stands too near a wall must be able to leave; any non-lethal cell),
-    1 near the start (a pocket the map closed around the robot must not trap the plan;
-    cells below INSCRIBED).
+    footprint needs). Blocked cells may be entered only while escaping, near the start: 2
+    from a blocked cell (a robot that stands too near a wall must be able to leave; any
+    non-lethal cell), 1 from another (a pocket the map closed around the robot must not
+    trap the plan; cells below INSCRIBED). Farther away, blocked cells stay blocked: a plan
+    must not thread along walls' inscribed zones into their unknown insides.
     """
     c = inflated[iy, ix]
     if c >= 254 or (unknown[iy, ix] and not allow_unknown):
@@ -116,8 +117,8 @@ def dijkstra(
     buffers: a cell's entries are valid only where stamp == run_id, so no buffer is cleared.
     Returns `(K,) int64` flat indices of the target cells settled, nearest first.
 
-    Within `escape_cells` of the start, blocked cells below INSCRIBED cost 253 a step instead
-    of being impassable: the robot stands there, so it can drive out.
+    Only from cells within `escape_cells` of the start may blocked cells be entered (at 253 a
+    step): the robot stands there, so it can drive out.
 
     With a goal cell (goal_iy >= 0) the queue is ordered by potential plus the octile
     distance to it times the cheapest step cost (A*): an admissible bound, so the goal's
@@ -159,12 +160,12 @@ def dijkstra(
                 first = d
                 if stop_extra <= 0.0:
                     break
-        if inflated[iy, ix] >= blocked:
-            escaping = 2
-        elif (iy - start_iy) ** 2 + (ix - start_ix) ** 2 <= escape2:
-            escaping = 1
-        else:
+        if (iy - start_iy) ** 2 + (ix - start_ix) ** 2 > escape2:
             escaping = 0
+        elif inflated[iy, ix] >= blocked:
+            escaping = 2
+        else:
+            escaping = 1
         for k in range(8):
             jy = iy + _DY[k]
             jx = ix + _DX[k]

@@ -132,8 +132,8 @@ def test_diverging_slam_pose_fails_the_run_as_slam_diverged():
     slam = DriftingSlam(make_slam("odometry", SimParams().laser, SlamParams(), rng))
     result = explore(world, sim, slam, ExploreParams(time_limit=60.0), oracle=True)
     assert result.outcome == "failed" and result.reason == "slam_diverged"
-    # 3 m at 1 m/s: the first step past 3 s
-    assert 3.0 < result.t[-1] <= 3.15
+    # 3 m at 1 m/s: the step at 3 s (exactly 3 m: rounding decides) or the next
+    assert 2.95 < result.t[-1] <= 3.15
 
 
 def test_bormann_oracle_exploration_completes():
