@@ -111,9 +111,9 @@ class ProgressReporter:
 
     Every `store_every_s` of wall time it writes the progress to the run's row and reads the
     run's status back: a run cancelled meanwhile raises `RunCancelled`, which stops it at its
-    next step. Every `publish_every_s` it publishes the progress on the run's channel; path
-    points, scan, plan and map go out only while somebody listens, the map at most every
-    `map_every_s`.
+    next step. Every `publish_every_s` it publishes the progress on the run's channel (every
+    `idle_publish_every_s` while nobody listens); path points, scan, plan and map go out only
+    while somebody listens, the map at most every `map_every_s`.
     """
 
     def __init__(
@@ -124,6 +124,7 @@ class ProgressReporter:
         store_every_s: float = 2.0,
         publish_every_s: float = 0.2,
         map_every_s: float = 1.0,
+        idle_publish_every_s: float = 1.0,
     ):
         self.url = database_url
         self.run_id = run_id
@@ -131,6 +132,7 @@ class ProgressReporter:
         self.store_every_s = store_every_s
         self.publish_every_s = publish_every_s
         self.map_every_s = map_every_s
+        self.idle_publish_every_s = idle_publish_every_s
         self._next_store = 0.0
         self._next_publish = 0.0
         self._next_map = 0.0
@@ -159,11 +161,13 @@ class ProgressReporter:
         self._record(p)
         now = time.monotonic()
         if self.redis is not None and now >= self._next_publish:
-            self._next_publish = now + self.publish_every_s
             try:
                 self._publish(p, now)
             except Exception:  # a viewer feed must never break a run
                 self.redis = None
+            # nobody listening: only often enough to notice a new listener soon
+            period = self.publish_every_s if self._listeners else self.idle_publish_every_s
+            self._next_publish = now + period
         if now >= self._next_store:
             self._next_store = now + self.store_every_s
             with session_scope(self.url) as s:

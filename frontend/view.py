@@ -100,6 +100,7 @@ class RunView:
         """Clear the scene and lay out the layers for `run_id` over its floorplan."""
         with self.lock:
             self._clear()
+            reframe = run_id != self.run_id  # the same run again (it finished): keep the camera
             self.run_id, self.mode, self.finished, self.playing = run_id, "none", None, False
             on = {n: b.value for n, b in self.toggles.items()}
             sc = self.scene
@@ -107,7 +108,8 @@ class RunView:
             if floor is not None:
                 L["floor"] = Floorplan(sc, "/floor", floor.occ, floor.resolution, floor.origin)
                 L["floor"].node.visible = on["floorplan"]
-                self._frame_camera(L["floor"])
+                if reframe:
+                    self._frame_camera(L["floor"])
             L["map"] = MapTiles(sc, "/slam", on["SLAM map"])
             L["map"].floor, L["map"].floor_on = L["floor"], on["floorplan"]
             L["gt"] = PathLayer(sc, "/gt", GT_RGB, 0.08, on["ground truth"])

@@ -188,8 +188,14 @@ class ViewerApp:
             live_ids = list(self.live)
         for run_id in live_ids:
             if run_status(self.url, run_id) != "running":
+                with self._lock:
+                    self.live.pop(run_id, None)
+                    self._subs.put(("unsubscribe", run_id))
                 for view in [v for v in views if v.run_id == run_id and v.mode == "live"]:
                     self.show(view, run_id)  # done: the replay from the database
+        for view in [v for v in views if v.mode == "none" and v.run_id is not None]:
+            if run_status(self.url, view.run_id) in ("running", "done"):
+                self.show(view, view.run_id)  # a queued run has started (or finished)
 
     def _refresh_runs(self) -> None:
         self.runs = {r.id: r for r in list_runs(self.url)}

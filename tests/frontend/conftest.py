@@ -140,14 +140,20 @@ def browser_service(tmp: Path, redis_url: str):
     return BrowserService()
 
 
-@pytest.fixture(scope="module")
-def site(tmp_path_factory):
+@pytest.fixture(scope="session")
+def own_redis() -> OwnRedis:
+    """A Redis server of this test session only (see OwnRedis)."""
     if shutil.which("redis-server") is None:
         pytest.fail("redis-server is missing: install Debian's package (apt-get install redis)")
     own = OwnRedis()
-    service = browser_service(tmp_path_factory.mktemp("browser"), own.url)
+    yield own
+    own.stop()
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory, own_redis):
+    service = browser_service(tmp_path_factory.mktemp("browser"), own_redis.url)
     s = Site(service)
     yield s
     s.stop()
     service.stop()
-    own.stop()

@@ -127,6 +127,13 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     assert replay["run"] == run_id and replay["gt_points"] > scene["gt_points"]
     time.sleep(1.0)
     _shoot(viewer, artifacts / "viewer-replay.png")
+    # Play at the end starts the replay over: the time slider runs and the paths regrow
+    view = next(v for v in site.viewer.views.values() if v.run_id == run_id)
+    end = view.slider.max
+    viewer.get_by_role("button", name="Play").click()
+    _wait(lambda: view.playing and 0 < view.slider.value < end, 10, "the replay to play")
+    assert view.describe()["gt_points"] < replay["gt_points"]
+    _wait(lambda: view.slider.value > 3.0, 10, "the replay to advance")
 
     page.goto(site.url + "/compare")
     assert page.locator("#compare-table tbody tr").count() == 1

@@ -27,7 +27,6 @@ from backend.progress import (
 )
 from backend.store import add_user, create_job, mark_run_started, save_world
 from frontend.live import LiveRun
-from tests.services import ensure_redis
 from worker.pipeline import RunProgress
 from worker.slam.grid import OccupancyGrid
 from worker.world.world import World
@@ -81,7 +80,7 @@ def _progress(t, pose, grid, ranges=None, angles=None) -> RunProgress:
 
 
 @pytest.fixture()
-def feed(tmp_path):
+def feed(tmp_path, own_redis):
     url = f"sqlite:///{tmp_path / 'feed.db'}"
     upgrade(url)
     occ = np.zeros((40, 40), bool)
@@ -93,7 +92,7 @@ def feed(tmp_path):
         run_id = create_job(s, owner_id=uid, world_id=w.id, slam="rbpf", params={}, seeds=[1])
         run_id = run_id.runs[0].id
         mark_run_started(s, run_id)
-    client = redis.Redis.from_url(ensure_redis().rsplit("/", 1)[0] + "/12")
+    client = redis.Redis.from_url(own_redis.url)
     yield url, run_id, client
     client.close()
 
@@ -107,7 +106,9 @@ def _grid(step: int) -> OccupancyGrid:
 
 def test_a_listener_gets_the_whole_state_then_only_changes(feed):
     url, run_id, client = feed
-    rep = ProgressReporter(url, run_id, client, publish_every_s=0.0, map_every_s=0.0)
+    rep = ProgressReporter(
+        url, run_id, client, publish_every_s=0.0, map_every_s=0.0, idle_publish_every_s=0.0
+    )
     poses = [np.array([0.1 * i, 0.05 * i, 0.0]) for i in range(12)]
     rep(_progress(0.0, poses[0], _grid(0)))  # nobody listens: a light message
     assert rep._listeners == 0
