@@ -13,7 +13,10 @@ Speed, with the same score: the used beams' end and free points are computed onc
 in the robot frame (`prepare_beams`); a window row is read as one bit mask; and a candidate
 pose of the hill climbing stops being scored as soon as it can no longer beat the current
 pose (each beam adds at most 1), with the beams taken worst-matched first (their order at the
-particle's initial pose), so that a losing candidate falls behind early.
+particle's initial pose), so that a losing candidate falls behind early; and each beam's
+matching cells (their hit means, after the occupancy and free-cell tests) are remembered for
+the current pose of the climb, keyed by the end-point cell and free-cell offset: a candidate
+whose end point stays in the same cell (about half of them) reuses them.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ NULL_LIKELIHOOD = -0.5  # GMapping's nullLikelihood: a beam with no match
 FREE_CELL_RATIO = math.sqrt(2.0)  # GMapping's freeCellRatio: free point this many cells back
 MAX_KERNEL = 15  # [cells] a window row must fit in two patches
 _SLACK = 1e-6  # abort margin: far above the rounding of a sum of <= 1e5 terms <= 1
+MAX_CACHED_KERNEL = 2  # [cells] the cell cache keeps up to (2k+1)^2 points per beam
 
 # layout of the `cfg` array the kernels take (one float64 array instead of eleven arguments)
 CFG_FIELDS = (
@@ -84,11 +88,14 @@ def prepare_beams(ranges, cos_a, sin_a, cfg):
 
 
 @njit(cache=True)
-def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms):
+def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms, cache, w):
     """(score, log-likelihood, complete) of the beams at pose (x, y, theta), in `order`.
 
     Stops (complete = False, partial sums) once the score can no longer exceed `bound`.
     terms: (M,) gets each beam's score term when complete (pass an empty array to skip).
+    cache: see _new_cache; a beam whose key matches the committed entry reuses its points,
+    the others are scored on the map and recorded in scratch slot w. One flat loop (no
+    calls): this is the innermost loop of the whole filter.
     """
     res, kernel, sigma, lsigma = cfg[C_RES], int(cfg[C_KERNEL]), cfg[C_SIGMA], cfg[C_LSIGMA]
     inv_res = 1.0 / res
@@ -100,6 +107,9 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
     th, tw = table.shape
     n = order.shape[0]
     keep = terms.shape[0] == n
+    ckey, cn, cpts, skey, sn, spts, smiss, snmiss = cache
+    use = cpts.shape[1] > 0
+    snmiss[w] = 0
     score = 0.0
     like = 0.0
     for k in range(n):
@@ -112,58 +122,80 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
         ihy = int(math.floor(hy * inv_res))
         ofx = int(math.floor((x + c * beams[i, 2] - s * beams[i, 3]) * inv_res)) - ihx
         ofy = int(math.floor((y + s * beams[i, 2] + c * beams[i, 3]) * inv_res)) - ihy
-        # the window's rows as bit masks (bit j = cell gx0 + j); a row spans at most two
-        # patches, and so does the row of free cells one step back along the beam
-        gx0 = ihx - kernel
-        tx0 = (gx0 >> PATCH_BITS) - tpx0
-        lx0 = gx0 & PATCH_MASK
-        in0 = 0 <= tx0 < tw
-        in1 = lx0 + nb > PATCH and 0 <= tx0 + 1 < tw
-        gf0 = gx0 + ofx
-        tf0 = (gf0 >> PATCH_BITS) - tpx0
-        lf0 = gf0 & PATCH_MASK
-        inf0 = 0 <= tf0 < tw
-        inf1 = lf0 + nb > PATCH and 0 <= tf0 + 1 < tw
-        best = np.inf
-        for gy in range(ihy - kernel, ihy + kernel + 1):
-            ty = (gy >> PATCH_BITS) - tpy0
-            if ty < 0 or ty >= th:
-                continue
-            uty = np.uintp(ty)
-            ly = np.uintp(gy & PATCH_MASK)
-            e0 = table[uty, np.uintp(tx0)] if in0 else -1
-            e1 = table[uty, np.uintp(tx0 + 1)] if in1 else -1
-            occ = bits[np.uintp(e0), OCCUPIED, ly] >> lx0 if e0 >= 0 else np.int64(0)
-            if e1 >= 0:
-                occ |= bits[np.uintp(e1), OCCUPIED, ly] << (PATCH - lx0)
-            occ &= wmask
-            if occ == 0:
-                continue
-            # the cell one step back along the beam must not be full (near side of a wall)
-            gfy = gy + ofy
-            tfy = (gfy >> PATCH_BITS) - tpy0
-            if 0 <= tfy < th:
-                utf = np.uintp(tfy)
-                lfy = np.uintp(gfy & PATCH_MASK)
-                f0 = table[utf, np.uintp(tf0)] if inf0 else -1
-                f1 = table[utf, np.uintp(tf0 + 1)] if inf1 else -1
-                if f0 >= 0:
-                    occ &= ~(bits[np.uintp(f0), FULL, lfy] >> lf0)
-                if f1 >= 0:
-                    occ &= ~(bits[np.uintp(f1), FULL, lfy] << (PATCH - lf0))
-            j = 0
-            while occ != 0:
-                if occ & 1:
-                    gx = gx0 + j
-                    e = np.uintp(e0 if lx0 + j < PATCH else e1)
-                    lx = np.uintp(gx & PATCH_MASK)
-                    mx = hx - (gx * res + mean[e, ly, lx, 0])
-                    my = hy - (gy * res + mean[e, ly, lx, 1])
-                    d2 = mx * mx + my * my
-                    if d2 < best:
-                        best = d2
-                occ >>= 1
-                j += 1
+        key = ((ihx + 0x800000) << 40) | ((ihy + 0x800000) << 16) | ((ofx + 8) << 8) | (ofy + 8)
+        if use and key == ckey[i]:
+            best = np.inf
+            for q in range(cn[i]):
+                mx = hx - cpts[i, q, 0]
+                my = hy - cpts[i, q, 1]
+                d2 = mx * mx + my * my
+                if d2 < best:
+                    best = d2
+        else:
+            npts = 0
+            # the window's rows as bit masks (bit j = cell gx0 + j); a row spans at most two
+            # patches, and so does the row of free cells one step back along the beam
+            gx0 = ihx - kernel
+            tx0 = (gx0 >> PATCH_BITS) - tpx0
+            lx0 = gx0 & PATCH_MASK
+            in0 = 0 <= tx0 < tw
+            in1 = lx0 + nb > PATCH and 0 <= tx0 + 1 < tw
+            gf0 = gx0 + ofx
+            tf0 = (gf0 >> PATCH_BITS) - tpx0
+            lf0 = gf0 & PATCH_MASK
+            inf0 = 0 <= tf0 < tw
+            inf1 = lf0 + nb > PATCH and 0 <= tf0 + 1 < tw
+            best = np.inf
+            for gy in range(ihy - kernel, ihy + kernel + 1):
+                ty = (gy >> PATCH_BITS) - tpy0
+                if ty < 0 or ty >= th:
+                    continue
+                uty = np.uintp(ty)
+                ly = np.uintp(gy & PATCH_MASK)
+                e0 = table[uty, np.uintp(tx0)] if in0 else -1
+                e1 = table[uty, np.uintp(tx0 + 1)] if in1 else -1
+                occ = bits[np.uintp(e0), OCCUPIED, ly] >> lx0 if e0 >= 0 else np.int64(0)
+                if e1 >= 0:
+                    occ |= bits[np.uintp(e1), OCCUPIED, ly] << (PATCH - lx0)
+                occ &= wmask
+                if occ == 0:
+                    continue
+                # the cell one step back along the beam must not be full (near side of a wall)
+                gfy = gy + ofy
+                tfy = (gfy >> PATCH_BITS) - tpy0
+                if 0 <= tfy < th:
+                    utf = np.uintp(tfy)
+                    lfy = np.uintp(gfy & PATCH_MASK)
+                    f0 = table[utf, np.uintp(tf0)] if inf0 else -1
+                    f1 = table[utf, np.uintp(tf0 + 1)] if inf1 else -1
+                    if f0 >= 0:
+                        occ &= ~(bits[np.uintp(f0), FULL, lfy] >> lf0)
+                    if f1 >= 0:
+                        occ &= ~(bits[np.uintp(f1), FULL, lfy] << (PATCH - lf0))
+                j = 0
+                while occ != 0:
+                    if occ & 1:
+                        gx = gx0 + j
+                        e = np.uintp(e0 if lx0 + j < PATCH else e1)
+                        lx = np.uintp(gx & PATCH_MASK)
+                        px = gx * res + mean[e, ly, lx, 0]
+                        py = gy * res + mean[e, ly, lx, 1]
+                        if use:
+                            spts[w, i, npts, 0] = px
+                            spts[w, i, npts, 1] = py
+                            npts += 1
+                        mx = hx - px
+                        my = hy - py
+                        d2 = mx * mx + my * my
+                        if d2 < best:
+                            best = d2
+                    occ >>= 1
+                    j += 1
+            if use:
+                skey[w, i] = key
+                sn[w, i] = npts
+                smiss[w, snmiss[w]] = i
+                snmiss[w] += 1
         if best < np.inf:
             term = math.exp(-best / sigma)
             like -= best / lsigma
@@ -177,12 +209,43 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
 
 
 @njit(cache=True)
+def _new_cache(m, kernel):
+    """The matching-cell cache of m beams: (key (M,), count (M,), points (M, K, 2) [m]) for the
+    current pose, and two scratch slots of the same plus their lists of recorded beams.
+    K = (2 kernel + 1)^2; K = 0 (no caching) for kernels above MAX_CACHED_KERNEL."""
+    k = (2 * kernel + 1) ** 2 if kernel <= MAX_CACHED_KERNEL else 0
+    return (
+        np.full(m, -1, dtype=np.int64),
+        np.zeros(m, dtype=np.int64),
+        np.empty((m, k, 2)),
+        np.full((2, m), -1, dtype=np.int64),
+        np.zeros((2, m), dtype=np.int64),
+        np.empty((2, m, k, 2)),
+        np.empty((2, m), dtype=np.int64),
+        np.zeros(2, dtype=np.int64),
+    )
+
+
+@njit(cache=True)
+def _commit(cache, slot):
+    """The pose scored into scratch `slot` becomes the current one: its entries are kept."""
+    ckey, cn, cpts, skey, sn, spts, smiss, snmiss = cache
+    for q in range(snmiss[slot]):
+        i = smiss[slot, q]
+        ckey[i] = skey[slot, i]
+        cn[i] = sn[slot, i]
+        for r in range(sn[slot, i]):
+            cpts[i, r, 0] = spts[slot, i, r, 0]
+            cpts[i, r, 1] = spts[slot, i, r, 1]
+
+
+@njit(cache=True)
 def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     """(score, log-likelihood) of the prepared beams at pose (3,) in one particle's map."""
     order = np.arange(beams.shape[0])
     sc, like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, order, cfg, -np.inf,
-        np.empty(0),
+        np.empty(0), _new_cache(0, MAX_CACHED_KERNEL + 1), 0,
     )  # fmt: skip
     return sc, like
 
@@ -202,10 +265,12 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     m = beams.shape[0]
     terms = np.empty(m)
     natural = np.arange(m)
+    cache = _new_cache(m, int(cfg[C_KERNEL]))
     cur, cur_like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
-        terms,
+        terms, cache, 0,
     )  # fmt: skip
+    _commit(cache, 0)
     start_score, start_like = cur, cur_like
     order = np.argsort(terms, kind="mergesort")  # worst matched first; stable, deterministic
     none = np.empty(0)
@@ -223,6 +288,7 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
         best = cur
         nx, ny, nt = bx, by, bt
         chosen = -1
+        slot = -1  # scratch slot holding the best candidate of this round
         for move in range(6):
             if came_by >= 0 and move == came_by ^ 1:  # moves 0/1, 2/3, 4/5 undo each other
                 continue
@@ -239,13 +305,17 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
                 t += adelta
             else:
                 t -= adelta
+            w = 1 if slot == 0 else 0
             sc, lk, whole = _score(
-                mean, bits, table, tpx0, tpy0, x, y, t, beams, order, cfg, cur, none
+                mean, bits, table, tpx0, tpy0, x, y, t, beams, order, cfg, cur, none, cache, w
             )
             if whole and sc > cur:
                 cur, cur_like = sc, lk
                 nx, ny, nt = x, y, t
                 chosen = move
+                slot = w
+        if chosen >= 0:
+            _commit(cache, slot)
         bx, by, bt = nx, ny, nt
         came_by = chosen
         if not (cur > best or refinement < iterations):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from worker.slam.base import make_slam
 from worker.slam.match_kernels import match_config, optimize, prepare_beams, score_and_likelihood
@@ -25,9 +26,9 @@ def _mapped():
     return laser, slam
 
 
-def _cfg(lskip: int = 0) -> np.ndarray:
+def _cfg(lskip: int = 0, kernel: int = 1) -> np.ndarray:
     return match_config(
-        res=0.05, usable_range=30.0, max_range=29.99, lskip=lskip, kernel=1, sigma=0.05,
+        res=0.05, usable_range=30.0, max_range=29.99, lskip=lskip, kernel=kernel, sigma=0.05,
         lsigma=0.075, lstep=0.05, astep=0.05, iterations=5, minimum_score=0.0,
     )  # fmt: skip
 
@@ -49,8 +50,8 @@ def _score(slam, laser, pose, ranges, cfg=None):
 class _Reference:
     """GMapping's score and likelihood, cell by cell from the hits / visits planes."""
 
-    def __init__(self, maps, laser, ranges, lskip):
-        self.m, self.res = maps, 0.05
+    def __init__(self, maps, laser, ranges, lskip, kernel=1):
+        self.m, self.res, self.k = maps, 0.05, kernel
         a = laser.angles
         used = [i for i in range(lskip, len(ranges), lskip + 1) if 0 < ranges[i] <= 29.99]
         r = np.asarray(ranges)[used]
@@ -82,8 +83,8 @@ class _Reference:
             ofx = math.floor((x + c * fx - s * fy) / self.res) - ihx
             ofy = math.floor((y + s * fx + c * fy) / self.res) - ihy
             best = None
-            for gy in range(ihy - 1, ihy + 2):
-                for gx in range(ihx - 1, ihx + 2):
+            for gy in range(ihy - self.k, ihy + self.k + 1):
+                for gx in range(ihx - self.k, ihx + self.k + 1):
                     h, v, mx, my = self.cell(gx, gy)
                     hf, vf, _, _ = self.cell(gx + ofx, gy + ofy)
                     occupied = v > 0 and h > 0.1 * v
@@ -145,14 +146,16 @@ def test_score_and_likelihood_equal_the_reference():
             assert np.allclose(got, want, rtol=1e-9, atol=1e-9), (lskip, off, got, want)
 
 
-def test_optimize_equals_plain_hill_climbing():
-    # the kernel drops hopeless candidates early; the reference scores all: same climb
+@pytest.mark.parametrize("kernel, lskip", [(1, 2), (2, 4), (3, 6)])
+def test_optimize_equals_plain_hill_climbing(kernel, lskip):
+    # the kernel drops hopeless candidates early and reuses the cells of beams whose end
+    # point stays in its cell (kernel <= 2); the reference scores all, afresh: same climb
     laser, slam = _mapped()
     m = slam.maps
     truth = np.array([3.3, 2.2, 0.4])
     ranges = box_scan(truth, laser.angles, BOX)
-    cfg = _cfg(lskip=2)
-    ref = _Reference(m, laser, ranges, 2)
+    cfg = _cfg(lskip, kernel)
+    ref = _Reference(m, laser, ranges, lskip, kernel)
     beams = _beams(laser, ranges, cfg)
     for off in ([0.12, -0.08, 0.04], [-0.07, 0.1, -0.05]):
         start = truth + np.array(off)
