@@ -234,6 +234,8 @@ def _print_tables(out: Path) -> None:
     from rich.table import Table
 
     console = Console()
+    if not console.is_terminal:  # a log file: wide enough for every column
+        console = Console(width=160)
     for name, title in (("success.csv", "success"), ("translation.csv", "B translation [m]"),
                         ("rotation.csv", "B rotation [rad]")):  # fmt: skip
         with open(out / name, newline="") as fh:

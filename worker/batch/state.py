@@ -68,9 +68,8 @@ class BatchDir:
     """The output folder OUT of a batch: records, journal, tables, plots, report.html."""
 
     def __init__(self, root: str | Path):
-        self.root = Path(root)
+        self.root = Path(root)  # created on the first write, so a dry run leaves no trace
         self.runs = self.root / "runs"
-        self.runs.mkdir(parents=True, exist_ok=True)
 
     def batch_id(self) -> str:
         """This folder's batch id, made on first use: it names the batch's jobs in the database."""
@@ -78,6 +77,7 @@ class BatchDir:
         if path.exists():
             return json.loads(path.read_text())["batch_id"]
         bid = uuid.uuid4().hex[:12]
+        self.root.mkdir(parents=True, exist_ok=True)
         _write_atomic(path, json.dumps({"batch_id": bid, "created": now_iso()}, indent=2) + "\n")
         return bid
 
@@ -124,6 +124,7 @@ class BatchDir:
     def journal(self, event: str, key: str | None = None, **fields: Any) -> None:
         """Append one event (start, done, error, interrupted, enqueued) to journal.jsonl."""
         line = json.dumps({"time": now_iso(), "event": event, "key": key, **fields})
+        self.root.mkdir(parents=True, exist_ok=True)
         with open(self.root / JOURNAL, "a", encoding="utf-8") as fh:
             fh.write(line + "\n")
             fh.flush()
