@@ -22,9 +22,10 @@ import zlib
 from typing import Any
 
 import numpy as np
+from sqlalchemy import update
 
 from backend.db.models import Run
-from backend.db.session import session_scope
+from backend.db.session import get_engine
 from worker.pipeline import RunCancelled, RunProgress
 
 # map cell codes on the wire
@@ -170,11 +171,19 @@ class ProgressReporter:
             self._next_publish = now + period
         if now >= self._next_store:
             self._next_store = now + self.store_every_s
-            with session_scope(self.url) as s:
-                run = s.get_one(Run, self.run_id)
-                if run.status == "cancelled":
-                    raise RunCancelled(f"run {self.run_id} was cancelled")
-                run.progress = self.payload(p)
+            self._store(p)
+
+    def _store(self, p: RunProgress) -> None:
+        """One statement: store the progress unless the run was cancelled (or is gone)."""
+        stmt = (
+            update(Run)
+            .where(Run.id == self.run_id, Run.status != "cancelled")
+            .values(progress=self.payload(p))
+            .returning(Run.id)
+        )
+        with get_engine(self.url).begin() as conn:
+            if conn.execute(stmt).first() is None:
+                raise RunCancelled(f"run {self.run_id} was cancelled (or deleted)")
 
     def _record(self, p: RunProgress) -> None:
         if self._n == len(self._path):
