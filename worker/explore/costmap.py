@@ -9,6 +9,8 @@ import numpy as np
 from worker.explore import costmap_kernels as ck
 from worker.explore.params import ExploreParams
 
+_TILE = 32  # [cells] block size of the inflation updates
+
 
 class GlobalCostmap:
     """Static layer (SLAM map) + inflation layer, updated only where the map changed.
@@ -89,16 +91,14 @@ class GlobalCostmap:
             y0, y1, x0, x1 = max(0, y0), min(h, y1 + 1), max(0, x0), min(w, x1 + 1)
         if y1 <= y0 or x1 <= x0:
             return (0, 0, 0, 0)
+        t = _TILE
+        tiles = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.bool_)
         ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
-            y0, y1, x0, x1,
+            y0, y1, x0, x1, tiles, t,
         )  # fmt: skip
         if ly1 > ly0:
-            r = self._kernel.shape[0] // 2
-            ck.inflate_region(
-                self.lethal, self._kernel, self.inflated,
-                max(0, ly0 - r), min(h, ly1 + r), max(0, lx0 - r), min(w, lx1 + r),
-            )  # fmt: skip
+            ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
 
     def _reset(self, resolution: float, origin: np.ndarray, shape) -> None:
@@ -170,8 +170,8 @@ class LocalCostmap:
         half = (params.footprint_half_m + params.footprint_padding) / res_m
         # A footprint corner reaches half*sqrt(2) from the centre, and both the robot and the
         # obstacle may sit anywhere in their cells: centre cells up to (half + 1) sqrt(2) apart.
-        self._near = ck.disc_offsets((half + 1.0) * math.sqrt(2.0) + 0.01)
-        self._inner = ck.disc_offsets(half)
+        self._near = ck.disc_half_widths((half + 1.0) * math.sqrt(2.0) + 0.01)
+        self._inner = ck.disc_half_widths(half)
         # farthest a trajectory takes the footprint from the robot: the map's obstacles
         # matter for the collision test only that near
         reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m

@@ -152,12 +152,45 @@ def footprint_collides(lethal, near, inner, origin_x, origin_y, resolution, x, y
 
 
 @njit(cache=True)
-def classify_region(prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1):
+def inflate_tiles(lethal, kernel, cost, tiles, tile):
+    """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`.
+
+    tiles: (ceil(H / tile), ceil(W / tile)) bool, the blocks where lethal cells changed. A
+    cell's cost depends on the obstacles within R (the kernel's radius) only, so the blocks
+    within ceil(R / tile) blocks of a flagged one are all that can change; scattered changes
+    (new walls at both ends of a long corridor) recompute a few blocks, not their bounding box.
+    """
+    h, w = lethal.shape
+    th, tw = tiles.shape
+    r = kernel.shape[0] // 2
+    reach = (r + tile - 1) // tile
+    todo = np.zeros((th, tw), dtype=np.bool_)
+    for ty in range(th):
+        for tx in range(tw):
+            if tiles[ty, tx]:
+                for uy in range(max(0, ty - reach), min(th, ty + reach + 1)):
+                    for ux in range(max(0, tx - reach), min(tw, tx + reach + 1)):
+                        todo[uy, ux] = True
+    for ty in range(th):
+        for tx in range(tw):
+            if todo[ty, tx]:
+                inflate_region(
+                    lethal, kernel, cost, ty * tile, min(h, (ty + 1) * tile), tx * tile,
+                    min(w, (tx + 1) * tile),
+                )  # fmt: skip
+
+
+@njit(cache=True)
+def classify_region(
+    prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1, tiles, tile
+):
     """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
 
     prob: (h, w) float32 occupancy probability, NaN unknown, whose cell (0, 0) is cell
     (off_y, off_x) of the layers; layer cells outside it are unknown. A cell is lethal above
-    `occupied_thresh` (GMapping publishes 100 above its occ_thresh). Returns the bounding boxes
+    `occupied_thresh` (GMapping publishes 100 above its occ_thresh). The `tile x tile` blocks
+    holding lethal changes are flagged in `tiles (ceil(H / tile), ceil(W / tile)) bool`.
+    Returns the bounding boxes
     `(y0, y1, x0, x1)` of the lethal and of the unknown changes, each empty (y1 == y0) when
     nothing changed.
     """
@@ -173,6 +206,7 @@ def classify_region(prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1
             let = (not unk) and p > occupied_thresh
             if let != lethal[iy, ix]:
                 lethal[iy, ix] = let
+                tiles[iy // tile, ix // tile] = True
                 ly0 = min(ly0, iy)
                 ly1 = max(ly1, iy + 1)
                 lx0 = min(lx0, ix)
@@ -190,6 +224,42 @@ def classify_region(prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1
     return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1
 
 
+def disc_half_widths(radius_cells: float) -> np.ndarray:
+    """`(2R+1,) int64`: for each row offset dy = -R..R, the largest |dx| of a cell whose
+    centre is within radius_cells of a centre (the disc of `disc_offsets`, row by row)."""
+    r = int(math.floor(radius_cells))
+    dy = np.arange(-r, r + 1)
+    return np.floor(np.sqrt(np.maximum(radius_cells**2 + 1e-9 - dy * dy, 0.0))).astype(np.int64)
+
+
+@njit(cache=True)
+def _dilate_rows(cells, k, half_widths, n):
+    """`(n, n) bool`: the union of discs (row half-widths `half_widths`) around cells[:k],
+    by a difference array per row: 2 writes per disc row instead of one per disc cell."""
+    r = half_widths.shape[0] // 2
+    diff = np.zeros((n, n + 1), dtype=np.int32)
+    for i in range(k):
+        cy = cells[i, 0]
+        cx = cells[i, 1]
+        for m in range(half_widths.shape[0]):
+            jy = cy + m - r
+            if jy < 0 or jy >= n:
+                continue
+            hw = half_widths[m]
+            a = max(0, cx - hw)
+            b = min(n - 1, cx + hw)
+            if a <= b:
+                diff[jy, a] += 1
+                diff[jy, b + 1] -= 1
+    out = np.zeros((n, n), dtype=np.bool_)
+    for iy in range(n):
+        acc = 0
+        for ix in range(n):
+            acc += diff[iy, ix]
+            out[iy, ix] = acc > 0
+    return out
+
+
 def disc_offsets(radius_cells: float) -> np.ndarray:
     """`(K, 2) int64 [dy, dx]` of the cells whose centres are within radius_cells of a centre."""
     r = int(math.floor(radius_cells))
@@ -200,12 +270,13 @@ def disc_offsets(radius_cells: float) -> np.ndarray:
 
 @njit(cache=True)
 def local_layers(
-    px, py, ox, oy, resolution, n, near_offsets, inner_offsets, g_lethal, g_cost, g_oy, g_ox,
+    px, py, ox, oy, resolution, n, near_widths, inner_widths, g_lethal, g_cost, g_oy, g_ox,
     reach, rx, ry, rth, rhalf,
 ):  # fmt: skip
     """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
 
-    px, py: (K,) [m] obstacle points (map frame) from the recent scans; the global costmap's
+    px, py: (K,) [m] obstacle points (map frame) from the recent scans; near_widths,
+    inner_widths: `disc_half_widths` of the two layers' discs; the global costmap's
     obstacles `g_lethal` and costs `g_cost` are read through the window (its cell (0, 0) is
     global cell (g_oy, g_ox)). Returns `(lethal, near, inner, cost)`, all (n, n): lethal bool
     cells holding an obstacle (scan, or map within `reach` cells of the window's centre: the
@@ -217,8 +288,6 @@ def local_layers(
     artefacts (which would otherwise forbid every motion).
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
-    near = np.zeros((n, n), dtype=np.bool_)
-    inner = np.zeros((n, n), dtype=np.bool_)
     cells = np.empty((px.shape[0], 2), dtype=np.int64)
     k = 0
     c = math.cos(rth)
@@ -226,11 +295,14 @@ def local_layers(
     # only cells wholly inside the footprint: one the robot's edge merely touches may be real
     lim = rhalf - 0.75 * resolution
     under = np.zeros((n, n), dtype=np.bool_)
-    for iy in range(n):
-        dy = oy + (iy + 0.5) * resolution - ry
-        for ix in range(n):
-            dx = ox + (ix + 0.5) * resolution - rx
-            if abs(dx) <= 2 * lim and abs(dy) <= 2 * lim:
+    if lim > 0.0:
+        b = int(math.ceil(2.0 * lim / resolution)) + 1
+        ucy = int(math.floor((ry - oy) / resolution))
+        ucx = int(math.floor((rx - ox) / resolution))
+        for iy in range(max(0, ucy - b), min(n, ucy + b + 1)):
+            dy = oy + (iy + 0.5) * resolution - ry
+            for ix in range(max(0, ucx - b), min(n, ucx + b + 1)):
+                dx = ox + (ix + 0.5) * resolution - rx
                 under[iy, ix] = abs(dx * c + dy * s) < lim and abs(-dx * s + dy * c) < lim
     for i in range(px.shape[0]):
         ix = int(math.floor((px[i] - ox) / resolution))
@@ -254,19 +326,8 @@ def local_layers(
                 cells[k, 0] = iy
                 cells[k, 1] = ix
                 k += 1
-    for i in range(k):
-        cy = cells[i, 0]
-        cx = cells[i, 1]
-        for m in range(near_offsets.shape[0]):
-            jy = cy + near_offsets[m, 0]
-            jx = cx + near_offsets[m, 1]
-            if 0 <= jy < n and 0 <= jx < n:
-                near[jy, jx] = True
-        for m in range(inner_offsets.shape[0]):
-            jy = cy + inner_offsets[m, 0]
-            jx = cx + inner_offsets[m, 1]
-            if 0 <= jy < n and 0 <= jx < n:
-                inner[jy, jx] = True
+    near = _dilate_rows(cells, k, near_widths, n)
+    inner = _dilate_rows(cells, k, inner_widths, n)
     cost = np.zeros((n, n), dtype=np.uint8)
     for iy in range(n):
         gy = g_oy + iy

@@ -23,6 +23,9 @@ class FrontierGoal:
     cluster_size_m: float  # [m] frontier length (cells x resolution, as explore_lite)
     travel_cost: float  # [-] navfn potential from the robot to the goal
     n_clusters: int  # clusters big enough at the time of the choice
+    # (K, 2) [x, y] the search's own path from the robot to the goal, through known space
+    # (a first plan for free), or None
+    path_xy: np.ndarray | None = None
 
 
 class FrontierSearch:
@@ -196,7 +199,10 @@ class FrontierSearch:
         d = frontier_xy - goal_xy
         if np.hypot(*d) < 1e-9:
             d = goal_xy - np.asarray(robot_xy[:2], dtype=float)
+        path_cells = self.search.path_to(int(cand[best]))
+        pxs, pys = costmap.cell_to_world(path_cells[:, 1], path_cells[:, 0])
         return FrontierGoal(
+            path_xy=np.column_stack((pxs, pys)),
             goal_xy=goal_xy,
             yaw=math.atan2(d[1], d[0]),
             frontier_xy=frontier_xy,

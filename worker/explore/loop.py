@@ -63,6 +63,8 @@ class ExplorationResult:
     recoveries: int
     T_world_map: np.ndarray  # (3,) alignment used for the coverage
     nav_wall_s: np.ndarray  # (N,) [s] wall time of the navigation stack per 0.1 s step
+    # (N,) [s] its CPU time (this thread): what it costs on one core, whatever else runs
+    nav_cpu_s: np.ndarray
     wall_s: float  # [s] wall time of the whole run
 
     @property
@@ -76,16 +78,19 @@ class _Recorder:
     def __init__(self):
         self.buf = np.empty((4096, 7))
         self.nav = np.empty(4096)
+        self.cpu = np.empty(4096)
         self.n = 0
 
-    def add(self, t, pose_gt, pose_est, nav_s) -> None:
+    def add(self, t, pose_gt, pose_est, nav_s, cpu_s) -> None:
         if self.n == len(self.buf):
             self.buf = np.concatenate([self.buf, np.empty_like(self.buf)])
             self.nav = np.concatenate([self.nav, np.empty_like(self.nav)])
+            self.cpu = np.concatenate([self.cpu, np.empty_like(self.cpu)])
         self.buf[self.n, 0] = t
         self.buf[self.n, 1:4] = pose_gt
         self.buf[self.n, 4:7] = pose_est
         self.nav[self.n] = nav_s
+        self.cpu[self.n] = cpu_s
         self.n += 1
 
 
@@ -157,23 +162,25 @@ def explore(
         pose_est = np.asarray(slam.pose_estimate(), dtype=float)
         if T0 is None:
             T0 = align_map_to_world(pose_est[None, :], pose_gt[None, :])
-        nav_s = 0.0
+        nav_s = cpu_s = 0.0
         if updated and t - last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:
             grid = slam.occupancy()
             full = t - last_full_t >= p.full_map_check_period
-            c0 = time.perf_counter()
+            c0, u0 = time.perf_counter(), time.thread_time()
             nav.update_map(grid.prob, grid.resolution, grid.origin, full)
             nav_s += time.perf_counter() - c0
+            cpu_s += time.thread_time() - u0
             last_map_t = t
             if full:
                 last_full_t = t
         v0, w0 = _odom_velocity(prev_odom, pose_odom, dt)
         prev_odom = pose_odom
-        c0 = time.perf_counter()
+        c0, u0 = time.perf_counter(), time.thread_time()
         cmd = nav.step(t, pose_est, v0, w0, ranges)
         nav_s += time.perf_counter() - c0
+        cpu_s += time.thread_time() - u0
         status = cmd.status
-        rec.add(t, pose_gt, pose_est, nav_s)
+        rec.add(t, pose_gt, pose_est, nav_s, cpu_s)
         # --- outcome checks: the harness may look at the ground truth, the robot may not ---
         if cmd.status == "no_frontier":
             # for a whole second: a transient gap in the map must not end the run
@@ -256,5 +263,6 @@ def _result(world, sim, slam, nav, rec, reach, reason, detail, n_col0, wall0):
         recoveries=nav.stats.recoveries,
         T_world_map=T,
         nav_wall_s=rec.nav[: rec.n].copy(),
+        nav_cpu_s=rec.cpu[: rec.n].copy(),
         wall_s=time.perf_counter() - wall0,
     )

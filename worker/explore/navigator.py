@@ -253,7 +253,9 @@ class Navigator:
             self._end_goal(t, "replaced", "a nearer frontier")
         self.goal = new
         self._goal_t0 = t
-        self.path = None
+        self.path = new.path_xy  # the frontier search's own path: the first plan
+        self.dwa.set_plan(self.path)
+        self._next_plan_t = t + 1.0 / p.planner_frequency
         self._plan_fail_since = None
         self._ctrl_fail_since = None
         self._best_gap = math.inf

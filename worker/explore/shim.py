@@ -77,7 +77,7 @@ class HeadingShim:
         for v, w in (
             (v_back, w_back), (v_back, 0.0), (v_back, -w_back), (v_fwd, w_fwd), (v_fwd, 0.0)
         ):  # fmt: skip
-            if not self._legal(pose, v, w, local, 0.5):
+            if not self._legal(pose, v, w, local, 0.5, padded=False):
                 continue
             # once going one way, keep going that way while it is legal (no shuffling)
             c = _cost_after(pose, v, w, 0.5, local) + (1000 if v * self._dir < 0 else 0)
@@ -91,14 +91,17 @@ class HeadingShim:
         self.n_reversals += best[1] < 0
         return best[1], best[2], "reverse" if best[1] < 0 else "creep"
 
-    def _legal(self, pose, v: float, w: float, local: LocalCostmap, duration: float) -> bool:
-        """Driving (v, w) for `duration` [s] keeps the padded footprint clear."""
+    def _legal(
+        self, pose, v: float, w: float, local: LocalCostmap, duration: float, padded: bool = True
+    ) -> bool:
+        """Driving (v, w) for `duration` [s] keeps the (padded) footprint clear. Getting room
+        to turn is checked with the exact footprint: where the robot stands, it fits."""
         p = self.params
+        half = p.footprint_half_m + (p.footprint_padding if padded else 0.0)
         return dk.motion_legal(
             float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration,
             local.lethal, local.near, local.inner, float(local.origin[0]),
-            float(local.origin[1]), local.resolution, p.footprint_half_m + p.footprint_padding,
-            p.angular_sim_granularity,
+            float(local.origin[1]), local.resolution, half, p.angular_sim_granularity,
         )  # fmt: skip
 
 

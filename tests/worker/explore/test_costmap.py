@@ -137,7 +137,7 @@ def _single_obstacle_layers(cx, cy, n=40):
     pts = np.array([[(cx + 0.5) * RES, (cy + 0.5) * RES]])
     lethal, near, inner, _ = ck.local_layers(
         pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
-        ck.disc_offsets(5 * math.sqrt(2) + 0.01), ck.disc_offsets(4.0),
+        ck.disc_half_widths(5 * math.sqrt(2) + 0.01), ck.disc_half_widths(4.0),
         np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), n,
         0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
@@ -207,3 +207,24 @@ def test_local_costmap_clears_the_robots_own_footprint():
     assert local.lethal.sum() == 1
     local.build(5.0, 5.0)  # no heading given: nothing cleared
     assert local.lethal.sum() == 2
+
+
+def test_local_layers_equal_a_disc_dilation():
+    # independent check: scipy's binary dilation with the disc of disc_offsets
+    from scipy import ndimage
+
+    rng = np.random.default_rng(4)
+    n, radius = 60, 6.3
+    pts = rng.uniform(0.0, n * RES, size=(40, 2))
+    lethal, near, inner, _ = ck.local_layers(
+        pts[:, 0].copy(), pts[:, 1].copy(), 0.0, 0.0, RES, n,
+        ck.disc_half_widths(radius), ck.disc_half_widths(2.5),
+        np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), 0,
+        0.0, 0.0, 0.0, -1.0,
+    )  # fmt: skip
+    for layer, r in ((near, radius), (inner, 2.5)):
+        off = ck.disc_offsets(r)
+        R = int(np.abs(off).max())
+        disc = np.zeros((2 * R + 1, 2 * R + 1), dtype=bool)
+        disc[off[:, 0] + R, off[:, 1] + R] = True
+        np.testing.assert_array_equal(layer, ndimage.binary_dilation(lethal, structure=disc))

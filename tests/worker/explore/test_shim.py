@@ -1,0 +1,80 @@
+"""Heading shim: turns on the spot to a path behind, backs out of a pocket it cannot turn in."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore.costmap import LocalCostmap
+from worker.explore.params import ExploreParams
+from worker.explore.shim import HeadingShim
+
+RES = 0.05
+
+
+def _local(points, pose, p):
+    local = LocalCostmap(p, RES)
+    if len(points):
+        local.add_points(0.0, np.asarray(points, dtype=float))
+    local.build(pose[0], pose[1], None, pose[2])
+    return local
+
+
+def _segment(x0, y0, x1, y1, step=0.01):
+    n = int(math.hypot(x1 - x0, y1 - y0) / step) + 1
+    return np.column_stack((np.linspace(x0, x1, n), np.linspace(y0, y1, n)))
+
+
+def _path_west(x0=3.0, y=3.0):
+    return np.column_stack((np.linspace(x0, 0.5, 51), np.full(51, y)))
+
+
+def test_path_ahead_is_left_to_the_dwa():
+    p = ExploreParams()
+    pose = np.array([3.0, 3.0, math.pi])
+    assert HeadingShim(p).command(pose, 0.0, _path_west(), _local([], pose, p)) is None
+
+
+def test_path_behind_in_the_open_turns_on_the_spot_until_released():
+    p = ExploreParams()
+    shim = HeadingShim(p)
+    pose = np.array([3.0, 3.0, 0.2])
+    v, w, kind = shim.command(pose, 0.0, _path_west(), _local([], pose, p))
+    assert kind == "rotate" and v == 0.0 and w > 0  # the short way round: left
+    assert w <= p.acc_lim_theta / p.controller_frequency + 1e-9  # from rest: one step's accel
+    pose[2] = math.pi - 0.9  # 0.9 rad off: above the release angle, it keeps turning
+    assert shim.command(pose, 0.25, _path_west(), _local([], pose, p))[2] == "rotate"
+    pose[2] = math.pi - 0.4  # below shim_release (0.5 rad): the DWA takes over
+    assert shim.command(pose, 0.5, _path_west(), _local([], pose, p)) is None
+
+
+def test_boxed_in_it_backs_out_until_it_can_turn():
+    # a 0.56 m wide dead-end slot open to the -x side, the robot in it facing its +x end; the
+    # path leads out of the slot's open end behind the robot: no turn fits in the slot
+    p = ExploreParams()
+    walls = np.concatenate(
+        [_segment(1.0, 2.72, 3.45, 2.72), _segment(1.0, 3.28, 3.45, 3.28),
+         _segment(3.45, 2.72, 3.45, 3.28)]
+    )  # fmt: skip
+    x = np.array([3.0, 3.0, 0.0])
+    shim = HeadingShim(p)
+    kinds = []
+    for _ in range(200):
+        out = shim.command(x, 0.0, _path_west(x[0] - 0.3), _local(walls, x, p))
+        assert out is not None
+        v, w, kind = out
+        kinds.append(kind)
+        if kind == "rotate":
+            break
+        x[0] += v * math.cos(x[2]) * 0.1
+        x[1] += v * math.sin(x[2]) * 0.1
+        x[2] += w * 0.1
+        # independent check: the robot's 0.4 m square never overlaps a wall point
+        c, s = math.cos(x[2]), math.sin(x[2])
+        u = (walls[:, 0] - x[0]) * c + (walls[:, 1] - x[1]) * s
+        q = -(walls[:, 0] - x[0]) * s + (walls[:, 1] - x[1]) * c
+        assert not np.any((np.abs(u) < 0.2) & (np.abs(q) < 0.2))
+    assert kinds[0] == "reverse" and kinds[-1] == "rotate"
+    assert x[0] < 1.2  # it backed out of the slot before it could turn
+    assert shim.n_reversals == len(kinds) - 1
