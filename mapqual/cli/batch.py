@@ -124,7 +124,7 @@ def _terminate(signum: int, frame: Any) -> None:
 def batch(
     worlds: Annotated[
         list[Path] | None,
-        typer.Argument(metavar="WORLDS...", help="Floorplan files (.yaml, .world) or folders."),
+        typer.Argument(metavar="WORLDS", help="Floorplan files (.yaml, .world) or folders."),
     ] = None,
     runs: Annotated[int | None, typer.Option(min=1, help="Seeds 1..N per condition.")] = None,
     seeds: Annotated[str | None, typer.Option(help="Seeds: A-B or a list, e.g. 1-10.")] = None,
@@ -163,10 +163,18 @@ def batch(
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")] = Path("batch"),
 ) -> None:
     """Run an experiment (WORLDS x seeds x --slam x --laser-noise) and write its tables,
-    figures and report.html to OUT. Re-running the same command resumes it."""
+    figures and report.html to OUT. Re-running the same command resumes it.
+
+    An experiment file (YAML) holds the keys worlds, runs or seeds, slam, laser_noise and
+    params (sim, slam, explore, eval sections), and optionally a list of groups with the
+    same keys: the experiment is the union of their products. Options override the file's
+    values; --only narrows its worlds.
+    """
     from worker.batch.experiment import build_groups, expand, load_experiment, load_params, merge
     from worker.batch.state import BatchDir
 
+    if worlds and experiment:
+        raise InputError("give WORLDS or --experiment, not both (--only GLOB narrows one)")
     if workers is not None and celery:
         raise InputError("--workers is for the local pool; Celery workers are started apart")
     raw, base_dir = load_experiment(experiment) if experiment else ({}, None)

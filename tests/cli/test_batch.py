@@ -302,6 +302,7 @@ def test_a_killed_batch_resumes_with_no_run_lost_or_done_twice(worlds, tmp_path)
         (["w/rooms.yaml", "--celery", "--workers", "2"], "--workers is for the local pool"),
         (["w/rooms.yaml", "--slam", "gmapping"], "slam"),
         (["--experiment", "nothing.yaml"], "no such experiment"),
+        (["w/rooms.yaml", "--experiment", "thesis"], "not both"),
         (["w/rooms.yaml", "--only", "office*"], "matches none"),
     ],
 )
