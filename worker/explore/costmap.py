@@ -93,12 +93,14 @@ class GlobalCostmap:
             return (0, 0, 0, 0)
         t = _TILE
         tiles = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.bool_)
-        ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
+        ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1, added = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
             y0, y1, x0, x1, tiles, t,
         )  # fmt: skip
         if ly1 > ly0:
+            # obstacles that went away: their blocks are recomputed; new ones: stamped in
             ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
+            ck.stamp_added(self.lethal, self._kernel, self.inflated, added)
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
 
     def _reset(self, resolution: float, origin: np.ndarray, shape) -> None:
