@@ -139,8 +139,9 @@ class RunView:
 
     def _frame_camera(self, floor: Floorplan) -> None:
         cx, cy = floor.centre
-        span = max(floor.size) * 0.6
+        span = max(floor.size) * 0.5
         height = span / math.tan(math.radians(35)) + 1.0
+        cx += 0.2 * span  # the plan sits left of centre, clear of the control panel
         cam = self.client.camera
         cam.position = (cx, cy - 0.05 * height, height)
         cam.look_at = (cx, cy, 0.0)

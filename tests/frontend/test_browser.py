@@ -37,14 +37,16 @@ def _sign_in(page, site) -> None:
 
 def _upload_world(page, site, tmp_path, artifacts) -> int:
     png = tmp_path / "rooms.png"
-    Image.fromarray(np.where(rooms(4, 2), 0, 255).astype(np.uint8)).save(png)
+    Image.fromarray(np.where(rooms(5, 3), 0, 255).astype(np.uint8)).save(png)
     page.goto(site.url + "/worlds")
     page.set_input_files('input[name="file"]', str(png))
     page.fill('input[name="resolution"]', "0.05")
     page.click('button:has-text("Upload")')
     notice = page.locator(".notice").inner_text()
     world_id = int(re.search(r"as #(\d+)", notice).group(1))
-    assert page.locator(f"#world-{world_id} img").evaluate("img => img.naturalWidth") == 481
+    thumb = f"document.querySelector('#world-{world_id} img')"
+    page.wait_for_function(f"{thumb}.complete && {thumb}.naturalWidth > 0")
+    assert page.evaluate(f"{thumb}.naturalWidth") == 601  # the floorplan's own pixels
     page.screenshot(path=artifacts / "worlds.png", full_page=True)
     return world_id
 
@@ -54,6 +56,7 @@ def _shoot(page, path) -> None:
     close = page.locator(".mantine-Notification-closeButton")
     for i in range(close.count()):
         close.nth(i).click()
+    page.wait_for_timeout(700)  # the notice fades out
     page.screenshot(path=path)
 
 
@@ -82,7 +85,7 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     page.select_option('select[name="world_id"]', str(world_id))
     page.fill('input[name="runs"]', "1")
     page.select_option('select[name="slam"]', "rbpf")
-    page.fill('input[name="time_limit"]', "60")
+    page.fill('input[name="time_limit"]', "90")
     page.click('button:has-text("Submit")')
     page.wait_for_url(re.compile(r".*/jobs/\d+$"))
     job_id = int(page.url.rsplit("/", 1)[1])
