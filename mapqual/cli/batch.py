@@ -185,7 +185,7 @@ def batch(
         raw, base_dir, _overrides(worlds or [], runs, seeds, slam, laser_noise), base_params
     )
     if only is not None:
-        groups = [replace(g, worlds=_match(g.worlds, only)) for g in groups]
+        groups = _only(groups, only)
     specs, loaded = expand(groups)
     bdir = BatchDir(out)
     records = bdir.load_records(s.key for s in specs)
@@ -202,8 +202,13 @@ def batch(
     _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log)
 
 
-def _match(paths, pattern: str):
-    kept = tuple(p for p in paths if fnmatch.fnmatch(Path(p).stem, pattern))
+def _only(groups, pattern: str):
+    """The groups narrowed to the worlds whose file name matches `pattern`."""
+    kept = []
+    for g in groups:
+        worlds = tuple(p for p in g.worlds if fnmatch.fnmatch(Path(p).stem, pattern))
+        if worlds:
+            kept.append(replace(g, worlds=worlds))
     if not kept:
         raise InputError(f"--only {pattern!r} matches none of the experiment's worlds")
     return kept
