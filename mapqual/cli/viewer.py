@@ -26,12 +26,12 @@ def viewer(
     from backend.db.migrate import upgrade
     from frontend.viewer import ViewerApp
 
+    done = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: done.set())
     settings = get_settings()
     upgrade(settings.database_url)
     viewer_app = ViewerApp(settings.database_url, settings.redis_url, host, port)
     typer.echo(f"mapqual viewer on http://{host}:{viewer_app.port}/ (Ctrl+C stops it)", err=True)
-    done = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: done.set())
     done.wait()
     viewer_app.stop()
