@@ -311,3 +311,20 @@ def test_bad_input_is_one_line_and_exit_code_2(worlds, tmp_path, args, message):
     r = _mapqual(tmp_path, {"DATABASE_URL": f"sqlite:///{tmp_path / 'm.db'}"}, "batch", *args)
     assert r.returncode == 2, r.stderr
     assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_slice_of_the_thesis_experiment_dry_run(tmp_path):
+    env = {"DATABASE_URL": f"sqlite:///{tmp_path / 'm.db'}"}
+    r = _mapqual(tmp_path, env, "batch", "--experiment", "thesis", "--only", "office_d*",
+                 "--runs", "2", "--dry-run", "-o", "out")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "8 runs, 0 finished, 8 to do" in r.stderr
+    labels = sorted(line.split(None, 2)[2] for line in r.stdout.splitlines())
+    # both variants at noise 0, and the noise sweep on office_d with furniture, 2 seeds each
+    assert labels == sorted(
+        f"{w} seed {s} rbpf noise {n}"
+        for s in (1, 2)
+        for w, n in [("office_d", "0"), ("office_d_furnitures", "0"),
+                     ("office_d_furnitures", "0.1"), ("office_d_furnitures", "0.3")]
+    )  # fmt: skip
+    assert not (tmp_path / "out").exists()  # a dry run writes nothing
