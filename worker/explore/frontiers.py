@@ -174,6 +174,11 @@ class FrontierSearch:
             # the goal can be the lowest-cost cell of that cluster, not its nearest edge.
             extra = p.neutral_cost * 2.0 * p.goal_radius / res
             found = self.search.run(costmap, (sx, sy), self._target, p, extra, allow_unknown=False)
+            if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
+                found = self.search.run(
+                    costmap, (sx, sy), self._target, p, extra, allow_unknown=False,
+                    escape_m=p.pocket_escape_radius,
+                )  # fmt: skip
         finally:
             self._target[marked[:, 0], marked[:, 1]] = False
         if found.size == 0:

@@ -55,6 +55,9 @@ class ExploreParams:
     # [m] near the robot, plans may cross the margin (not the inscribed radius): a pocket the
     # map closed around the robot as it mapped obstacles better must not trap it
     escape_radius: float = 0.5
+    # [m] the same, when nothing is reachable otherwise (the robot in a pocket between table
+    # legs that the map sealed as it mapped them): before a goal or the run is given up
+    pocket_escape_radius: float = 1.5
     planner_patience: float = 5.0  # [s] planning may fail this long before recovery
     # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
     controller_frequency: float = 10.0  # [Hz]

@@ -30,8 +30,10 @@ class DijkstraSearch:
         stop_extra: float = 0.0,
         allow_unknown: bool | None = None,
         goal_cell: tuple[int, int] | None = None,
+        escape_m: float | None = None,
     ) -> np.ndarray:
-        """Search from `start_cell (ix, iy)`; settled target flat indices, nearest first."""
+        """Search from `start_cell (ix, iy)`; settled target flat indices, nearest first.
+        escape_m: the escape radius [m] (default params.escape_radius)."""
         if costmap.shape != self.shape:
             self.shape = costmap.shape
             self.potential = np.zeros(self.shape)
@@ -40,6 +42,7 @@ class DijkstraSearch:
             self.run_id = 0
         self.run_id += 1
         allow = params.allow_unknown if allow_unknown is None else allow_unknown
+        escape = params.escape_radius if escape_m is None else escape_m  # [m]
         return pk.dijkstra(
             costmap.inflated,
             costmap.unknown,
@@ -57,7 +60,7 @@ class DijkstraSearch:
             -1 if goal_cell is None else goal_cell[1],
             -1 if goal_cell is None else goal_cell[0],
             planner_blocked_cost(params),
-            int(round(params.escape_radius / costmap.resolution)),
+            int(round(escape / costmap.resolution)),
         )
 
     def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:
@@ -90,6 +93,11 @@ class GlobalPlanner:
             found = self.search.run(
                 costmap, (sx, sy), self._target, self.params, goal_cell=(gx, gy)
             )
+            if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
+                found = self.search.run(
+                    costmap, (sx, sy), self._target, self.params, goal_cell=(gx, gy),
+                    escape_m=self.params.pocket_escape_radius,
+                )  # fmt: skip
         finally:
             self._target[gy, gx] = False
         if found.size == 0:

@@ -74,15 +74,20 @@ class HeadingShim:
         w_fwd = max(-p.max_vel_theta, min(p.max_vel_theta, 1.5 * err))
         v_back, v_fwd = 1.5 * p.escape_vel, p.min_vel_x
         best = None
-        for v, w in (
-            (v_back, w_back), (v_back, 0.0), (v_back, -w_back), (v_fwd, w_fwd), (v_fwd, 0.0)
-        ):  # fmt: skip
-            if not self._legal(pose, v, w, local, 0.5, padded=False):
-                continue
-            # once going one way, keep going that way while it is legal (no shuffling)
-            c = _cost_after(pose, v, w, 0.5, local) + (1000 if v * self._dir < 0 else 0)
-            if best is None or c < best[0]:
-                best = (c, v, w)
+        # the exact footprint first; then one half a cell smaller: the cell test is that much
+        # conservative, and a robot whose edge touches a map cell must still get away from it
+        for shrink in (0.0, 0.5 * local.resolution):
+            for v, w in (
+                (v_back, w_back), (v_back, 0.0), (v_back, -w_back), (v_fwd, w_fwd), (v_fwd, 0.0)
+            ):  # fmt: skip
+                if not self._legal(pose, v, w, local, 0.5, padded=False, shrink=shrink):
+                    continue
+                # once going one way, keep going that way while it is legal (no shuffling)
+                c = _cost_after(pose, v, w, 0.5, local) + (1000 if v * self._dir < 0 else 0)
+                if best is None or c < best[0]:
+                    best = (c, v, w)
+            if best is not None:
+                break
         if best is None:
             self.active = False
             self._dir = 0.0
@@ -92,12 +97,20 @@ class HeadingShim:
         return best[1], best[2], "reverse" if best[1] < 0 else "creep"
 
     def _legal(
-        self, pose, v: float, w: float, local: LocalCostmap, duration: float, padded: bool = True
+        self,
+        pose,
+        v: float,
+        w: float,
+        local: LocalCostmap,
+        duration: float,
+        padded: bool = True,
+        shrink: float = 0.0,
     ) -> bool:
-        """Driving (v, w) for `duration` [s] keeps the (padded) footprint clear. Getting room
-        to turn is checked with the exact footprint: where the robot stands, it fits."""
+        """Driving (v, w) for `duration` [s] keeps the (padded, or shrunk by `shrink` [m])
+        footprint clear. Getting room to turn is checked with the exact footprint: where the
+        robot stands, it fits."""
         p = self.params
-        half = p.footprint_half_m + (p.footprint_padding if padded else 0.0)
+        half = p.footprint_half_m + (p.footprint_padding if padded else -shrink)
         return dk.motion_legal(
             float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration,
             local.lethal, local.near, local.inner, float(local.origin[0]),
