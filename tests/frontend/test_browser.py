@@ -99,6 +99,9 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     viewer = new.value
     scene = _live_scene(site, run_id)
     assert scene["scan"] and viewer.url.startswith(site.viewer_url)
+    # the metrics panel in the page shows the run and its simulated time
+    viewer.get_by_text(f"Run #{run_id}").first.wait_for(timeout=10000)
+    assert viewer.get_by_text("sim time").count() >= 1
     time.sleep(1.0)  # let the browser draw what it received
     _shoot(viewer, artifacts / "viewer-live.png")
     page.screenshot(path=artifacts / "job-running.png", full_page=True)
