@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -15,7 +16,9 @@ def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
     return ImageFont.load_default(size=size)
 
 
-def map_png(path: str | Path, grid_ros: np.ndarray, lines: Sequence[str], min_width: int = 640):
+def map_png(
+    path: str | Path | BinaryIO, grid_ros: np.ndarray, lines: Sequence[str], min_width: int = 640
+):
     """Write the map with `lines` of text on it in a box at the top left.
 
     Small maps are scaled up by an integer factor (nearest neighbour) so that the text stays
@@ -36,7 +39,7 @@ def map_png(path: str | Path, grid_ros: np.ndarray, lines: Sequence[str], min_wi
         draw.rectangle((0, 0, box_w, line_h * len(lines) + 2 * pad), fill=(255, 255, 255, 215))
         for i, s in enumerate(lines):
             draw.text((pad, pad + i * line_h), s, fill=(160, 0, 0), font=font)
-    img.save(path)
+    img.save(path, format="PNG")  # explicit: `path` may be a stream
 
 
 def _floorplan_axes(ax, occ: np.ndarray, resolution: float, origin: Sequence[float]) -> None:

@@ -69,6 +69,7 @@ def get_trajectory(
 
 
 def _map_files(run: Run, session) -> dict[str, bytes]:
+    from worker.report.folder import error_lines
     from worker.report.plots import map_png
     from worker.slam.grid import ros_to_image
 
@@ -81,7 +82,7 @@ def _map_files(run: Run, session) -> dict[str, bytes]:
         "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
     ).encode()
     buf = io.BytesIO()
-    map_png(buf, grid, [])
+    map_png(buf, grid, error_lines(run.summary) if run.summary.get("relations") else [])
     return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
 
 

@@ -219,3 +219,42 @@ def test_unreachable_broker_is_503_and_the_runs_say_why(api):
     assert job["status"] == "failed"
     run = api.get(f"/api/v1/runs/{job['runs'][0]['id']}").json()
     assert run["status"] == "failed" and "could not enqueue" in run["error"]
+
+
+def test_a_finished_run_without_its_report_folder_serves_its_map_from_the_database(api):
+    from backend.db.session import session_scope
+    from backend.store import mark_run_started, store_run_result
+
+    w = _world(api)
+    run_id = api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1}).json()["runs"][0]["id"]
+    grid = np.full((40, 60), -1, dtype=np.int8)  # [iy, ix], bottom row first
+    grid[:20, :] = 0  # lower half free
+    grid[0, :] = 100  # bottom row a wall
+    t = np.arange(5) * 0.1
+    poses = np.zeros((5, 3))
+    b = {"n": 7, "mean": 0.25, "std": 0.125, "min": 0.0, "max": 1.0}
+    summary = {
+        "world": "box",
+        "seed": 1,
+        "outcome": "completed",
+        "coverage": 0.5,
+        "relations": {"B": {"translation": b, "rotation": b, "skipped": 0}},
+        "timings": {"sim_time_s": 0.4, "wall_time_s": 1.0},
+    }
+    with session_scope(api.url) as s:
+        mark_run_started(s, run_id)
+        store_run_result(
+            s, run_id, summary=summary, t=t, pose_gt=poses, pose_est=poses, map_ros=grid,
+            map_resolution=0.05, map_origin=(1.0, 2.0), report_dir=None,
+        )  # fmt: skip
+    pgm = api.get(f"/api/v1/runs/{run_id}/map.pgm").content
+    header, pixels = pgm.split(b"\n255\n", 1)
+    assert header.endswith(b"60 40")
+    img = np.frombuffer(pixels, np.uint8).reshape(40, 60)  # top row first, as map_saver writes
+    assert (img[-1] == 0).all() and (img[-2] == 254).all() and (img[0] == 205).all()
+    assert "origin: [1.0, 2.0, 0.0]" in api.get(f"/api/v1/runs/{run_id}/map.yaml").text
+    png = api.get(f"/api/v1/runs/{run_id}/map.png")
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    rgb = np.asarray(Image.open(io.BytesIO(png.content)).convert("RGB"))
+    assert rgb.shape[1] >= 640  # scaled up for the text
+    assert ((rgb[..., 0] > 120) & (rgb[..., 1] < 40)).any()  # the errors are written in red
