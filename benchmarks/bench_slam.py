@@ -109,7 +109,9 @@ def main() -> None:
         ]
         env = dict(os.environ, NUMBA_NUM_THREADS="1")
         t0 = time.perf_counter()
-        out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+        out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        if out.returncode != 0:
+            sys.exit(f"mapqual slam failed ({out.returncode}):\n{out.stderr}")
         wall = time.perf_counter() - t0
         usage = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu_s = usage.ru_utime + usage.ru_stime
