@@ -96,6 +96,17 @@ def stamp_targets(
     marked = np.empty((1024, 2), dtype=np.int64)
     n = 0
     seen = np.zeros(cell_cluster.max() + 1 if cell_cluster.shape[0] else 1, dtype=np.int64)
+    # candidates on the even sub-lattice only (a goal needs no finer placement than 2 cells):
+    # the offsets split by parity, in their order, so each cell visits only the quarter
+    # that lands on it
+    n_off = offsets.shape[0]
+    by_parity = np.empty((4, n_off, 2), dtype=np.int64)
+    n_par = np.zeros(4, dtype=np.int64)
+    for m in range(n_off):
+        k = ((offsets[m, 0] & 1) << 1) | (offsets[m, 1] & 1)
+        by_parity[k, n_par[k], 0] = offsets[m, 0]
+        by_parity[k, n_par[k], 1] = offsets[m, 1]
+        n_par[k] += 1
     for i in range(cells.shape[0]):
         c = cell_cluster[i]
         if not cell_valid[i]:
@@ -104,12 +115,11 @@ def stamp_targets(
         seen[c] += 1
         if (seen[c] - 1) % 3 != 0:
             continue
-        for m in range(offsets.shape[0]):
-            jy = cells[i, 0] + offsets[m, 0]
-            jx = cells[i, 1] + offsets[m, 1]
-            # candidates on the even sub-lattice only: a goal needs no finer placement than
-            # 2 cells and it quarters the stamping
-            if (jy | jx) & 1 or jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
+        k = ((cells[i, 0] & 1) << 1) | (cells[i, 1] & 1)
+        for m in range(n_par[k]):
+            jy = cells[i, 0] + by_parity[k, m, 0]
+            jx = cells[i, 1] + by_parity[k, m, 1]
+            if jy < 0 or jy >= h or jx < 0 or jx >= w or target[jy, jx]:
                 continue
             if unknown[jy, jx] or inflated[jy, jx] >= blocked:
                 continue
@@ -123,6 +133,25 @@ def stamp_targets(
             marked[n, 1] = jx
             n += 1
     return marked[:n]
+
+
+@njit(cache=True)
+def true_cells(mask):
+    """`(K, 2) int64 [iy, ix]` of the True cells of `mask (H, W)`, row by row (np.argwhere)."""
+    h, w = mask.shape
+    out = np.empty((1024, 2), dtype=np.int64)
+    n = 0
+    for iy in range(h):
+        for ix in range(w):
+            if mask[iy, ix]:
+                if n == out.shape[0]:
+                    o2 = np.empty((2 * n, 2), dtype=np.int64)
+                    o2[:n] = out
+                    out = o2
+                out[n, 0] = iy
+                out[n, 1] = ix
+                n += 1
+    return out[:n]
 
 
 @njit(cache=True)

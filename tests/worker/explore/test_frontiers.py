@@ -147,3 +147,48 @@ def test_unknown_enclosed_by_known_cells_is_no_frontier():
     assert {tuple(c) for c in cells2[is_open2]} == open_set | {(30, 31), (30, 32)}
     goal = fs.choose(cm, (1.0, 1.0), [])
     assert goal is not None and goal.goal_xy[0] > 2.4  # the door, not the leg nearby
+
+
+def _stamp_reference(cells, labels, valid, offsets, inflated, unknown, blocked):
+    """Plain-Python goal candidate stamping: the rule stamp_targets implements."""
+    h, w = inflated.shape
+    owner, order, seen = {}, [], {}
+    for (cy, cx), c, ok in zip(cells, labels, valid, strict=True):
+        if not ok:
+            continue
+        seen[c] = seen.get(c, 0) + 1
+        if (seen[c] - 1) % 3:
+            continue
+        for dy, dx in offsets:
+            jy, jx = cy + dy, cx + dx
+            if jy % 2 or jx % 2 or not (0 <= jy < h and 0 <= jx < w) or (jy, jx) in owner:
+                continue
+            if unknown[jy, jx] or inflated[jy, jx] >= blocked:
+                continue
+            owner[(jy, jx)] = c
+            order.append((jy, jx))
+    return order, owner
+
+
+def test_goal_candidates_match_a_plain_implementation():
+    from worker.explore import frontier_kernels as fk
+    from worker.explore.planner import cells_in_radius
+
+    rng = np.random.default_rng(7)
+    prob = np.full((70, 90), 0.05)
+    for _ in range(12):  # unknown blocks and a few obstacle cells in a known free room
+        y, x = rng.integers(0, 60), rng.integers(0, 80)
+        prob[y : y + rng.integers(3, 10), x : x + rng.integers(3, 10)] = np.nan
+    prob[rng.random((70, 90)) < 0.002] = 0.9
+    cm, fs = _setup(prob)
+    cells, labels = fs.clusters()
+    np.testing.assert_array_equal(cells, np.argwhere(fs.frontier))
+    valid = rng.random(len(cells)) < 0.8
+    offsets = cells_in_radius(0.3, RES)
+    marked = fk.stamp_targets(
+        cells, labels, valid, offsets, cm.inflated, cm.unknown, fs._target, fs._owner, 120
+    )
+    order, owner = _stamp_reference(cells, labels, valid, offsets, cm.inflated, cm.unknown, 120)
+    assert [tuple(m) for m in marked] == order and len(order) > 50
+    assert all(fs._owner[y, x] == owner[(y, x)] for y, x in order)
+    assert fs._target.sum() == len(order)
