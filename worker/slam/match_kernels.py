@@ -24,7 +24,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from worker.slam.map_kernels import FULL, OCCUPIED, PATCH, PATCH_BITS, PATCH_MASK
 
@@ -60,6 +63,20 @@ def match_config(**fields: float) -> np.ndarray:
     if not 0 <= fields["kernel"] <= MAX_KERNEL:
         raise ValueError(f"kernel must be in [0, {MAX_KERNEL}] cells, got {fields['kernel']}")
     return np.array([fields[k] for k in CFG_FIELDS], dtype=np.float64)
+
+
+@intrinsic
+def _ctz(typingctx, x):
+    """Index of the lowest set bit of a non-zero int64 (LLVM's cttz: one instruction)."""
+    sig = types.int64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(i64, [i64, ir.IntType(1)])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.cttz.i64")
+        return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
+
+    return sig, codegen
 
 
 @njit(cache=True)
@@ -172,25 +189,21 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
                         occ &= ~(bits[np.uintp(f0), FULL, lfy] >> lf0)
                     if f1 >= 0:
                         occ &= ~(bits[np.uintp(f1), FULL, lfy] << (PATCH - lf0))
-                j = 0
-                while occ != 0:
-                    if occ & 1:
-                        gx = gx0 + j
-                        e = np.uintp(e0 if lx0 + j < PATCH else e1)
-                        lx = np.uintp(gx & PATCH_MASK)
-                        px = gx * res + mean[e, ly, lx, 0]
-                        py = gy * res + mean[e, ly, lx, 1]
-                        if use:
-                            spts[w, i, npts, 0] = px
-                            spts[w, i, npts, 1] = py
-                            npts += 1
-                        mx = hx - px
-                        my = hy - py
-                        d2 = mx * mx + my * my
-                        if d2 < best:
-                            best = d2
-                    occ >>= 1
-                    j += 1
+                while occ != 0:  # the set bits, lowest first
+                    j = _ctz(occ)
+                    occ &= occ - 1
+                    gx = gx0 + j
+                    e = np.uintp(e0 if lx0 + j < PATCH else e1)
+                    lx = np.uintp(gx & PATCH_MASK)
+                    px = gx * res + mean[e, ly, lx, 0]
+                    py = gy * res + mean[e, ly, lx, 1]
+                    if use:
+                        spts[w, i, npts, 0] = px
+                        spts[w, i, npts, 1] = py
+                        npts += 1
+                    mx = hx - px
+                    my = hy - py
+                    best = min(best, mx * mx + my * my)
             if use:
                 skey[w, i] = key
                 sn[w, i] = npts
