@@ -33,14 +33,13 @@ def errors_by_world(records: Sequence[dict[str, Any]], path: Path) -> Path | Non
     plt = _plt()
     n = len(rows["translation"])
     fig, axs = plt.subplots(2, 1, figsize=(max(6.0, 0.45 * n + 2.5), 7.5), constrained_layout=True)
-    for ax, (axis, unit, good) in zip(axs, AXES, strict=True):
+    # no threshold line here: beside the max on its own axis it would read against the wrong one
+    for ax, (axis, unit, _) in zip(axs, AXES, strict=True):
         r = rows[axis]
         x = np.arange(len(r))
         mean = [row["MEAN"] for row in r]
         std = [row["STD"] for row in r]
         ax.errorbar(x, mean, yerr=std, fmt="o", capsize=4, label="mean ± std")
-        if max(np.add(mean, std)) > good / 3:  # the limit only where it does not squash the data
-            ax.axhline(good, color="grey", ls="--", lw=1, label=f"visually good ({good:g} {unit})")
         ax.set_ylabel(f"B {axis} error [{unit}]")
         ax.set_ylim(bottom=0)
         ax2 = ax.twinx()
