@@ -320,3 +320,24 @@ def test_a_slice_of_the_thesis_experiment_dry_run(tmp_path):
                      ("office_d_furnitures", "0.1"), ("office_d_furnitures", "0.3")]
     )  # fmt: skip
     assert not (tmp_path / "out").exists()  # a dry run writes nothing
+
+
+def test_a_killed_celery_batch_loses_nothing_and_sends_no_run_twice(
+    worlds, celery_service, tmp_path
+):
+    svc = celery_service
+    args = [str(worlds / "rooms.yaml"), "--seeds", "1-4", "--slam", "odometry", "--laser-noise",
+            "0.1", "--time-limit", "40", "--celery", "-o", "out"]  # fmt: skip
+    code, done = _interrupt(tmp_path, svc.env, args, signal.SIGKILL, 1)
+    assert code == -signal.SIGKILL and len(done) < 4
+    r = _mapqual(tmp_path, svc.env, "batch", *args)  # the worker carried on meanwhile
+    assert r.returncode == 0, r.stderr
+    events = [json.loads(line) for line in (tmp_path / "out" / "journal.jsonl").open()]
+    sent = [e["run_id"] for e in events if e["event"] == "enqueued"]
+    assert len(sent) == len(set(sent)) == 4  # each run sent to the queue once
+    finished = [e["key"] for e in events if e["event"] in ("done", "error")]
+    assert len(finished) == len(set(finished)) == 4
+    with session_scope(svc.db_url) as s:
+        runs = s.scalars(select(Run).where(Run.id.in_(sent))).all()
+        assert len(runs) == 4 and {r.status for r in runs} == {"done"}
+    assert len(_csv(tmp_path / "out" / "runs.csv")) == 4
