@@ -16,7 +16,7 @@ import yaml
 from worker.errors import InputError
 from worker.params import load_params_file
 from worker.pipeline import ALGORITHMS, RunParams
-from worker.world.catalogue import default_worlds_dir, find_worlds
+from worker.world.catalogue import CATALOGUE_SUFFIXES, default_worlds_dir, find_worlds
 from worker.world.loader import load_world
 from worker.world.world import World
 
@@ -117,6 +117,12 @@ def resolve_worlds(entries: Sequence[str | Path], base_dir: Path | None = None) 
                 raise InputError("no floorplan (.yaml, .world) in this folder", path=p)
             out.extend(found)
         elif p.is_file():
+            if p.suffix.lower() not in CATALOGUE_SUFFIXES:
+                raise InputError(
+                    "a batch takes floorplan descriptions (.yaml, .world): give an image a "
+                    "map_server YAML with its resolution",
+                    path=p,
+                )
             out.append(p)
         else:
             raise InputError("no such world file or folder", path=p)

@@ -103,6 +103,7 @@ def test_experiment_file_groups_deduplicate_and_options_override(tmp_path):
         ({"worlds": ["a.yaml"], "runs": 0}, "runs must be"),
         ({"worlds": ["a.yaml"], "runs": 2, "seeds": "1-2"}, "not both"),
         ({"worlds": ["missing.yaml"]}, "no such world"),
+        ({"worlds": ["a.png"]}, "give an image a map_server YAML"),
         ({"worlds": ["a.yaml"], "params": {"sim": {"bogus": 1}}}, "sim.bogus"),
         ({}, "no worlds given"),
     ],
