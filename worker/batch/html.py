@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from worker.batch.state import now_iso
 from worker.batch.tables import ERROR_COLUMNS, error_rows, is_good, outcome_of, success_rows
 
 CAPTIONS = {
@@ -51,6 +52,10 @@ def _num(v: Any, digits: int = 4) -> str:
     return _e(v)
 
 
+# columns shown with fewer digits than the errors
+DIGITS = {"noise": None, "NUMMEASURES": 1}
+
+
 def _table(rows: Sequence[dict[str, Any]], columns: Sequence[str], left: int = 1) -> str:
     head = "".join(
         f'<th class="{"l" if i < left else ""}">{_e(c)}</th>' for i, c in enumerate(columns)
@@ -58,11 +63,18 @@ def _table(rows: Sequence[dict[str, Any]], columns: Sequence[str], left: int = 1
     body = []
     for row in rows:
         cells = "".join(
-            f'<td class="{"l" if i < left else ""}">{_num(row.get(c))}</td>'
+            f'<td class="{"l" if i < left else ""}">{_cell(row.get(c), c)}</td>'
             for i, c in enumerate(columns)
         )
         body.append(f"<tr>{cells}</tr>")
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+def _cell(v: Any, column: str) -> str:
+    if column not in DIGITS or not isinstance(v, float):
+        return _num(v)
+    digits = DIGITS[column]
+    return f"{v:g}" if digits is None else f"{v:.{digits}f}"
 
 
 def _runs_table(records: Sequence[dict[str, Any]], out: Path) -> str:
@@ -120,8 +132,7 @@ def write_html(
         f"<h1>mapqual batch {_e(info.get('batch_id', ''))}</h1>"
         f"<p>{_e(info.get('command', ''))}</p>"
         f"<p>{len(records)} of {expected} runs finished: {done} completed, {good} visually good "
-        f"(B mean under 1 m and 0.03 rad), {errors} internal errors. Updated "
-        f"{_e(info.get('updated', ''))}.</p>"
+        f"(B mean under 1 m and 0.03 rad), {errors} internal errors. Written {now_iso()}.</p>"
     )
     success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good", "failed"]
     success_cols += ["collision", "stuck", "time_limit", "slam_diverged", "error"]
