@@ -32,6 +32,7 @@ class GlobalCostmap:
         self.unknown = np.zeros((0, 0), dtype=np.bool_)
         self.inflated = np.zeros((0, 0), dtype=np.uint8)
         self._kernel = np.zeros((1, 1), dtype=np.uint8)
+        self._fresh = np.zeros((0, 0), dtype=np.bool_)  # new obstacle cells to stamp
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -93,14 +94,17 @@ class GlobalCostmap:
             return (0, 0, 0, 0)
         t = _TILE
         tiles = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.bool_)
-        ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1, added = ck.classify_region(
+        fresh_tiles = np.zeros_like(tiles)
+        if self._fresh.shape != self.lethal.shape:
+            self._fresh = np.zeros(self.lethal.shape, dtype=np.bool_)
+        ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
-            y0, y1, x0, x1, tiles, t,
+            y0, y1, x0, x1, tiles, self._fresh, fresh_tiles, t,
         )  # fmt: skip
         if ly1 > ly0:
             # obstacles that went away: their blocks are recomputed; new ones: stamped in
             ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
-            ck.stamp_added(self.lethal, self._kernel, self.inflated, added)
+            ck.stamp_fresh(self.lethal, self._kernel, self.inflated, self._fresh, fresh_tiles, t)
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
 
     def _reset(self, resolution: float, origin: np.ndarray, shape) -> None:

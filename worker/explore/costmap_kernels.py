@@ -181,8 +181,9 @@ def inflate_tiles(lethal, kernel, cost, tiles, tile):
 
 
 @njit(cache=True)
-def stamp_added(lethal, kernel, cost, cells):
-    """Raise the costs around new obstacle cells `(K, 2) [iy, ix]` (in place).
+def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
+    """Raise the costs around the new obstacle cells (`fresh`, cleared here) of the blocks
+    flagged in `tiles` (in place).
 
     A cost is the kernel's value at the nearest obstacle, the max over all of their stamps,
     so a new obstacle only raises costs: its stamp, max-ed in, is the exact update. Cells
@@ -190,43 +191,50 @@ def stamp_added(lethal, kernel, cost, cells):
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
-    for i in range(cells.shape[0]):
-        sy = cells[i, 0]
-        sx = cells[i, 1]
-        if (
-            0 < sy < h - 1
-            and 0 < sx < w - 1
-            and lethal[sy - 1, sx]
-            and lethal[sy + 1, sx]
-            and lethal[sy, sx - 1]
-            and lethal[sy, sx + 1]
-        ):
-            cost[sy, sx] = 254
-            continue
-        for iy in range(max(0, sy - r), min(h, sy + r + 1)):
-            krow = iy - sy + r
-            for ix in range(max(0, sx - r), min(w, sx + r + 1)):
-                c = kernel[krow, ix - sx + r]
-                if c > cost[iy, ix]:
-                    cost[iy, ix] = c
+    for ty in range(tiles.shape[0]):
+        for tx in range(tiles.shape[1]):
+            if not tiles[ty, tx]:
+                continue
+            for sy in range(ty * tile, min(h, (ty + 1) * tile)):
+                for sx in range(tx * tile, min(w, (tx + 1) * tile)):
+                    if not fresh[sy, sx]:
+                        continue
+                    fresh[sy, sx] = False
+                    if not lethal[sy, sx]:
+                        continue
+                    if (
+                        0 < sy < h - 1
+                        and 0 < sx < w - 1
+                        and lethal[sy - 1, sx]
+                        and lethal[sy + 1, sx]
+                        and lethal[sy, sx - 1]
+                        and lethal[sy, sx + 1]
+                    ):
+                        cost[sy, sx] = 254
+                        continue
+                    for iy in range(max(0, sy - r), min(h, sy + r + 1)):
+                        krow = iy - sy + r
+                        for ix in range(max(0, sx - r), min(w, sx + r + 1)):
+                            c = kernel[krow, ix - sx + r]
+                            if c > cost[iy, ix]:
+                                cost[iy, ix] = c
 
 
 @njit(cache=True)
 def classify_region(
-    prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1, tiles, tile
-):
+    prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1, tiles, fresh,
+    fresh_tiles, tile,
+):  # fmt: skip
     """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
 
     prob: (h, w) float32 occupancy probability, NaN unknown, whose cell (0, 0) is cell
     (off_y, off_x) of the layers; layer cells outside it are unknown. A cell is lethal above
     `occupied_thresh` (GMapping publishes 100 above its occ_thresh). The `tile x tile` blocks
     holding obstacle cells that went away are flagged in `tiles (ceil(H / tile),
-    ceil(W / tile)) bool`. Returns the bounding boxes `(y0, y1, x0, x1)` of the lethal and
-    of the unknown changes, each empty (y1 == y0) when nothing changed, and the new obstacle
-    cells `(K, 2) int64 [iy, ix]`.
+    ceil(W / tile)) bool`; new obstacle cells in `fresh (H, W) bool`, their blocks in
+    `fresh_tiles`. Returns the bounding boxes `(y0, y1, x0, x1)` of the lethal and of the
+    unknown changes, each empty (y1 == y0) when nothing changed.
     """
-    added = np.empty((256, 2), dtype=np.int64)
-    n_added = 0
     ph, pw = prob.shape
     ly0, ly1, lx0, lx1 = y1, y0, x1, x0
     uy0, uy1, ux0, ux1 = y1, y0, x1, x0
@@ -240,13 +248,8 @@ def classify_region(
             if let != lethal[iy, ix]:
                 lethal[iy, ix] = let
                 if let:
-                    if n_added == added.shape[0]:
-                        a2 = np.empty((2 * n_added, 2), dtype=np.int64)
-                        a2[:n_added] = added
-                        added = a2
-                    added[n_added, 0] = iy
-                    added[n_added, 1] = ix
-                    n_added += 1
+                    fresh[iy, ix] = True
+                    fresh_tiles[iy // tile, ix // tile] = True
                 else:
                     tiles[iy // tile, ix // tile] = True
                 ly0 = min(ly0, iy)
@@ -263,7 +266,7 @@ def classify_region(
         ly0 = ly1 = lx0 = lx1 = 0
     if uy1 <= uy0:
         uy0 = uy1 = ux0 = ux1 = 0
-    return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1, added[:n_added]
+    return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1
 
 
 def disc_half_widths(radius_cells: float) -> np.ndarray:

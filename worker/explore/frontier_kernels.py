@@ -136,25 +136,6 @@ def stamp_targets(
 
 
 @njit(cache=True)
-def true_cells(mask):
-    """`(K, 2) int64 [iy, ix]` of the True cells of `mask (H, W)`, row by row (np.argwhere)."""
-    h, w = mask.shape
-    out = np.empty((1024, 2), dtype=np.int64)
-    n = 0
-    for iy in range(h):
-        for ix in range(w):
-            if mask[iy, ix]:
-                if n == out.shape[0]:
-                    o2 = np.empty((2 * n, 2), dtype=np.int64)
-                    o2[:n] = out
-                    out = o2
-                out[n, 0] = iy
-                out[n, 1] = ix
-                n += 1
-    return out[:n]
-
-
-@njit(cache=True)
 def any_in_disc(mask, iy, ix, offsets):
     """True when some cell of `mask (H, W) bool` lies in the disc `offsets` around (iy, ix)."""
     h, w = mask.shape

@@ -109,7 +109,7 @@ class FrontierSearch:
 
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:
         """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
-        cells = fk.true_cells(self.frontier)
+        cells = np.argwhere(self.frontier).astype(np.int64)
         self._run_id += 1
         labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
         return cells, labels
