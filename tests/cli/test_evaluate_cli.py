@@ -147,3 +147,28 @@ def test_malformed_line_is_one_line_exit_2_no_traceback(tmp_path, logs):
     assert proc.stderr == (
         f"mapqual: error: {bad}:3: not a number: 'zero' (expected t1 t2 x y z roll pitch yaw)\n"
     )
+
+
+def test_the_readme_example_reproduces_the_run_that_made_it(run):
+    """examples/office_a (made by examples/make_examples.sh): `mapqual evaluate` on the shipped
+    relations and estimate gives the B figures the run itself stored, and every relation is the
+    ground-truth motion between the shipped gt.log poses."""
+    ex = Path(__file__).resolve().parents[2] / "examples" / "office_a"
+    code, out, _ = run(
+        "evaluate", "--relations", ex / "relations_B.txt", "--est", ex / "est.log", "--json"
+    )
+    assert code == 0
+    got = json.loads(out)
+    want = json.loads((ex / "summary.json").read_text())["relations"]["B"]
+    for part in ("translation", "rotation"):
+        assert got[part]["n"] == want[part]["n"] > 0
+        for stat in ("mean", "std", "min", "max"):
+            assert got[part][stat] == pytest.approx(want[part][stat], rel=1e-6, abs=1e-9)
+    gt = read_trajectory(ex / "gt.log")
+    rel = np.loadtxt(ex / "relations_B.txt", ndmin=2)  # t1 t2 x y z roll pitch yaw
+    for t1, t2, x, y, _z, _roll, _pitch, yaw in rel[:20]:
+        a, b = (gt.poses[np.argmin(np.abs(gt.t - t))] for t in (t1, t2))
+        c, s = math.cos(a[2]), math.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        assert [c * dx + s * dy, -s * dx + c * dy] == pytest.approx([x, y], abs=1e-6)
+        assert math.remainder(b[2] - a[2] - yaw, 2 * math.pi) == pytest.approx(0, abs=1e-6)
