@@ -9,7 +9,7 @@ import numpy as np
 from worker.explore import costmap_kernels as ck
 from worker.explore.params import ExploreParams
 
-_TILE = 32  # [cells] block size of the inflation updates
+_TILE = 8  # [cells] block size of the inflation updates
 
 
 class GlobalCostmap:

@@ -67,45 +67,52 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
     """Recompute `cost[y0:y1, x0:x1]` from the lethal cells that can reach it (in place).
 
     lethal: (H, W) bool; kernel: (2R+1, 2R+1) uint8 stamp; cost: (H, W) uint8 inflated costs.
-    Every obstacle within R cells of the region stamps the max of its kernel into the region,
-    which is what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Obstacle
-    cells whose 4 neighbours are all obstacles are skipped: a boundary cell is always nearer.
+    A cell's cost is the kernel's value at its nearest obstacle within the kernel's square,
+    what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Exact and in
+    O(R) per cell: first, per row, the distance to the nearest obstacle in that row (two
+    sweeps); then, per cell, the least dy^2 + row distance^2 over the 2R+1 rows around it.
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
+    if y1 <= y0 or x1 <= x0:
+        return
+    # cost by squared cell distance (the kernel depends on the distance only)
+    table = np.zeros(2 * r * r + 1, dtype=np.uint8)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            table[dy * dy + dx * dx] = kernel[dy + r, dx + r]
+    far = r + 1  # "no obstacle within R in this row"
+    ry0 = max(0, y0 - r)
+    ry1 = min(h, y1 + r)
+    cx0 = max(0, x0 - r)
+    cx1 = min(w, x1 + r)
+    hd = np.empty((ry1 - ry0, x1 - x0), dtype=np.int64)
+    for yy in range(ry0, ry1):
+        row = hd[yy - ry0]
+        last = -(10**9)
+        for xx in range(cx0, x1):  # nearest obstacle to the left (or here)
+            if lethal[yy, xx]:
+                last = xx
+            if xx >= x0:
+                row[xx - x0] = min(far, xx - last)
+        last = 10**9
+        for xx in range(cx1 - 1, x0 - 1, -1):  # and to the right
+            if lethal[yy, xx]:
+                last = xx
+            if xx < x1:
+                d = last - xx
+                if d < row[xx - x0]:
+                    row[xx - x0] = d
     for iy in range(y0, y1):
         for ix in range(x0, x1):
-            cost[iy, ix] = 0
-    sy0 = max(0, y0 - r)
-    sy1 = min(h, y1 + r)
-    sx0 = max(0, x0 - r)
-    sx1 = min(w, x1 + r)
-    for sy in range(sy0, sy1):
-        for sx in range(sx0, sx1):
-            if not lethal[sy, sx]:
-                continue
-            if (
-                0 < sy < h - 1
-                and 0 < sx < w - 1
-                and lethal[sy - 1, sx]
-                and lethal[sy + 1, sx]
-                and lethal[sy, sx - 1]
-                and lethal[sy, sx + 1]
-                and y0 <= sy < y1
-                and x0 <= sx < x1
-            ):
-                cost[sy, sx] = 254
-                continue
-            ky0 = max(y0, sy - r)
-            ky1 = min(y1, sy + r + 1)
-            kx0 = max(x0, sx - r)
-            kx1 = min(x1, sx + r + 1)
-            for iy in range(ky0, ky1):
-                krow = iy - sy + r
-                for ix in range(kx0, kx1):
-                    c = kernel[krow, ix - sx + r]
-                    if c > cost[iy, ix]:
-                        cost[iy, ix] = c
+            best = 2 * r * r + 1
+            for yy in range(max(ry0, iy - r), min(ry1, iy + r + 1)):
+                d = hd[yy - ry0, ix - x0]
+                if d <= r:
+                    d2 = (yy - iy) * (yy - iy) + d * d
+                    if d2 < best:
+                        best = d2
+            cost[iy, ix] = table[best] if best <= 2 * r * r else 0
 
 
 @njit(cache=True)
