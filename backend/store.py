@@ -121,13 +121,8 @@ def save_world(
 
 
 def world_fingerprint(world: WorldModel) -> str:
-    """A content hash of a loaded world: grid, resolution, origin and start pose."""
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(world.occ, dtype=bool).tobytes())
-    h.update(repr((world.occ.shape, float(world.resolution))).encode())
-    h.update(np.asarray(world.origin, dtype=np.float64).tobytes())
-    h.update(np.asarray(world.start_pose, dtype=np.float64).tobytes())
-    return h.hexdigest()
+    """A content hash of a loaded world (see `World.fingerprint`)."""
+    return world.fingerprint()
 
 
 def world_model(row: World) -> WorldModel:

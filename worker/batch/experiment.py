@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from worker.errors import InputError
@@ -243,13 +242,8 @@ def _group(spec: dict[str, Any], base_dir: Path | None, base_params: dict) -> Gr
 
 
 def world_fingerprint(world: World) -> str:
-    """Content hash of a loaded world: grid, resolution, origin, start pose."""
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(world.occ, dtype=bool).tobytes())
-    h.update(repr((world.occ.shape, float(world.resolution))).encode())
-    h.update(np.asarray(world.origin, dtype=np.float64).tobytes())
-    h.update(np.asarray(world.start_pose, dtype=np.float64).tobytes())
-    return h.hexdigest()
+    """Content hash of a loaded world (see `World.fingerprint`)."""
+    return world.fingerprint()
 
 
 def run_key(fingerprint: str, name: str, params: dict[str, Any], seed: int) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -86,6 +87,16 @@ class World:
         ix, iy = self.world_to_cell(x, y)
         h, w = self.occ.shape
         return 0 <= ix < w and 0 <= iy < h and not self.occ[iy, ix]
+
+    def fingerprint(self) -> str:
+        """A content hash: grid, resolution, origin and start pose (not the name), so that the
+        same floorplan uploaded or loaded twice is recognised as one world."""
+        h = hashlib.sha256()
+        h.update(np.ascontiguousarray(self.occ, dtype=bool).tobytes())
+        h.update(repr((self.occ.shape, float(self.resolution))).encode())
+        h.update(np.asarray(self.origin, dtype=np.float64).tobytes())
+        h.update(np.asarray(self.start_pose, dtype=np.float64).tobytes())
+        return h.hexdigest()
 
     @classmethod
     def from_array(
