@@ -39,9 +39,13 @@ PROOF_WORLDS = (
     "lab_c_scan",
     "lab_c_scan_furnitures",
     "lab_d_scan",
+    "lab_d_scan_furnitures",
+    "lab_a_scan_furnitures",
     "lab_b_scan",
     "office_b",
+    "office_b_furnitures",
     "office_d",
+    "office_d_furnitures",
 )
 
 

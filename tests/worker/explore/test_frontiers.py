@@ -192,3 +192,29 @@ def test_goal_candidates_match_a_plain_implementation():
     assert [tuple(m) for m in marked] == order and len(order) > 50
     assert all(fs._owner[y, x] == owner[(y, x)] for y, x in order)
     assert fs._target.sum() == len(order)
+
+
+def test_frontier_looked_at_from_close_by_repeatedly_is_dead():
+    # a closed room with a 0.6 m hole in its right wall's face; behind it, a 2.5 m x 0.5 m
+    # unknown slab (the wall's unseen inside, too big for the enclosed-unknown rule)
+    prob = np.full((60, 80), 0.9)
+    prob[5:55, 5:60] = 0.05
+    prob[5:55, 61:71] = np.nan
+    prob[25:37, 60] = np.nan  # the hole in the face
+    cm, fs = _setup(prob)
+    assert fs.frontier[25:37, 59].all()
+    assert fs.choose(cm, (2.0, 1.5), []) is not None
+    p = ExploreParams()
+    behind = np.array([2.5, 1.525, np.pi])  # 0.5 m away but facing away: out of view
+    for _ in range(2 * p.dead_frontier_looks):
+        fs.observe(cm, behind, np.radians(135.0) - 0.05)
+    assert not fs.seen.any()
+    far = np.array([1.0, 1.525, 0.0])  # in view, but 2 m away
+    fs.observe(cm, far, np.radians(135.0) - 0.05)
+    assert not fs.seen.any()
+    near = np.array([2.5, 1.525, 0.0])  # 0.5 m away, facing it, clear line of sight
+    for _ in range(p.dead_frontier_looks):
+        assert fs.choose(cm, near[:2], []) is not None
+        fs.observe(cm, near, np.radians(135.0) - 0.05)
+    assert (fs.seen[25:37, 59] == p.dead_frontier_looks).all()
+    assert fs.choose(cm, near[:2], []) is None  # its only frontier is dead
