@@ -61,6 +61,8 @@ class DwaPlanner:
         self._stuck_left = self._stuck_right = False
         self._prev_xy = (0.0, 0.0)
         self._escape_from: tuple[float, float, float] | None = None
+        self._dist = np.zeros((2, 0, 0), dtype=np.float32)  # path / goal distance buffers
+        self._queue = np.zeros(0, dtype=np.int64)
 
     def set_plan(self, path_xy: np.ndarray | None) -> None:
         """New global path `(K, 2) [x, y]` in the map frame (None: no path)."""
@@ -97,8 +99,13 @@ class DwaPlanner:
         self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
         self._prm_unpadded[:] = self.prm
         self._prm_unpadded[dk.P_HALF] = p.footprint_half_m
-        path_dist = dk.wavefront(seeds, local.cost, local.resolution)
-        goal_dist = dk.wavefront(goal_cell, local.cost, local.resolution)
+        n = local.cost.shape[0]
+        if self._dist.shape[1:] != local.cost.shape:
+            self._dist = np.empty((2, n, n), dtype=np.float32)
+            self._queue = np.empty(n * n, dtype=np.int64)
+        path_dist, goal_dist = self._dist[0], self._dist[1]
+        dk.wavefront_into(seeds, local.cost, local.resolution, path_dist, self._queue)
+        dk.wavefront_into(goal_cell, local.cost, local.resolution, goal_dist, self._queue)
         goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         passes = [(self.prm, False), (self._prm_unpadded, True)]
         if self._stuck_left or self._stuck_right:

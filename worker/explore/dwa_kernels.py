@@ -40,8 +40,17 @@ def wavefront(seeds, cost, resolution):
     meter_scoring.
     """
     h, w = cost.shape
-    dist = np.full((h, w), np.inf, dtype=np.float32)
-    queue = np.empty(h * w, dtype=np.int64)
+    dist = np.empty((h, w), dtype=np.float32)
+    wavefront_into(seeds, cost, resolution, dist, np.empty(h * w, dtype=np.int64))
+    return dist
+
+
+@njit(cache=True)
+def wavefront_into(seeds, cost, resolution, dist, queue):
+    """`wavefront` written into `dist (n, n) float32`, with `queue (n * n,) int64` as its
+    work space (both reused from call to call: no allocation at 10 Hz)."""
+    h, w = cost.shape
+    dist[:, :] = np.inf
     head = 0
     tail = 0
     for i in range(seeds.shape[0]):
@@ -67,7 +76,6 @@ def wavefront(seeds, cost, resolution):
             dist[jy, jx] = nd
             queue[tail] = jy * w + jx
             tail += 1
-    return dist
 
 
 @njit(cache=True)
