@@ -1,7 +1,8 @@
 """API latency under load: p50/p99 of POST /jobs and GET /jobs/{id} with 50 concurrent clients.
 
-Starts `mapqual serve` (uvicorn, one process) on loopback against PostgreSQL (127.0.0.1:5432, a
-fresh database) and a Redis database of its own, then measures each endpoint three ways:
+Starts `mapqual serve` (uvicorn, `--server-workers` processes, default one) on loopback against
+PostgreSQL (127.0.0.1:5432, a fresh database) and a Redis database of its own, then measures
+each endpoint three ways:
 
 - one client, requests back to back: what a request costs the server;
 - 50 concurrent clients, each sending one request every `--period` seconds (open loop, from its
@@ -169,6 +170,7 @@ def main() -> None:
         "--period", type=float, default=0.5, help="[s] between one client's requests (open loop)"
     )
     ap.add_argument("--port", type=int, default=8765)
+    ap.add_argument("--server-workers", type=int, default=1, help="uvicorn worker processes")
     ap.add_argument("--queue-runs", type=int, default=12, help="0 skips the queue figures")
     ap.add_argument("--queue-time-limit", type=float, default=60.0, help="[s] simulated")
     args = ap.parse_args()
@@ -190,7 +192,7 @@ def main() -> None:
         .splitlines()[-1]
     )
     server = subprocess.Popen(
-        [*mq, "serve", "--port", str(args.port)],
+        [*mq, "serve", "--port", str(args.port), "--workers", str(args.server_workers)],
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -225,7 +227,8 @@ def main() -> None:
         get = asyncio.run(_measure(base, key, args, get_job))
         offered = args.clients / args.period
         print(
-            f"PostgreSQL + Redis on loopback, 1 uvicorn process; load average "
+            f"PostgreSQL + Redis on loopback, {args.server_workers} uvicorn process(es), "
+            f"{args.clients} clients every {args.period:g} s; load average "
             f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
         )
         for label, (seq, opn, rate), target in (
