@@ -31,18 +31,16 @@ import signal
 import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import httpx
 import numpy as np
 from PIL import Image
-from sqlalchemy import create_engine, text
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.services import ensure_postgres, ensure_redis  # noqa: E402
+from tests.services import ensure_redis, scratch_database  # noqa: E402
 
 
 def _png(rooms: tuple[int, int] = (1, 1), room_px: int = 80) -> bytes:
@@ -175,12 +173,11 @@ def main() -> None:
     ap.add_argument("--queue-time-limit", type=float, default=60.0, help="[s] simulated")
     args = ap.parse_args()
 
-    admin_url = ensure_postgres()
-    name = f"mapqual_bench_{uuid.uuid4().hex[:8]}"
-    admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
-    with admin.connect() as c:
-        c.execute(text(f'CREATE DATABASE "{name}"'))
-    db_url = admin_url.rsplit("/", 1)[0] + f"/{name}"
+    with scratch_database("mapqual_bench") as db_url:
+        _bench(args, db_url)
+
+
+def _bench(args, db_url: str) -> None:
     redis_url = ensure_redis().rsplit("/", 1)[0] + "/12"
     env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url)
     mq = [sys.executable, "-m", "mapqual"]
@@ -279,8 +276,6 @@ def main() -> None:
         import redis
 
         redis.Redis.from_url(redis_url).flushdb()
-        with admin.connect() as c:
-            c.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
 
 
 if __name__ == "__main__":

@@ -177,24 +177,10 @@ def _database(kind: str, tmp: str) -> Iterator[str]:
     if kind == "sqlite":
         yield f"sqlite:///{tmp}/bench.db"
         return
-    from sqlalchemy import create_engine, text
+    from tests.services import scratch_database
 
-    from backend.db.session import get_engine
-    from tests.services import ensure_postgres
-
-    admin_url = ensure_postgres()
-    name = f"mapqual_bench_{os.getpid()}"
-    admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
-    with admin.connect() as c:
-        c.execute(text(f'CREATE DATABASE "{name}"'))
-    url = admin_url.rsplit("/", 1)[0] + f"/{name}"
-    try:
+    with scratch_database("mapqual_bench") as url:
         yield url
-    finally:
-        get_engine(url).dispose()
-        with admin.connect() as c:
-            c.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-        admin.dispose()
 
 
 @contextmanager

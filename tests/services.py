@@ -7,6 +7,9 @@ import shutil
 import socket
 import subprocess
 import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 PG_HOST, PG_PORT = "127.0.0.1", 5432
 REDIS_HOST, REDIS_PORT = "127.0.0.1", 6379
@@ -42,6 +45,28 @@ def ensure_postgres() -> str:
         if not _wait_port(PG_HOST, PG_PORT, 30):
             raise RuntimeError("PostgreSQL did not come up on 127.0.0.1:5432")
     return f"postgresql+psycopg://postgres@{PG_HOST}:{PG_PORT}/test"
+
+
+@contextmanager
+def scratch_database(prefix: str) -> Iterator[str]:
+    """The URL of a new, empty PostgreSQL database, dropped (with its connections) afterwards."""
+    from sqlalchemy import create_engine, text
+
+    from backend.db.session import get_engine
+
+    admin_url = ensure_postgres()
+    name = f"{prefix}_{uuid.uuid4().hex[:12]}"
+    admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    url = admin_url.rsplit("/", 1)[0] + f"/{name}"
+    try:
+        yield url
+    finally:
+        get_engine(url).dispose()
+        with admin.connect() as conn:
+            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
 
 
 def ensure_redis() -> str:

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import uuid
-
 import pytest
-from sqlalchemy import create_engine, text
 
 from backend.db.migrate import upgrade
-from tests.services import ensure_postgres
+from tests.services import scratch_database
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
@@ -19,19 +16,6 @@ def db_url(request, tmp_path):
         upgrade(url)
         yield url
         return
-    admin_url = ensure_postgres()
-    name = f"mapqual_test_{uuid.uuid4().hex[:12]}"
-    admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f'CREATE DATABASE "{name}"'))
-    url = admin_url.rsplit("/", 1)[0] + f"/{name}"
-    try:
+    with scratch_database("mapqual_test") as url:
         upgrade(url)
         yield url
-    finally:
-        from backend.db.session import get_engine
-
-        get_engine(url).dispose()
-        with admin.connect() as conn:
-            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-        admin.dispose()

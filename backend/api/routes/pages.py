@@ -129,11 +129,12 @@ def _worlds(session, user: User) -> list[WorldOut]:
 
 def _jobs_page(request, session, user, error: str | None = None, status_code: int = 200):
     page = jobs_api.list_jobs(session, user, None, None, 100, 0)
-    names = {w.id: w.name for w in _worlds(session, user)}
+    worlds = _worlds(session, user)
+    names = {w.id: w.name for w in worlds}
     refresh = any(j.status in ACTIVE for j in page.items)
     return _render(
         request, "jobs.html", status_code, user=user, jobs=page.items, total=page.total,
-        worlds=_worlds(session, user), world_names=names, refresh=refresh, error=error,
+        worlds=worlds, world_names=names, refresh=refresh, error=error,
     )  # fmt: skip
 
 
