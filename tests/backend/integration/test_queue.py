@@ -13,6 +13,7 @@ import sys
 import time
 import uuid
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ from tests.services import ensure_postgres, ensure_redis
 from worker.pipeline import RunParams, run_one
 
 VISIBILITY_S = 12
+OFFICE_A = Path(__file__).parents[3] / "worlds/bormann/no_furniture/office_a.png"
 
 
 def _png(img: np.ndarray) -> bytes:
@@ -190,9 +192,14 @@ def test_a_job_runs_to_done_and_every_result_format_is_served(service):
 
 
 def test_cancel_stops_a_running_run_and_frees_the_worker(service):
-    big = service.job(service.world(many_rooms()), [1], "oracle", 5000.0)
+    # A run of many wall-clock minutes: rbpf in a Bormann office with no time limit to speak
+    # of (the oracle explores the test worlds in a couple of wall seconds, before a cancel
+    # could reach it).
+    big = service.job(service.world(OFFICE_A.read_bytes()), [1], "rbpf", 5000.0)
     rid = big["runs"][0]["id"]
-    service.wait(f"/api/v1/runs/{rid}", lambda r: r["progress"].get("t", 0) > 5, 120)
+    # generous: a worker on a cold numba cache compiles the SLAM kernels first
+    running = service.wait(f"/api/v1/runs/{rid}", lambda r: r["progress"].get("t", 0) > 5, 300)
+    assert running["status"] == "running", running["status"]
     assert service.client.post(f"/api/v1/jobs/{big['id']}/cancel").json()["status"] == "cancelled"
     # the single worker process is free again only if the long run really stopped
     small = service.job(service.world(two_rooms()), [9], "oracle", 60.0)
@@ -204,9 +211,12 @@ def test_cancel_stops_a_running_run_and_frees_the_worker(service):
 
 
 def test_sigkill_mid_run_is_redelivered_and_stores_exactly_one_result(service):
-    job = service.job(service.world(many_rooms()), [5], "oracle", 150.0)
+    # rbpf (about 10x real time here), so that 150 simulated seconds last long enough in wall
+    # time for the progress stored every 2 s to show the run mid-way
+    job = service.job(service.world(many_rooms()), [5], "rbpf", 150.0)
     rid = job["runs"][0]["id"]
-    service.wait(f"/api/v1/runs/{rid}", lambda r: r["progress"].get("t", 0) > 20, 120)
+    mid = service.wait(f"/api/v1/runs/{rid}", lambda r: r["progress"].get("t", 0) > 20, 300)
+    assert mid["status"] == "running", mid["status"]
     service.kill_worker()
     killed_at = time.time()
     assert service.client.get(f"/api/v1/runs/{rid}").json()["status"] == "running"
