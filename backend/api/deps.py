@@ -1,22 +1,37 @@
-"""Request dependencies: settings, a database session per request, the signed-in user."""
+"""Request dependencies: settings, a database session per request, the signed-in user.
+
+Dependencies that do no I/O are `async def`, so FastAPI runs them on the event loop instead of
+sending each through the thread pool; a request's blocking database work is meant to take one
+trip to the pool (the hot routes open their own session inside it, see `in_session`).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from typing import Annotated
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Annotated, TypeVar
 
-from fastapi import Depends, Header, HTTPException, Request, status
+from fastapi import Depends, FastAPI, Header, HTTPException, Request, status
 from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 
 from backend.core.config import Settings, get_settings
 from backend.db.models import User
-from backend.db.session import get_sessionmaker
-from backend.store import local_user, user_for_key
+from backend.db.session import get_sessionmaker, session_scope
+from backend.store import hash_key, local_user, user_for_key
 
 API_KEY_COOKIE = "mapqual_key"
+# How long [s] a valid API key is trusted without asking the database again: a user deleted
+# from the database (or whose key_hash is replaced) keeps access for at most this long on each
+# server process. Unknown keys are never cached, so a key added a moment ago works at once and
+# a wrong key is refused every time.
+KEY_CACHE_TTL = 5.0
+KEY_CACHE_MAX = 10_000  # entries; past this the cache is emptied (one query per key to refill)
+T = TypeVar("T")
 
 
-def settings_dep(request: Request) -> Settings:
+async def settings_dep(request: Request) -> Settings:
     """The app's settings (set by `create_app`, so tests can run apps with their own)."""
     return getattr(request.app.state, "settings", None) or get_settings()
 
@@ -40,6 +55,55 @@ def db_session(settings: SettingsDep) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(db_session)]
 
 
+def in_session(settings: Settings, work: Callable[..., T], *args) -> T:
+    """`work(session, *args)` in a transaction of its own (committed if it returns, rolled back
+    if it raises): what an `async def` route hands to the thread pool in one trip."""
+    with session_scope(settings.database_url) as session:
+        return work(session, *args)
+
+
+@dataclass(frozen=True)
+class Principal:
+    """Who a request acts for: a user's id, name and admin flag, detached from any session (so
+    it can be cached between requests)."""
+
+    id: int
+    name: str
+    is_admin: bool
+
+    @classmethod
+    def of(cls, user: User) -> Principal:
+        return cls(id=user.id, name=user.name, is_admin=bool(user.is_admin))
+
+
+class KeyCache:
+    """API key hash -> Principal, each entry trusted for `ttl` seconds (one per app)."""
+
+    def __init__(self, ttl: float = KEY_CACHE_TTL, max_entries: int = KEY_CACHE_MAX):
+        self.ttl = ttl
+        self.max_entries = max_entries
+        self._entries: dict[str, tuple[Principal, float]] = {}
+
+    def get(self, key_hash: str) -> Principal | None:
+        entry = self._entries.get(key_hash)
+        if entry is None or entry[1] < time.monotonic():
+            return None
+        return entry[0]
+
+    def put(self, key_hash: str, principal: Principal) -> None:
+        if len(self._entries) >= self.max_entries:
+            self._entries.clear()
+        self._entries[key_hash] = (principal, time.monotonic() + self.ttl)
+
+
+def key_cache(app: FastAPI) -> KeyCache:
+    """The app's key cache (made on first use)."""
+    cache = getattr(app.state, "key_cache", None)
+    if cache is None:
+        cache = app.state.key_cache = KeyCache()
+    return cache
+
+
 def _key_from_request(request: Request, authorization: str | None, x_api_key: str | None) -> str:
     if authorization:
         scheme, _, token = authorization.partition(" ")
@@ -60,29 +124,71 @@ def _key_from_request(request: Request, authorization: str | None, x_api_key: st
     )
 
 
-def current_user(
-    request: Request,
-    session: SessionDep,
-    settings: SettingsDep,
-    authorization: Annotated[str | None, Header()] = None,
-    x_api_key: Annotated[str | None, Header()] = None,
-) -> User:
-    """The user whose key came with the request (or the local user when auth is off)."""
+_LOCAL = "local"  # the cache entry of the local user (auth off); no key hash looks like it
+
+
+def _lookup(session: Session, settings: Settings, key: str | None) -> Principal | None:
     if settings.auth == "off":
-        return local_user(session)
-    key = _key_from_request(request, authorization, x_api_key)
+        return Principal.of(local_user(session))
     user = user_for_key(session, key)
+    return None if user is None else Principal.of(user)
+
+
+def _cache_entry(
+    request: Request, settings: Settings, authorization: str | None, x_api_key: str | None
+) -> tuple[str, str | None]:
+    """The request's key cache entry and its key (None when auth is off); 401 without a key."""
+    if settings.auth == "off":
+        return _LOCAL, None
+    key = _key_from_request(request, authorization, x_api_key)
+    return hash_key(key), key
+
+
+def _remember(request: Request, entry: str, user: Principal | None) -> Principal:
     if user is None:
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED, "unknown API key", headers={"WWW-Authenticate": "Bearer"}
         )
+    key_cache(request.app).put(entry, user)
     return user
 
 
-CurrentUser = Annotated[User, Depends(current_user)]
+async def current_user(
+    request: Request,
+    settings: SettingsDep,
+    authorization: Annotated[str | None, Header()] = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> Principal:
+    """The user whose key came with the request (or the local user when auth is off); a valid
+    key is looked up in the database at most once per `KEY_CACHE_TTL` seconds."""
+    entry, key = _cache_entry(request, settings, authorization, x_api_key)
+    user = key_cache(request.app).get(entry)
+    if user is None:  # a database lookup: the only case that needs a thread
+        found = await run_in_threadpool(in_session, settings, _lookup, settings, key)
+        user = _remember(request, entry, found)
+    return user
 
 
-def owned(user: User, obj, what: str, obj_id: int):
+def user_in_session(
+    request: Request,
+    session: Session,
+    settings: Settings,
+    authorization: str | None = None,
+    x_api_key: str | None = None,
+) -> Principal:
+    """`current_user` for sync handlers that already hold a session (the sign-in page): the
+    same answers and cache, the lookup made with `session`."""
+    entry, key = _cache_entry(request, settings, authorization, x_api_key)
+    user = key_cache(request.app).get(entry)
+    if user is None:
+        user = _remember(request, entry, _lookup(session, settings, key))
+    return user
+
+
+CurrentUser = Annotated[Principal, Depends(current_user)]
+
+
+def owned(user: Principal, obj, what: str, obj_id: int):
     """`obj` if the user may see it; otherwise 404, so other owners' ids reveal nothing."""
     if obj is None or (not user.is_admin and obj.owner_id != user.id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no {what} with id {obj_id}")

@@ -28,15 +28,17 @@ from sqlalchemy import select
 
 from backend.api.deps import (
     API_KEY_COOKIE,
+    Principal,
     SessionDep,
     SettingsDep,
     current_user,
     owned,
+    user_in_session,
 )
 from backend.api.routes import jobs as jobs_api
 from backend.api.routes import stats as stats_api
 from backend.api.routes import worlds as worlds_api
-from backend.db.models import Job, Run, User, World
+from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
 from worker.errors import InputError
 
@@ -53,23 +55,22 @@ class SignInRequired(Exception):
         self.next_path = next_path
 
 
-def page_user(
+async def page_user(
     request: Request,
-    session: SessionDep,
     settings: SettingsDep,
     authorization: Annotated[str | None, Header()] = None,
     x_api_key: Annotated[str | None, Header()] = None,
-) -> User:
+) -> Principal:
     """The signed-in user, exactly as the API decides it; without one, the sign-in page."""
     try:
-        return current_user(request, session, settings, authorization, x_api_key)
+        return await current_user(request, settings, authorization, x_api_key)
     except HTTPException as exc:
         if exc.status_code == 401:
             raise SignInRequired(request.url.path) from None
         raise
 
 
-PageUser = Annotated[User, Depends(page_user)]
+PageUser = Annotated[Principal, Depends(page_user)]
 
 
 def install(app: FastAPI) -> None:
@@ -107,7 +108,7 @@ def login(
 ) -> Response:
     """Check the key as the API would; keep it in an HTTP-only cookie."""
     try:
-        current_user(request, session, settings, f"Bearer {key.strip()}", None)
+        user_in_session(request, session, settings, f"Bearer {key.strip()}", None)
     except HTTPException as exc:
         return _render(request, "login.html", 401, next=_safe_next(next), error=str(exc.detail))
     resp = RedirectResponse(_safe_next(next), status_code=303)
@@ -123,7 +124,7 @@ def logout() -> RedirectResponse:
 
 
 # --- jobs -----------------------------------------------------------------------------------
-def _worlds(session, user: User) -> list[WorldOut]:
+def _worlds(session, user: Principal) -> list[WorldOut]:
     return worlds_api.list_worlds(session, user)
 
 
@@ -280,7 +281,7 @@ def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLR
     return _render(request, "compare.html", user=user, rows=rows)
 
 
-def _relation_counts(session, user: User) -> dict[int, int]:
+def _relation_counts(session, user: Principal) -> dict[int, int]:
     """Per world: B relations evaluated over its completed runs."""
     stmt = select(Run.world_id, Run.summary).where(Run.status == "done", Run.outcome == "completed")
     if not user.is_admin:

@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
-from fastapi.testclient import TestClient
+import time
 
+from fastapi.testclient import TestClient
+from sqlalchemy import delete
+
+from backend.api.deps import KeyCache
 from backend.core.config import Settings
+from backend.db.migrate import upgrade
+from backend.db.models import User
+from backend.db.session import session_scope
 from backend.main import create_app
+from backend.store import hash_key
+from tests.services import scratch_database
 
 
 def test_healthz_and_readyz_report_database_and_broker(api):
@@ -43,3 +52,40 @@ def test_auth_off_must_be_explicit_and_acts_as_local(db_url, caplog):
     with caplog.at_level("WARNING"), TestClient(create_app(settings)) as client:
         assert client.get("/api/v1/stats").status_code == 200
     assert "authentication is OFF" in caplog.text
+
+
+def _delete_user(url, name):
+    with session_scope(url) as s:
+        s.execute(delete(User).where(User.name == name))
+
+
+def test_a_deleted_users_key_is_refused_once_its_cache_entry_expires(api):
+    api.client.app.state.key_cache = KeyCache(ttl=0.3)
+    assert api.get("/api/v1/stats", user="bob").status_code == 200
+    _delete_user(api.url, "bob")
+    # within the TTL the key is still trusted (no query per request)...
+    assert api.get("/api/v1/stats", user="bob").status_code == 200
+    time.sleep(0.4)
+    # ...and after it the database is asked again
+    r = api.get("/api/v1/stats", user="bob")
+    assert r.status_code == 401 and r.json()["detail"] == "unknown API key"
+
+
+def test_an_unknown_key_is_not_cached_so_a_key_added_later_works_at_once(api):
+    key = "mq_added_after_a_failed_try"
+    headers = {"Authorization": f"Bearer {key}"}
+    assert api.client.get("/api/v1/stats", headers=headers).status_code == 401
+    with session_scope(api.url) as s:
+        s.add(User(name="carol", is_admin=False, key_hash=hash_key(key)))
+    assert api.client.get("/api/v1/stats", headers=headers).status_code == 200
+
+
+def test_the_key_cache_is_per_app(api):
+    # another app on another database must not trust a key it has never seen
+    assert api.get("/api/v1/stats", user="alice").status_code == 200
+    with scratch_database("mapqual_test") as other_url:
+        upgrade(other_url)
+        settings = Settings(DATABASE_URL=other_url, MAPQUAL_AUTH="on")
+        with TestClient(create_app(settings)) as other:
+            headers = {"Authorization": f"Bearer {api.keys['alice']}"}
+            assert other.get("/api/v1/stats", headers=headers).status_code == 401
