@@ -335,9 +335,12 @@ def local_layers(
     farthest a trajectory can take the footprint); near bool within the circumscribed radius
     (plus a cell) of one, where the footprint test must look closer; inner bool within the
     inscribed radius; cost uint8: the map's costs, raised to LETHAL / INSCRIBED by the layers.
-    Cells wholly under the robot's footprint (pose rx, ry, rth; half side rhalf) are left
-    free, as costmap_2d's footprint clearing does: the robot stands there, so they are map
-    artefacts (which would otherwise forbid every motion).
+    The robot stands where it is, so the space under its footprint (pose rx, ry, rth; half
+    side rhalf) is free, and costmap_2d's footprint clearing leaves it so: the map's obstacle
+    cells the footprint overlaps at all are artefacts (a wall drawn a cell too near by the
+    SLAM map, which would otherwise forbid every motion, even backing away from it); scan
+    cells are left out only when wholly under the footprint (a beam ending just at the
+    robot's edge may be a real obstacle touching it).
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
     cells = np.empty((px.shape[0], 2), dtype=np.int64)
@@ -346,16 +349,23 @@ def local_layers(
     s = math.sin(rth)
     # only cells wholly inside the footprint: one the robot's edge merely touches may be real
     lim = rhalf - 0.75 * resolution
+    # a cell's half extent along the footprint's axes: cells overlapping the footprint are
+    # those footprint_collides would report
+    touch = rhalf + 0.5 * resolution * (abs(c) + abs(s))
     under = np.zeros((n, n), dtype=np.bool_)
-    if lim > 0.0:
-        b = int(math.ceil(2.0 * lim / resolution)) + 1
+    overlap = np.zeros((n, n), dtype=np.bool_)
+    if rhalf > 0.0:
+        b = int(math.ceil(2.0 * touch / resolution)) + 1
         ucy = int(math.floor((ry - oy) / resolution))
         ucx = int(math.floor((rx - ox) / resolution))
         for iy in range(max(0, ucy - b), min(n, ucy + b + 1)):
             dy = oy + (iy + 0.5) * resolution - ry
             for ix in range(max(0, ucx - b), min(n, ucx + b + 1)):
                 dx = ox + (ix + 0.5) * resolution - rx
-                under[iy, ix] = abs(dx * c + dy * s) < lim and abs(-dx * s + dy * c) < lim
+                u = abs(dx * c + dy * s)
+                v = abs(-dx * s + dy * c)
+                under[iy, ix] = u < lim and v < lim
+                overlap[iy, ix] = u < touch and v < touch
     for i in range(px.shape[0]):
         ix = int(math.floor((px[i] - ox) / resolution))
         iy = int(math.floor((py[i] - oy) / resolution))
@@ -369,7 +379,7 @@ def local_layers(
     c1 = n // 2 + reach + 1
     for iy in range(max(0, -g_oy, c0), min(n, gh - g_oy, c1)):
         for ix in range(max(0, -g_ox, c0), min(n, gw - g_ox, c1)):
-            if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix] and not under[iy, ix]:
+            if g_lethal[g_oy + iy, g_ox + ix] and not lethal[iy, ix] and not overlap[iy, ix]:
                 lethal[iy, ix] = True
                 if k == cells.shape[0]:
                     c2 = np.empty((2 * k + 16, 2), dtype=np.int64)

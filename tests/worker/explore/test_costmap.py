@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from worker.explore import costmap_kernels as ck
+from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
 from worker.explore.params import ExploreParams
 
@@ -207,6 +208,28 @@ def test_local_costmap_clears_the_robots_own_footprint():
     assert local.lethal.sum() == 1
     local.build(5.0, 5.0)  # no heading given: nothing cleared
     assert local.lethal.sum() == 2
+
+
+def test_a_map_wall_the_footprint_overlaps_does_not_wedge_the_robot():
+    # The office_a deadlock: the SLAM map draws a wall a cell nearer than it is, so that the
+    # robot's footprint (0.2 m half side) at 0.22 m from the wall's cell edge, turned 0.57 rad,
+    # overlaps it; with that cell kept every motion collided, backing away included.
+    p = ExploreParams()
+    cm = GlobalCostmap(p)
+    cm.update(_prob_with_wall(), RES, (0.0, 0.0))  # wall cells x in [2.0, 2.05)
+    x, y, th = 1.77, 1.5, 0.57  # corner at x = 1.77 + 0.2 (cos + sin) = 2.05: in the wall
+    local = LocalCostmap(p, RES)
+    local.build(x, y, cm, th)
+    args = (local.lethal, local.near, local.inner, *local.origin, RES)
+    half = p.footprint_half_m
+    assert not ck.footprint_collides(*args, x, y, th, half)
+    back = dk.motion_legal(x, y, th, -0.1, 0.0, 1.0, *args, half, p.sim_granularity)
+    on = dk.motion_legal(x, y, th, 0.1, 0.0, 1.0, *args, half, p.sim_granularity)
+    assert back and not on  # away from the wall is free; into it still collides
+    local.build(x, y, cm)  # without the heading nothing is cleared: the wall is there
+    assert ck.footprint_collides(local.lethal, local.near, local.inner, *local.origin, RES,
+                                 x, y, th, half)  # fmt: skip
+    assert local.lethal[int((1.5 - local.origin[1]) / RES), int((2.02 - local.origin[0]) / RES)]
 
 
 def test_local_layers_equal_a_disc_dilation():
