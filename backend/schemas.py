@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
 from typing import Any, Literal
 
@@ -113,7 +114,8 @@ class JobOut(BaseModel):
     runs: list[RunBrief]
 
     @classmethod
-    def of(cls, j: Job) -> JobOut:
+    def of(cls, j: Job, runs: Sequence[Run] | None = None) -> JobOut:
+        """From a Job, or from any object with its attributes (a Row) and its `runs`."""
         return cls(
             id=j.id,
             world_id=j.world_id,
@@ -122,7 +124,7 @@ class JobOut(BaseModel):
             params=j.params,
             created_at=j.created_at,
             updated_at=j.updated_at,
-            runs=[RunBrief.of(r) for r in j.runs],
+            runs=[RunBrief.of(r) for r in (j.runs if runs is None else runs)],
         )
 
 

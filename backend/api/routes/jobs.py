@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import json
+from functools import lru_cache
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Header, HTTPException, Query, status
-from fastapi.responses import JSONResponse
-from sqlalchemy import func, select
-from sqlalchemy.orm import joinedload
+from fastapi import APIRouter, Header, HTTPException, Query, Response, status
+from pydantic import BaseModel
+from sqlalchemy import bindparam, func, select
+from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 
-from backend.api.deps import CurrentUser, SessionDep, SettingsDep, owned
-from backend.db.models import Job, World
+from backend.api.deps import CurrentUser, Principal, SessionDep, SettingsDep, in_session, owned
+from backend.core.config import Settings
+from backend.db.models import Job, Run, World
 from backend.queue import enqueue_run
 from backend.schemas import JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
@@ -20,32 +24,41 @@ router = APIRouter(tags=["jobs"])
 JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
 
 
-@router.post("/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
-def submit_job(
+@lru_cache(maxsize=256)
+def _run_params(overrides_json: str) -> tuple[str, str]:
+    """(algorithm, RunParams JSON) for the overrides: validated by the pipeline's own rules
+    (InputError -> 400), once per distinct set of overrides."""
+    params = RunParams.from_json(json.loads(overrides_json))
+    return params.algorithm, json.dumps(params.to_json())
+
+
+def submit(
+    session: Session,
+    user: Principal,
+    settings: Settings,
     body: JobIn,
-    session: SessionDep,
-    user: CurrentUser,
-    settings: SettingsDep,
-    idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
-) -> JSONResponse:
-    """Queue one run per seed; the same Idempotency-Key again returns the same job."""
-    owned(user, session.get(World, body.world_id), "world", body.world_id)
+    idempotency_key: str | None,
+) -> JobOut:
+    """Store a job of one queued run per seed and queue its runs (the work of POST /jobs, also
+    used by the dashboard's form)."""
+    world = session.execute(select(World.owner_id).where(World.id == body.world_id)).first()
+    owned(user, world, "world", body.world_id)
     data = dict(body.params)
     if body.slam is not None:
         data["algorithm"] = body.slam
-    params = RunParams.from_json(data)  # the pipeline's own validation; InputError -> 400
+    algorithm, params_json = _run_params(json.dumps(data, sort_keys=True))
     if idempotency_key is not None:
         found = session.scalars(
             select(Job).where(Job.owner_id == user.id, Job.idempotency_key == idempotency_key)
         ).first()
         if found is not None:
-            return JSONResponse(JobOut.of(found).model_dump(mode="json"), status_code=202)
+            return JobOut.of(found)
     job = create_job(
         session,
         owner_id=user.id,
         world_id=body.world_id,
-        slam=params.algorithm,
-        params=params.to_json(),
+        slam=algorithm,
+        params=json.loads(params_json),
         seeds=body.seed_list(),
         idempotency_key=idempotency_key,
     )
@@ -61,7 +74,28 @@ def submit_job(
         raise HTTPException(
             status.HTTP_503_SERVICE_UNAVAILABLE, "the job queue is unreachable; try again later"
         ) from None
-    return JSONResponse(JobOut.of(job).model_dump(mode="json"), status_code=202)
+    return JobOut.of(job)
+
+
+def json_response(model: BaseModel, status_code: int = 200) -> Response:
+    """`model` serialised once by its own pydantic serializer. A route that declares
+    `response_model` and returns a Response skips FastAPI's second validation and encoding
+    (the model still documents the answer in OpenAPI)."""
+    return Response(model.model_dump_json(), status_code, media_type="application/json")
+
+
+@router.post("/jobs", response_model=JobOut, status_code=status.HTTP_202_ACCEPTED)
+async def submit_job(
+    body: JobIn,
+    user: CurrentUser,
+    settings: SettingsDep,
+    idempotency_key: Annotated[str | None, Header(max_length=200)] = None,
+) -> Response:
+    """Queue one run per seed; the same Idempotency-Key again returns the same job."""
+    job = await run_in_threadpool(
+        in_session, settings, submit, user, settings, body, idempotency_key
+    )
+    return json_response(job, status.HTTP_202_ACCEPTED)
 
 
 @router.get("/jobs", response_model=JobPage)
@@ -86,12 +120,30 @@ def list_jobs(
     return JobPage(items=[JobOut.of(j) for j in jobs], total=total, limit=limit, offset=offset)
 
 
+# GET /jobs/{id} is polled: two lean column selects, no ORM objects; built once, so SQLAlchemy
+# reuses their compiled form and result layout as they are (only :job_id changes).
+_JOB_BY_ID = select(
+    Job.id, Job.owner_id, Job.world_id, Job.status, Job.slam, Job.params, Job.created_at,
+    Job.updated_at,
+).where(Job.id == bindparam("job_id"))  # fmt: skip
+_RUNS_OF_JOB = select(
+    Run.id, Run.seed, Run.status, Run.outcome, Run.reason, Run.coverage, Run.b_mean_t,
+    Run.b_mean_r, Run.progress,
+).where(Run.job_id == bindparam("job_id")).order_by(Run.id)  # fmt: skip
+
+
+def read_job(session: Session, user: Principal, job_id: int) -> JobOut:
+    """A job and its runs as JobOut, or 404 (also for another owner's job)."""
+    conn = session.connection()
+    job = conn.execute(_JOB_BY_ID, {"job_id": job_id}).first()
+    owned(user, job, "job", job_id)
+    return JobOut.of(job, runs=conn.execute(_RUNS_OF_JOB, {"job_id": job_id}).all())
+
+
 @router.get("/jobs/{job_id}", response_model=JobOut)
-def get_job(job_id: int, session: SessionDep, user: CurrentUser) -> JobOut:
+async def get_job(job_id: int, user: CurrentUser, settings: SettingsDep) -> Response:
     """A job's status and its runs with their progress."""
-    # the job and its runs in one query (a polled endpoint: round trips are its cost)
-    job = session.get(Job, job_id, options=[joinedload(Job.runs)])
-    return JobOut.of(owned(user, job, "job", job_id))
+    return json_response(await run_in_threadpool(in_session, settings, read_job, user, job_id))
 
 
 @router.post("/jobs/{job_id}/cancel", response_model=JobOut)

@@ -162,15 +162,14 @@ def submit_job_form(
         params["explore"] = {"time_limit": time_limit}
     try:
         body = JobIn(world_id=world_id, runs=runs, slam=slam, params=params)
-        resp = jobs_api.submit_job(body, session, user, settings, None)
+        job = jobs_api.submit(session, user, settings, body, None)
     except ValidationError as exc:
         msg = "; ".join(e["msg"] for e in exc.errors())
         return _jobs_page(request, session, user, f"invalid job: {msg}", 400)
     except (HTTPException, InputError) as exc:
         session.rollback()
         return _jobs_page(request, session, user, str(getattr(exc, "detail", exc)), 400)
-    job_id = json.loads(resp.body)["id"]
-    return RedirectResponse(f"/jobs/{job_id}", status_code=303)
+    return RedirectResponse(f"/jobs/{job.id}", status_code=303)
 
 
 @router.get("/jobs/{job_id}", response_class=HTMLResponse)

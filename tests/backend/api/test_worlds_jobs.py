@@ -258,3 +258,48 @@ def test_a_finished_run_without_its_report_folder_serves_its_map_from_the_databa
     rgb = np.asarray(Image.open(io.BytesIO(png.content)).convert("RGB"))
     assert rgb.shape[1] >= 640  # scaled up for the text
     assert ((rgb[..., 0] > 120) & (rgb[..., 1] < 40)).any()  # the errors are written in red
+
+
+def test_a_job_reads_the_same_by_id_as_in_the_list_and_follows_its_runs(api):
+    # GET /jobs/{id} reads columns directly; GET /jobs builds the same answer from ORM objects
+    from backend.db.session import session_scope
+    from backend.store import mark_run_started, store_run_result
+
+    w = _world(api)
+    job = api.post("/api/v1/jobs", json={"world_id": w["id"], "seeds": [9, 4, 6]}).json()
+    first = api.get(f"/api/v1/jobs/{job['id']}").json()
+    # (SQLite gives its timestamps back without a time zone: only the job as stored compares)
+    assert {**first, "created_at": 0, "updated_at": 0} == {**job, "created_at": 0, "updated_at": 0}
+    done, running, _ = (r["id"] for r in job["runs"])
+    b = {"n": 3, "mean": 0.5, "std": 0.1, "min": 0.25, "max": 0.75}
+    with session_scope(api.url) as s:
+        mark_run_started(s, running).progress = {"t": 12.5, "coverage": 0.25, "pose": [1, 2, 0]}
+        mark_run_started(s, done)
+        store_run_result(
+            s, done, summary={"outcome": "completed", "coverage": 0.875,
+                              "relations": {"B": {"translation": b, "rotation": b}}},
+            t=np.zeros(2), pose_gt=np.zeros((2, 3)), pose_est=np.zeros((2, 3)),
+            map_ros=np.zeros((2, 2), np.int8), map_resolution=0.05, map_origin=(0, 0),
+            report_dir=None,
+        )  # fmt: skip
+    got = api.get(f"/api/v1/jobs/{job['id']}").json()
+    assert got == api.get("/api/v1/jobs").json()["items"][0]
+    assert got["status"] == "running" and got["updated_at"] > first["updated_at"]
+    assert [r["seed"] for r in got["runs"]] == [9, 4, 6]  # in the order they were made
+    assert [r["status"] for r in got["runs"]] == ["done", "running", "queued"]
+    assert got["runs"][0]["outcome"] == "completed" and got["runs"][0]["b_mean_t"] == 0.5
+    assert got["runs"][0]["coverage"] == 0.875
+    assert got["runs"][1]["progress"] == {"t": 12.5, "coverage": 0.25, "pose": [1, 2, 0]}
+    assert got["runs"][2]["progress"] == {} and got["runs"][2]["outcome"] is None
+    assert api.get(f"/api/v1/jobs/{job['id'] + 1}").status_code == 404
+
+
+def test_openapi_documents_the_job_answers_that_are_sent_as_ready_json(api):
+    doc = api.client.get("/api/v1/openapi.json").json()
+    ref = {"$ref": "#/components/schemas/JobOut"}
+    post = doc["paths"]["/api/v1/jobs"]["post"]
+    assert post["responses"]["202"]["content"]["application/json"]["schema"] == ref
+    assert post["requestBody"]["content"]["application/json"]["schema"]["$ref"].endswith("/JobIn")
+    get = doc["paths"]["/api/v1/jobs/{job_id}"]["get"]
+    assert get["responses"]["200"]["content"]["application/json"]["schema"] == ref
+    assert "runs" in doc["components"]["schemas"]["JobOut"]["properties"]
