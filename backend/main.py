@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import gc
 import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
@@ -16,6 +19,23 @@ API_PREFIX = "/api/v1"
 log = logging.getLogger("mapqual.api")
 
 
+_frozen = False
+
+
+@asynccontextmanager
+async def _lifespan(_app: FastAPI) -> AsyncIterator[None]:
+    """At the first start in a process, move everything alive then (modules, routes, ORM
+    mappers, schemas: it lives as long as the process) out of the cyclic garbage collector's
+    sight. A full collection then scans only what requests made since, instead of ~200,000
+    objects: a 50-130 ms pause that every request in flight would wait out (p99 latency)."""
+    global _frozen
+    if not _frozen:
+        _frozen = True
+        gc.collect()
+        gc.freeze()
+    yield
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """A configured app; tests pass their own settings (database, broker, auth)."""
     settings = settings or get_settings()
@@ -26,6 +46,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         "submit runs, fetch metrics, trajectories and maps.",
         openapi_url=f"{API_PREFIX}/openapi.json",
         docs_url=f"{API_PREFIX}/docs",
+        lifespan=_lifespan,
     )
     app.state.settings = settings
     app.state.key_cache = KeyCache()  # API keys seen lately (see deps.KEY_CACHE_TTL)
