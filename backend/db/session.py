@@ -9,6 +9,10 @@ from functools import lru_cache
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.orm import Session, sessionmaker
 
+# Connections per process and database (PostgreSQL allows 100 in all by default).
+POOL_SIZE = 20
+POOL_OVERFLOW = 10
+
 
 @lru_cache(maxsize=8)
 def get_engine(url: str) -> Engine:
@@ -24,7 +28,10 @@ def get_engine(url: str) -> Engine:
             cur.close()
 
         return engine
-    return create_engine(url, pool_pre_ping=True)
+    # Up to POOL_SIZE connections stay open between requests (SQLAlchemy's default of 5 made
+    # every burst of more concurrent requests open and close new PostgreSQL backends, ~5 ms
+    # each); a burst past it opens at most POOL_OVERFLOW short-lived ones, then waits.
+    return create_engine(url, pool_pre_ping=True, pool_size=POOL_SIZE, max_overflow=POOL_OVERFLOW)
 
 
 @lru_cache(maxsize=8)
