@@ -8,10 +8,11 @@ trip to the pool (the hot routes open their own session inside it, see `in_sessi
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Annotated, TypeVar
 
+from anyio import CancelScope
 from fastapi import Depends, FastAPI, Header, HTTPException, Request, status
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
@@ -39,12 +40,29 @@ async def settings_dep(request: Request) -> Settings:
 SettingsDep = Annotated[Settings, Depends(settings_dep)]
 
 
-def db_session(settings: SettingsDep) -> Iterator[Session]:
-    """One session per request: committed when the handler returns, rolled back on error."""
+async def db_session(settings: SettingsDep) -> AsyncIterator[Session]:
+    """One session per request: committed when the handler returns, rolled back on error.
+
+    Making it does no I/O (that waits for the first query, in the handler's thread); ending it
+    does, so that is one trip to the thread pool, shielded so a cancelled request still ends
+    its transaction and returns its connection."""
     session = get_sessionmaker(settings.database_url)()
     try:
         yield session
-        session.commit()
+    except BaseException:
+        with CancelScope(shield=True):
+            await run_in_threadpool(_end, session, False)
+        raise
+    with CancelScope(shield=True):
+        await run_in_threadpool(_end, session, True)
+
+
+def _end(session: Session, commit: bool) -> None:
+    try:
+        if commit:
+            session.commit()
+        else:
+            session.rollback()
     except BaseException:
         session.rollback()
         raise
