@@ -32,6 +32,9 @@ def _run_params(overrides_json: str) -> tuple[str, str]:
     return params.algorithm, json.dumps(params.to_json())
 
 
+_WORLD_OWNER = select(World.owner_id).where(World.id == bindparam("world_id"))
+
+
 def submit(
     session: Session,
     user: Principal,
@@ -41,7 +44,7 @@ def submit(
 ) -> JobOut:
     """Store a job of one queued run per seed and queue its runs (the work of POST /jobs, also
     used by the dashboard's form)."""
-    world = session.execute(select(World.owner_id).where(World.id == body.world_id)).first()
+    world = session.connection().execute(_WORLD_OWNER, {"world_id": body.world_id}).first()
     owned(user, world, "world", body.world_id)
     data = dict(body.params)
     if body.slam is not None:
