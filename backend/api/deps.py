@@ -12,7 +12,7 @@ from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Annotated, TypeVar
 
-from anyio import CancelScope
+from anyio import CancelScope, CapacityLimiter, to_thread
 from fastapi import Depends, FastAPI, Header, HTTPException, Request, status
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
@@ -44,17 +44,20 @@ async def db_session(settings: SettingsDep) -> AsyncIterator[Session]:
     """One session per request: committed when the handler returns, rolled back on error.
 
     Making it does no I/O (that waits for the first query, in the handler's thread); ending it
-    does, so that is one trip to the thread pool, shielded so a cancelled request still ends
-    its transaction and returns its connection."""
+    does, so that is one trip to a thread, shielded so a cancelled request still ends its
+    transaction. That trip does not queue behind the thread pool's limit (as FastAPI ends its
+    own sync dependencies): handlers filling the pool while they wait for a database
+    connection would otherwise wait, until the connection pool's timeout, on the sessions
+    that hold the connections."""
     session = get_sessionmaker(settings.database_url)()
     try:
         yield session
     except BaseException:
         with CancelScope(shield=True):
-            await run_in_threadpool(_end, session, False)
+            await to_thread.run_sync(_end, session, False, limiter=CapacityLimiter(1))
         raise
     with CancelScope(shield=True):
-        await run_in_threadpool(_end, session, True)
+        await to_thread.run_sync(_end, session, True, limiter=CapacityLimiter(1))
 
 
 def _end(session: Session, commit: bool) -> None:
