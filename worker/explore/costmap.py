@@ -218,9 +218,11 @@ class LocalCostmap:
         costmap: GlobalCostmap | None = None,
         theta: float | None = None,
         use_map: bool = True,
+        clear_touching: bool = False,
     ) -> None:
         """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given);
-        with the robot's heading theta, the cells under its footprint are cleared. use_map
+        with the robot's heading theta, the cells under its footprint are cleared (see
+        costmap_kernels.local_layers; clear_touching: the scan cells it touches too). use_map
         False: the map's obstacles are left out (the thesis's scan-only local costmap)."""
         res = self.resolution
         half = self.n // 2
@@ -240,7 +242,7 @@ class LocalCostmap:
             float(self.origin[0]), float(self.origin[1]), res, self.n,
             self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox), self._reach,
             float(x), float(y), float(theta or 0.0),
-            self.params.footprint_half_m if theta is not None else -1.0,
+            self.params.footprint_half_m if theta is not None else -1.0, clear_touching,
         )  # fmt: skip
 
 

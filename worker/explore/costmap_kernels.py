@@ -323,7 +323,7 @@ def disc_offsets(radius_cells: float) -> np.ndarray:
 @njit(cache=True)
 def local_layers(
     px, py, ox, oy, resolution, n, near_widths, inner_widths, g_lethal, g_cost, g_oy, g_ox,
-    reach, rx, ry, rth, rhalf,
+    reach, rx, ry, rth, rhalf, clear_touching=False,
 ):  # fmt: skip
     """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
 
@@ -340,7 +340,8 @@ def local_layers(
     cells the footprint overlaps at all are artefacts (a wall drawn a cell too near by the
     SLAM map, which would otherwise forbid every motion, even backing away from it); scan
     cells are left out only when wholly under the footprint (a beam ending just at the
-    robot's edge may be a real obstacle touching it).
+    robot's edge may be a real obstacle touching it), or, with clear_touching, when the
+    footprint overlaps them at all (to find a way out once the robot touches something).
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
     cells = np.empty((px.shape[0], 2), dtype=np.int64)
@@ -369,7 +370,9 @@ def local_layers(
     for i in range(px.shape[0]):
         ix = int(math.floor((px[i] - ox) / resolution))
         iy = int(math.floor((py[i] - oy) / resolution))
-        if 0 <= ix < n and 0 <= iy < n and not lethal[iy, ix] and not under[iy, ix]:
+        if not (0 <= ix < n and 0 <= iy < n) or lethal[iy, ix] or under[iy, ix]:
+            continue
+        if not (clear_touching and overlap[iy, ix]):
             lethal[iy, ix] = True
             cells[k, 0] = iy
             cells[k, 1] = ix

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
 from worker.explore.dwa import Command, DwaPlanner, wrap_angle
@@ -164,6 +165,9 @@ class Navigator:
             self._finish(t, "reached")
             return NavCommand(0.0, 0.0, "aligning")
         if not cmd.legal:
+            vw = self._unwedge(pose)
+            if vw is not None:
+                return NavCommand(vw[0], vw[1], "recovering")
             return self._controller_failed(t)
         self._ctrl_fail_since = None
         self._recovered = False
@@ -199,6 +203,45 @@ class Navigator:
             if cmd.legal:
                 return cmd.v, cmd.w
         return planned
+
+    def _unwedge(self, pose: np.ndarray) -> tuple[float, float] | None:
+        """Out of contact: the footprint overlaps an obstacle cell (the scan's or the map's) at
+        the robot's own pose, so every motion collides, backing away included (in clutter the
+        DWA's unpadded pass can end a few centimetres from furniture, and a cell is 5 cm).
+        The slow motion (back, forward, turn, for one second) that takes the footprint
+        farthest from the cells it touches without touching any other; None when it touches
+        nothing, or no motion gets it at least a centimetre clear of them."""
+        p = self.params
+        L = self.local
+        x, y, th = (float(v) for v in pose)
+        half = p.footprint_half_m
+        L.build(x, y, self.costmap, th)
+        if not ck.footprint_collides(
+            L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
+            x, y, th, half,
+        ):  # fmt: skip
+            return None
+        blocked = L.lethal.copy()
+        L.build(x, y, self.costmap, th, clear_touching=True)  # same window: same origin
+        iy, ix = np.nonzero(blocked & ~L.lethal)
+        if iy.size == 0:
+            return None
+        cx = L.origin[0] + (ix + 0.5) * L.resolution
+        cy = L.origin[1] + (iy + 0.5) * L.resolution
+        best, best_gap = None, _square_gap(cx, cy, x, y, th, half) + 0.01
+        duration = 1.0
+        for v in (p.escape_vel, 0.0, p.min_vel_x):
+            for w in (-p.min_in_place_vel_theta, 0.0, p.min_in_place_vel_theta):
+                if (v, w) == (0.0, 0.0) or not dk.motion_legal(
+                    x, y, th, v, w, duration, L.lethal, L.near, L.inner, float(L.origin[0]),
+                    float(L.origin[1]), L.resolution, half, p.sim_granularity,
+                ):  # fmt: skip
+                    continue
+                ex, ey, eth = _drive(x, y, th, v, w, duration)
+                gap = _square_gap(cx, cy, ex, ey, eth, half)
+                if gap > best_gap:
+                    best, best_gap = (v, w), gap
+        return best
 
     def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
         """Bounding box `(x0, y0, x1, y1)` [m] of the robot and its beams' end points."""
@@ -365,3 +408,23 @@ class Navigator:
         self.dwa.set_plan(None)
         self.shim.reset()
         self._next_choice_t = t
+
+
+def _drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int = 20):
+    """The pose after driving (v, w) for `duration` from (x, y, th) (Euler steps, as the DWA)."""
+    dt = duration / n
+    for _ in range(n):
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+    return x, y, th
+
+
+def _square_gap(px: np.ndarray, py: np.ndarray, x: float, y: float, th: float, half: float):
+    """[m] the least distance from the points `(K,)` to the square footprint (half side
+    `half`) at (x, y, th); 0 for a point inside."""
+    dx, dy = px - x, py - y
+    c, s = math.cos(th), math.sin(th)
+    u = np.maximum(np.abs(dx * c + dy * s) - half, 0.0)
+    v = np.maximum(np.abs(-dx * s + dy * c) - half, 0.0)
+    return float(np.min(np.hypot(u, v)))

@@ -251,3 +251,28 @@ def test_local_layers_equal_a_disc_dilation():
         disc = np.zeros((2 * R + 1, 2 * R + 1), dtype=bool)
         disc[off[:, 0] + R, off[:, 1] + R] = True
         np.testing.assert_array_equal(layer, ndimage.binary_dilation(lethal, structure=disc))
+
+
+def test_a_robot_touching_an_obstacle_backs_away_from_it():
+    # The footprint's front edge 1 cm into the cell of a wall the scans and the map both hold
+    # (the cells are 5 cm): every motion "collides" at the start pose; the way out backs off.
+    from worker.explore.navigator import Navigator
+
+    p = ExploreParams()
+    angles = np.linspace(-2.35, 2.35, 541)
+    nav = Navigator(p, angles, 30.0)
+    nav.update_map(_prob_with_wall(), RES, (0.0, 0.0), True)  # wall cells x in [2.0, 2.05)
+    face = np.column_stack((np.full(21, 2.0), np.linspace(1.0, 2.0, 21)))
+    nav.local.add_points(0.0, face)
+    pose = np.array([1.81, 1.5, 0.0])  # front edge at x = 2.01
+    v, w = nav._unwedge(pose)
+    assert v < 0
+    # independent check: one second of it leaves the 0.4 m square clear of the face by more
+    x, y, th = 1.81, 1.5, 0.0
+    for _ in range(100):
+        x, y, th = x + v * math.cos(th) * 0.01, y + v * math.sin(th) * 0.01, th + w * 0.01
+    c, s = math.cos(th), math.sin(th)
+    u = np.abs((face[:, 0] - x) * c + (face[:, 1] - y) * s) - 0.2
+    q = np.abs(-(face[:, 0] - x) * s + (face[:, 1] - y) * c) - 0.2
+    assert np.min(np.hypot(np.maximum(u, 0), np.maximum(q, 0))) > 0.05
+    assert nav._unwedge(np.array([1.5, 1.5, 0.0])) is None  # clear of it: nothing to do
