@@ -26,11 +26,13 @@ class HeadingShim:
         self.params = params
         self.active = False
         self._dir = 0.0  # sign of the speed while moving to get room to turn; 0: not doing so
+        self._turn = 0.0  # sign of the turn under way; 0: none
         self.n_reversals = 0  # control periods spent backing up to get room to turn
 
     def reset(self) -> None:
         self.active = False
         self._dir = 0.0
+        self._turn = 0.0
 
     def command(
         self, pose: np.ndarray, w0: float, path_xy: np.ndarray | None, local: LocalCostmap
@@ -53,13 +55,18 @@ class HeadingShim:
         self.active = True
         dt = 1.0 / p.controller_frequency
         w_mag = max(p.min_in_place_vel_theta, min(p.max_vel_theta, abs(err)))
-        # the short way round as far as needed (at most sim_time), else the long way
+        # the short way round as far as needed (at most sim_time), else the long way; a turn
+        # under way goes on the same way while it can: a path about behind the robot, or a
+        # short way blocked now and then, must not make it swing back and forth
         sign = math.copysign(1.0, err)
-        for s, sweep in ((sign, abs(err)), (-sign, 2.0 * math.pi - abs(err))):
+        first = self._turn if self._turn != 0.0 else sign
+        for s in (first, -first):
+            sweep = abs(err) if s == sign else 2.0 * math.pi - abs(err)
             duration = min(p.sim_time, sweep / w_mag)
             if self._legal(pose, 0.0, s * w_mag, local, duration):
                 w = min(max(s * w_mag, w0 - p.acc_lim_theta * dt), w0 + p.acc_lim_theta * dt)
                 self._dir = 0.0
+                self._turn = s
                 return 0.0, w, "rotate"
         return self._to_clearance(pose, err, local)
 

@@ -78,3 +78,17 @@ def test_boxed_in_it_backs_out_until_it_can_turn():
     assert kinds[0] == "reverse" and kinds[-1] == "rotate"
     assert x[0] < 1.2  # it backed out of the slot before it could turn
     assert shim.n_reversals == len(kinds) - 1
+
+
+def test_a_turn_under_way_keeps_its_direction_when_the_path_is_about_behind():
+    # lab_a_furnitures: with the path about behind, the heading crossing the angle opposite
+    # the path flipped "the short way round" every other period, and the robot swung back
+    # and forth among chair legs for minutes
+    p = ExploreParams()
+    shim = HeadingShim(p)
+    pose = np.array([3.0, 3.0, 0.14])  # the path (west) 3.0 rad to the left
+    assert shim.command(pose, 0.0, _path_west(), _local([], pose, p))[1] > 0
+    pose[2] = -0.04  # now 3.10 rad to the right, 3.18 to the left: keep turning left
+    assert shim.command(pose, 0.3, _path_west(), _local([], pose, p))[1] > 0
+    fresh = HeadingShim(p)  # a robot that was not turning takes the short way: right
+    assert fresh.command(pose, 0.0, _path_west(), _local([], pose, p))[1] < 0
