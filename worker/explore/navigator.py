@@ -209,8 +209,9 @@ class Navigator:
         the robot's own pose, so every motion collides, backing away included (in clutter the
         DWA's unpadded pass can end a few centimetres from furniture, and a cell is 5 cm).
         The slow motion (back, forward, turn, for one second) that takes the footprint
-        farthest from the cells it touches without touching any other; None when it touches
-        nothing, or no motion gets it at least a centimetre clear of them."""
+        farthest from the cells it touches without touching any other, backwards first on
+        ties (sliding along an obstacle at its side is a way out too); None when it touches
+        nothing, or every such motion would take it nearer to them."""
         p = self.params
         L = self.local
         x, y, th = (float(v) for v in pose)
@@ -228,7 +229,7 @@ class Navigator:
             return None
         cx = L.origin[0] + (ix + 0.5) * L.resolution
         cy = L.origin[1] + (iy + 0.5) * L.resolution
-        best, best_gap = None, _square_gap(cx, cy, x, y, th, half) + 0.01
+        best, best_gap = None, _square_gap(cx, cy, x, y, th, half) - 1e-6
         duration = 1.0
         for v in (p.escape_vel, 0.0, p.min_vel_x):
             for w in (-p.min_in_place_vel_theta, 0.0, p.min_in_place_vel_theta):
