@@ -17,6 +17,16 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int):
+    """The pose after driving (v, w) for `duration` [s] from (x, y, th), in n Euler steps."""
+    dt = duration / n
+    for _ in range(n):
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+    return x, y, th
+
+
 @dataclass(frozen=True)
 class Command:
     """One controller output."""

@@ -10,7 +10,7 @@ import numpy as np
 from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
-from worker.explore.dwa import Command, DwaPlanner, wrap_angle
+from worker.explore.dwa import Command, DwaPlanner, drive, wrap_angle
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, path_length
@@ -238,7 +238,7 @@ class Navigator:
                     float(L.origin[1]), L.resolution, half, p.sim_granularity,
                 ):  # fmt: skip
                     continue
-                ex, ey, eth = _drive(x, y, th, v, w, duration)
+                ex, ey, eth = drive(x, y, th, v, w, duration, 20)
                 gap = _square_gap(cx, cy, ex, ey, eth, half)
                 if gap > best_gap:
                     best, best_gap = (v, w), gap
@@ -409,16 +409,6 @@ class Navigator:
         self.dwa.set_plan(None)
         self.shim.reset()
         self._next_choice_t = t
-
-
-def _drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int = 20):
-    """The pose after driving (v, w) for `duration` from (x, y, th) (Euler steps, as the DWA)."""
-    dt = duration / n
-    for _ in range(n):
-        x += v * math.cos(th) * dt
-        y += v * math.sin(th) * dt
-        th += w * dt
-    return x, y, th
 
 
 def _square_gap(px: np.ndarray, py: np.ndarray, x: float, y: float, th: float, half: float):

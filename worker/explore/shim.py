@@ -8,7 +8,7 @@ import numpy as np
 
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
-from worker.explore.dwa import wrap_angle
+from worker.explore.dwa import drive, wrap_angle
 from worker.explore.params import ExploreParams
 
 
@@ -137,13 +137,7 @@ def _carrot(path_xy: np.ndarray, x: float, y: float, lookahead: float) -> tuple[
 
 def _cost_after(pose: np.ndarray, v: float, w: float, duration: float, local: LocalCostmap) -> int:
     """Local costmap value [0, 255] where driving (v, w) for `duration` [s] ends."""
-    n = 10
-    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
-    dt = duration / n
-    for _ in range(n):
-        x += v * math.cos(th) * dt
-        y += v * math.sin(th) * dt
-        th += w * dt
+    x, y, _ = drive(float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, 10)
     ix = int(math.floor((x - local.origin[0]) / local.resolution))
     iy = int(math.floor((y - local.origin[1]) / local.resolution))
     if not (0 <= ix < local.n and 0 <= iy < local.n):
