@@ -10,7 +10,6 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from backend.api.deps import KeyCache
 from backend.api.routes import health, jobs, pages, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from worker.errors import InputError
@@ -49,7 +48,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=_lifespan,
     )
     app.state.settings = settings
-    app.state.key_cache = KeyCache()  # API keys seen lately (see deps.KEY_CACHE_TTL)
     if settings.auth == "off":
         log.warning("authentication is OFF (MAPQUAL_AUTH=off): every request acts as 'local'")
 

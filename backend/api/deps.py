@@ -118,7 +118,7 @@ class KeyCache:
 
 
 def key_cache(app: FastAPI) -> KeyCache:
-    """The app's key cache (made on first use)."""
+    """The app's cache of API keys seen lately (made on its first use; see KEY_CACHE_TTL)."""
     cache = getattr(app.state, "key_cache", None)
     if cache is None:
         cache = app.state.key_cache = KeyCache()
