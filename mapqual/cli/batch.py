@@ -230,6 +230,8 @@ def _execute(specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log) 
             if celery:
                 run_celery(todo, bdir, db, settings.redis_url, progress, retry_failed=retry_failed)
             else:
+                # runs a killed invocation left `running` are this pool's to redo: queued
+                db.interrupted(todo)
                 run_local(todo, bdir, workers, db, progress, sim_log=sim_log)
     finally:
         signal.signal(signal.SIGTERM, previous)

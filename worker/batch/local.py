@@ -136,9 +136,11 @@ def run_local(
     def handle(msg: PoolMessage) -> None:
         spec = specs[msg.index]
         if msg.kind == "started":
+            # in flight before the sink hears of it: an interrupt landing inside
+            # sink.started (after its commit) must still requeue the run
+            in_flight[msg.index] = spec
             bdir.fresh_run_dir(spec.key)
             sink.started(spec)
-            in_flight[msg.index] = spec
             bdir.journal("start", spec.key)
             on_event(Event("start", spec))
         elif msg.kind == "progress":
