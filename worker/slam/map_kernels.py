@@ -189,17 +189,21 @@ def register_scans(
     usable_range,
     max_range,
     need,
+    todo,
     start,
 ):
-    """Register the scan for particles start.. in turn; stop early when the pool runs short.
+    """Register the scan for particles todo[start:] in turn; stop early when the pool runs
+    short.
 
     need: (N,) patches a particle may have to allocate (its scan's bounding box). Returns
-    (next particle to do, dropped cell updates); next < N means: grow the pool and call again.
+    (next position in todo, dropped cell updates); next < len(todo) means: grow the pool and
+    call again.
     """
     dropped = 0
-    for p in range(start, poses.shape[0]):
+    for k in range(start, todo.shape[0]):
+        p = todo[k]
         if n_free[0] < need[p]:
-            return p, dropped
+            return k, dropped
         dropped += _register_one(
             visits,
             hits,
@@ -219,7 +223,7 @@ def register_scans(
             usable_range,
             max_range,
         )
-    return poses.shape[0], dropped
+    return todo.shape[0], dropped
 
 
 @njit(cache=True)

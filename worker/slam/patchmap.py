@@ -106,15 +106,33 @@ class PatchMaps:
         sin_a: np.ndarray,
         usable_range: float,
         max_range: float,
+        same_as: np.ndarray | None = None,
     ) -> None:
         """Integrate one scan into every particle's map at its pose.
 
         poses: (N, 3) [x, y, theta] map frame; ranges_m: (B,); cos_a, sin_a: (B,) of the
-        beam angles relative to the robot heading.
+        beam angles relative to the robot heading. same_as: (N,) optional; same_as[k] = j
+        says that particle k has the same map and pose as particle j (copies made by
+        resampling, before the motion model moves them apart), with same_as[j] = j: the scan
+        is registered for j only and k then shares j's patches (copy-on-write, as after
+        `select`), which gives k the very cells it would have written itself.
         """
         poses = np.ascontiguousarray(poses, dtype=np.float64).reshape(-1, 3)
         if poses.shape[0] != self.n_particles:
             raise ValueError(f"{poses.shape[0]} poses for {self.n_particles} particle maps")
+        n = self.n_particles
+        if same_as is None:
+            todo = np.arange(n, dtype=np.int64)
+        else:
+            same_as = np.asarray(same_as, dtype=np.int64)
+            if (
+                same_as.shape != (n,)
+                or np.any(same_as[same_as] != same_as)
+                or not np.array_equal(poses[same_as], poses)
+                or not np.array_equal(self.tables[same_as], self.tables)
+            ):
+                raise ValueError("same_as must name, for each particle, an identical one")
+            todo = np.flatnonzero(same_as == np.arange(n)).astype(np.int64)
         ranges = np.ascontiguousarray(ranges_m, dtype=np.float64)
         used = (ranges > 0) & (ranges <= max_range)
         reach = float(min(np.max(ranges[used]), usable_range)) if used.any() else 0.0
@@ -128,10 +146,10 @@ class PatchMaps:
         need = (span[:, 0] * span[:, 1]).astype(np.int64)
         self._recount()
         start = 0
-        while start < self.n_particles:
+        while start < todo.size:
             free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
-            if free_stack.size < need[start]:
-                self._grow_pool(int(need[start:].max()) - free_stack.size)
+            if free_stack.size < need[todo[start]]:
+                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
                 continue
             n_free = np.array([free_stack.size], dtype=np.int64)
             start, dropped = register_scans(
@@ -153,9 +171,13 @@ class PatchMaps:
                 usable_range,
                 max_range,
                 need,
+                todo,
                 start,
             )
             self.dropped += int(dropped)
+        if todo.size < n:
+            self.tables = self.tables[same_as]
+            self._recount()
 
     def occupancy(self, particle: int) -> OccupancyGrid:
         """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none)."""

@@ -79,9 +79,11 @@ class RbpfSlam:
             return False
         if self.updates > 0:
             self._proposal_and_weights(ranges)
-            self._maybe_resample()
+            same_as = self._maybe_resample()
+        else:  # the first scan: every particle at the same pose, with the same empty map
+            same_as = np.zeros(self.poses.shape[0], dtype=np.int64)
         self.maps.register(
-            self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range
+            self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range, same_as
         )
         self.updates += 1
         self._grid = None
@@ -111,17 +113,20 @@ class RbpfSlam:
         self.log_weights += likes
         self.log_weight_sums += likes
 
-    def _maybe_resample(self) -> None:
+    def _maybe_resample(self) -> np.ndarray | None:
+        """Resample when Neff is low. Returns None, or after resampling which particle each
+        one is a copy of (same_as for PatchMaps.register: the first copy of its parent)."""
         weights, self.neff = normalized_weights(self.log_weights, self.params.ogain)
         n = self.poses.shape[0]
         if self.neff >= self.params.resample_threshold * n:
-            return
-        idx = systematic_indices(weights, self.rng)
+            return None
+        idx = systematic_indices(weights, self.rng)  # sorted: copies of a parent are adjacent
         self.poses = self.poses[idx]
         self.log_weight_sums = self.log_weight_sums[idx]
         self.log_weights = np.zeros(n)
         self.maps.select(idx)
         self.resamplings += 1
+        return np.searchsorted(idx, idx, side="left")
 
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)

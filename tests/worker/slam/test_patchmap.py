@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from worker.slam.patchmap import PATCH, PatchMaps
 
@@ -90,3 +91,30 @@ def test_copy_on_write_sharing():
     assert np.isnan(p0.prob[cell[1], cell[0]])
     assert maps.dropped == 0
     assert PATCH == 32
+
+
+def test_copies_of_one_particle_register_once_and_share_the_result():
+    rng = np.random.default_rng(3)
+    angles = np.linspace(-2.3, 2.3, 91)
+    first = np.array([[0.3, 0.2, 0.1], [0.9, -0.4, 1.2]])
+    scan = rng.uniform(0.5, 6.0, angles.size)
+    idx = np.array([0, 0, 1, 1, 1])  # resampling: two copies of particle 0, three of 1
+    poses = first[idx]
+    plain, shared = PatchMaps(2, 0.05, 1.0, 0.25), PatchMaps(2, 0.05, 1.0, 0.25)
+    for maps in (plain, shared):
+        maps.register(first, scan, np.cos(angles), np.sin(angles), 30.0, 29.99)
+        maps.select(idx)
+    plain.register(poses, scan[::-1], np.cos(angles), np.sin(angles), 30.0, 29.99)
+    shared.register(poses, scan[::-1], np.cos(angles), np.sin(angles), 30.0, 29.99,
+                    same_as=np.array([0, 0, 2, 2, 2]))  # fmt: skip
+    for k in range(5):  # every particle's map is the one it would have written itself
+        a, b = plain.occupancy(k), shared.occupancy(k)
+        assert np.array_equal(a.prob, b.prob, equal_nan=True) and np.allclose(a.origin, b.origin)
+    # registered twice, not five times: the copies hold the same patches
+    assert np.array_equal(shared.tables[0], shared.tables[1])
+    assert shared.live_patches() < plain.live_patches()
+    assert np.array_equal(shared.counts, np.bincount(shared.tables[shared.tables >= 0].ravel(),
+                                                     minlength=shared.capacity))  # fmt: skip
+    with pytest.raises(ValueError, match="same_as"):  # particles 0 and 2 differ
+        shared.register(poses, scan, np.cos(angles), np.sin(angles), 30.0, 29.99,
+                        same_as=np.array([0, 0, 0, 2, 2]))  # fmt: skip
