@@ -106,18 +106,26 @@ def errors_png(
 
     fig, (ax_t, ax_r) = plt.subplots(2, 1, figsize=(9, 5.5), dpi=110, sharex=True)
     order = np.argsort(t2)
+    # a few relations (B relations are often a handful) must stay visible; thousands must not
+    # hide each other
+    size, alpha = (3, 0.35) if len(t2) > 200 else (16, 0.85)
     for ax, err, unit, colour in (
         (ax_t, err_trans, "m", "#1f5fbf"),
         (ax_r, err_rot, "rad", "#bf5f1f"),
     ):
-        ax.scatter(t2, err, s=3, alpha=0.35, color=colour, linewidths=0)
+        ax.scatter(t2, err, s=size, alpha=alpha, color=colour, linewidths=0)
+        if len(err):
+            ax.axhline(np.mean(err), color=colour, lw=1, ls="--",
+                       label=f"mean {np.mean(err):.4g} {unit} ({len(err)} relations)")  # fmt: skip
         if len(err) >= 20:
             # running median over ~2 % of the relations shows the trend under the scatter
             k = max(5, len(err) // 50)
             e = err[order]
             med = np.array([np.median(e[max(0, i - k) : i + k + 1]) for i in range(0, len(e), k)])
             ax.plot(t2[order][::k], med, color="black", lw=1.2, label="running median")
+        if len(err):
             ax.legend(loc="upper left", fontsize=8)
+        ax.set_ylim(bottom=0)  # errors are magnitudes: read them from zero
         ax.set_ylabel(f"error [{unit}]")
         ax.grid(alpha=0.3)
     ax_r.set_xlabel("time of the relation's later pose [s]")
