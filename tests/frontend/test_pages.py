@@ -118,7 +118,8 @@ def test_upload_form_stores_a_world_and_reports_bad_input(site):
     assert r.status_code == 201 and "stored as #" in r.text
     listed = client.get("/api/v1/worlds").json()
     assert [w["name"] for w in listed] == ["hall"]
-    assert f'src="/api/v1/worlds/{listed[0]["id"]}/image"' in r.text
+    assert f'src="/api/v1/worlds/{listed[0]["id"]}/image?max_px=480"' in r.text
+    assert "<th>free area</th>" in r.text and "m²" in r.text
     again = client.post(
         "/worlds", files={"file": ("hall.png", _png(occ))}, data={"resolution": "0.05"}
     )

@@ -227,10 +227,27 @@ def run_plot(run_id: int, name: str, session: SessionDep, user: PageUser) -> Res
 
 
 # --- worlds ---------------------------------------------------------------------------------
+# the world facts as the worlds page labels them: (label, unit after the value)
+FACT_LABELS = {
+    "free_area_m2": ("free area", " m²"),
+    "free_fraction": ("free share of the plan", ""),
+    "n_free_regions": ("free regions", ""),
+    "largest_region_area_m2": ("largest region", " m²"),
+    "largest_region_share": ("its share of the free area", ""),
+    "main_region_enclosed": ("largest region enclosed", ""),
+    "border_free": ("free space at the border", ""),
+    "clearance_mean_m": ("clearance, mean", " m"),
+    "clearance_median_m": ("clearance, median", " m"),
+    "clearance_p90_m": ("clearance, 90th percentile", " m"),
+    "clearance_max_m": ("clearance, max", " m"),
+    "n_rooms": ("rooms", ""),
+}
+
+
 def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
     return _render(
         request, "worlds.html", status_code, user=user, worlds=_worlds(session, user),
-        error=error, notice=notice,
+        error=error, notice=notice, fact_labels=FACT_LABELS,
     )  # fmt: skip
 
 

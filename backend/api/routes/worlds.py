@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile, status
+from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from sqlalchemy import select
 
@@ -125,13 +125,33 @@ def get_world(world_id: int, session: SessionDep, user: CurrentUser) -> WorldOut
     return WorldOut.of(owned(user, session.get(World, world_id), "world", world_id))
 
 
+def shrink_occupancy(occ: np.ndarray, max_px: int) -> np.ndarray:
+    """occ (H, W) bool reduced by a whole factor until both sides are <= max_px; a block is an
+    obstacle when any of its cells is (one-cell walls survive, as they would not a resize)."""
+    f = -(-max(occ.shape) // max_px)
+    if f <= 1:
+        return occ
+    h, w = -(-occ.shape[0] // f) * f, -(-occ.shape[1] // f) * f
+    padded = np.zeros((h, w), dtype=bool)
+    padded[: occ.shape[0], : occ.shape[1]] = occ
+    return padded.reshape(h // f, f, w // f, f).any(axis=(1, 3))
+
+
 @router.get("/worlds/{world_id}/image", response_class=Response)
-def world_image(world_id: int, session: SessionDep, user: CurrentUser) -> Response:
-    """The floorplan as the pipeline sees it: PNG, obstacles black, free white."""
+def world_image(
+    world_id: int,
+    session: SessionDep,
+    user: CurrentUser,
+    max_px: Annotated[int | None, Query(ge=16, le=4096)] = None,
+) -> Response:
+    """The floorplan as the pipeline sees it: PNG, obstacles black, free white; with max_px,
+    a thumbnail no side of which exceeds it (obstacles kept)."""
     from PIL import Image
 
     w = owned(user, session.get(World, world_id), "world", world_id)
     occ = world_occupancy(w)
+    if max_px is not None:
+        occ = shrink_occupancy(occ, max_px)
     img = Image.fromarray(np.where(np.flipud(occ), 0, 255).astype(np.uint8), mode="L")
     buf = io.BytesIO()
     img.save(buf, format="PNG", optimize=True)

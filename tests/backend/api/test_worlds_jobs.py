@@ -58,6 +58,23 @@ def test_upload_an_image_then_the_same_again_returns_the_existing_world(api):
     assert [x["id"] for x in api.get("/api/v1/worlds").json()] == [w["id"]]
 
 
+def test_a_thumbnail_keeps_one_pixel_walls(api):
+    w = _upload(api, [("box.png", _png(), "image/png")], resolution="0.05").json()
+    # 80 x 60 px with max 16: blocks of 5 x 5 px, 16 x 12 of them. The walls are one pixel
+    # wide: the border rows and columns and column 40 (block 8, as 40 // 5 = 8) with its
+    # doorway at rows 20..39 (blocks 4..7, which hold no wall pixel of that column)
+    img = api.get(f"/api/v1/worlds/{w['id']}/image", params={"max_px": 16})
+    thumb = np.asarray(Image.open(io.BytesIO(img.content)))
+    assert thumb.shape == (12, 16)
+    wall = thumb == 0
+    assert wall[[0, -1], :].all() and wall[:, [0, -1]].all()
+    assert wall[1:4, 8].all() and wall[8:11, 8].all() and not wall[4:8, 8].any()
+    assert not wall[1:11, 1:8].any() and not wall[1:11, 9:15].any()
+    for bad in ("3", "100000", "big"):
+        r = api.get(f"/api/v1/worlds/{w['id']}/image", params={"max_px": bad})
+        assert r.status_code == 422 and "max_px" in r.text
+
+
 def test_upload_a_map_server_yaml_with_its_image(api):
     yaml = (
         b"image: box.png\nresolution: 0.1\norigin: [-2.0, -1.0, 0.0]\nnegate: 0\n"
