@@ -46,7 +46,8 @@ def _upload_world(page, site, tmp_path, artifacts) -> int:
     world_id = int(re.search(r"as #(\d+)", notice).group(1))
     thumb = f"document.querySelector('#world-{world_id} img')"
     page.wait_for_function(f"{thumb}.complete && {thumb}.naturalWidth > 0")
-    assert page.evaluate(f"{thumb}.naturalWidth") == 601  # the floorplan's own pixels
+    # the floorplan's 601 x 361 px reduced by 2 (ceil(601 / 480)) for the thumbnail
+    assert page.evaluate(f"[{thumb}.naturalWidth, {thumb}.naturalHeight]") == [301, 181]
     page.screenshot(path=artifacts / "worlds.png", full_page=True)
     return world_id
 

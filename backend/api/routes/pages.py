@@ -227,13 +227,14 @@ def run_plot(run_id: int, name: str, session: SessionDep, user: PageUser) -> Res
 
 
 # --- worlds ---------------------------------------------------------------------------------
-# the world facts as the worlds page labels them: (label, unit after the value)
+# the world facts as the worlds page labels them: (label, unit after the value; " %": a
+# fraction shown in per cent)
 FACT_LABELS = {
     "free_area_m2": ("free area", " m²"),
-    "free_fraction": ("free share of the plan", ""),
+    "free_fraction": ("free share of the plan", " %"),
     "n_free_regions": ("free regions", ""),
     "largest_region_area_m2": ("largest region", " m²"),
-    "largest_region_share": ("its share of the free area", ""),
+    "largest_region_share": ("its share of the free area", " %"),
     "main_region_enclosed": ("largest region enclosed", ""),
     "border_free": ("free space at the border", ""),
     "clearance_mean_m": ("clearance, mean", " m"),
