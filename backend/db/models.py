@@ -23,11 +23,33 @@ from sqlalchemy import (
     UniqueConstraint,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+from sqlalchemy.types import TypeDecorator
 
 
 def utcnow() -> datetime:
     """Timezone-aware now, for column defaults."""
     return datetime.now(UTC)
+
+
+class UtcDateTime(TypeDecorator):
+    """A point in time, stored as DateTime(timezone=True) and always read back aware, in UTC.
+
+    PostgreSQL keeps the zone; SQLite keeps none and gave naive datetimes back, so the same
+    run's times read "...Z" from one database and without a zone from the other.
+    """
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect: Any) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            raise ValueError(f"naive datetime {value!r}: mapqual stores aware times only")
+        return None if value is None else value.astimezone(UTC)
+
+    def process_result_value(self, value: datetime | None, dialect: Any) -> datetime | None:
+        if value is None:
+            return None
+        return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
 class Base(DeclarativeBase):
@@ -57,7 +79,7 @@ class User(Base):
     # SHA-256 of the key: keys are 256-bit random tokens, so a fast hash is enough and a
     # stolen database reveals no usable key.
     key_hash: Mapped[str] = mapped_column(String(64), unique=True)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
 class World(Base):
@@ -83,7 +105,7 @@ class World(Base):
     # The occupancy grid as the pipeline sees it (bool [iy, ix], bottom row first), packed;
     # deferred (as are the other blobs): loaded only when read, not with every row.
     occupancy: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
     jobs: Mapped[list[Job]] = relationship(back_populates="world")
 
@@ -103,10 +125,8 @@ class Job(Base):
     status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
     slam: Mapped[str] = mapped_column(String(40))
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    updated_at: Mapped[datetime] = mapped_column(
-        DateTime(timezone=True), default=utcnow, onupdate=utcnow
-    )
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow, onupdate=utcnow)
 
     world: Mapped[World] = relationship(back_populates="jobs")
     runs: Mapped[list[Run]] = relationship(back_populates="job", order_by="Run.id")
@@ -140,9 +160,9 @@ class Run(Base):
     progress: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     error: Mapped[str | None] = mapped_column(Text)
     report_dir: Mapped[str | None] = mapped_column(Text)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
-    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
 
     job: Mapped[Job] = relationship(back_populates="runs")
     trajectories: Mapped[list[RunTrajectory]] = relationship(

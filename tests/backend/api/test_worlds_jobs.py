@@ -285,8 +285,11 @@ def test_a_job_reads_the_same_by_id_as_in_the_list_and_follows_its_runs(api):
     w = _world(api)
     job = api.post("/api/v1/jobs", json={"world_id": w["id"], "seeds": [9, 4, 6]}).json()
     first = api.get(f"/api/v1/jobs/{job['id']}").json()
-    # (SQLite gives its timestamps back without a time zone: only the job as stored compares)
-    assert {**first, "created_at": 0, "updated_at": 0} == {**job, "created_at": 0, "updated_at": 0}
+    # the same answer, times included, in UTC with its zone on both databases (SQLite keeps no
+    # zone: the column type puts UTC back)
+    assert first == job and job["created_at"].endswith("Z") and job["updated_at"].endswith("Z")
+    listed = api.get("/api/v1/jobs").json()["items"]
+    assert [j["created_at"] for j in listed] == [job["created_at"]]
     done, running, _ = (r["id"] for r in job["runs"])
     b = {"n": 3, "mean": 0.5, "std": 0.1, "min": 0.25, "max": 0.75}
     with session_scope(api.url) as s:
