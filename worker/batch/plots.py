@@ -150,6 +150,8 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     if not pts:
         return None
     plt = _plt()
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.6), constrained_layout=True)
     classes = (
         ("good map", "tab:green", lambda r: is_good(r)),
@@ -165,6 +167,12 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
         ax.axvline(good, color="grey", ls="--", lw=1)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        for a in (ax.xaxis, ax.yaxis):
+            # labels at 1, 2, 5 x 10^k only: the default labels every minor tick of a short
+            # log span, and they run into each other
+            a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+            a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            a.set_minor_formatter(NullFormatter())
         ax.set_xlabel(f"mean B {axis} error [{unit}] (log; floor {floor:g})")
         ax.set_ylabel(f"mean A {axis} error [{unit}] (log; floor {floor:g})")
         ax.grid(alpha=0.3, which="both")
