@@ -20,6 +20,7 @@ class DijkstraSearch:
         self.potential = np.zeros((0, 0))
         self.parent = np.zeros((0, 0), dtype=np.int64)
         self.stamp = np.zeros((0, 0), dtype=np.int64)
+        self.queue = np.zeros(0, dtype=np.int64)
 
     def run(
         self,
@@ -63,6 +64,32 @@ class DijkstraSearch:
             int(round(escape / costmap.resolution)),
         )
 
+    def sealed_off(
+        self,
+        costmap: GlobalCostmap,
+        start_cell: tuple[int, int],
+        goal_cell: tuple[int, int],
+        params: ExploreParams,
+        escape_m: float | None = None,
+    ) -> bool:
+        """True when `run` from start_cell could not reach goal_cell (a goal walled into a
+        pocket of at most SEALED_BUDGET cells): proven on the goal's side, without the search
+        of everything reachable that `run` makes before it gives up."""
+        if costmap.shape != self.shape:
+            return False  # buffers are sized by `run`
+        self.run_id += 1
+        if self.queue.shape[0] < SEALED_BUDGET:
+            self.queue = np.empty(SEALED_BUDGET, dtype=np.int64)
+        escape = params.escape_radius if escape_m is None else escape_m  # [m]
+        return bool(
+            pk.sealed_off(
+                costmap.inflated, costmap.unknown, goal_cell[1], goal_cell[0], start_cell[1],
+                start_cell[0], params.allow_unknown, planner_blocked_cost(params),
+                int(round(escape / costmap.resolution)), SEALED_BUDGET, self.stamp,
+                self.run_id, self.queue,
+            )
+        )  # fmt: skip
+
     def potential_at(self, flat_idx: np.ndarray) -> np.ndarray:
         """Potentials of settled cells given as flat indices."""
         return self.potential.reshape(-1)[flat_idx]
@@ -89,15 +116,21 @@ class GlobalPlanner:
         if self._target.shape != costmap.shape:
             self._target = np.zeros(costmap.shape, dtype=np.bool_)
         self._target[gy, gx] = True
+        search, p, none = self.search, self.params, np.zeros(0, dtype=np.int64)
         try:
-            found = self.search.run(
-                costmap, (sx, sy), self._target, self.params, goal_cell=(gx, gy)
+            # a goal the map walled in is found out on its side (the search would first
+            # cover everything reachable); the plans are the same
+            found = (
+                none
+                if search.sealed_off(costmap, (sx, sy), (gx, gy), p)
+                else search.run(costmap, (sx, sy), self._target, p, goal_cell=(gx, gy))
             )
             if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
-                found = self.search.run(
-                    costmap, (sx, sy), self._target, self.params, goal_cell=(gx, gy),
-                    escape_m=self.params.pocket_escape_radius,
-                )  # fmt: skip
+                wide = p.pocket_escape_radius
+                if not search.sealed_off(costmap, (sx, sy), (gx, gy), p, escape_m=wide):
+                    found = search.run(
+                        costmap, (sx, sy), self._target, p, goal_cell=(gx, gy), escape_m=wide
+                    )
         finally:
             self._target[gy, gx] = False
         if found.size == 0:
@@ -105,6 +138,9 @@ class GlobalPlanner:
         cells = self.search.path_to(found[0])
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
         return np.column_stack((xs, ys))
+
+
+SEALED_BUDGET = 40_000  # [cells] largest goal pocket DijkstraSearch.sealed_off floods (100 m^2)
 
 
 def planner_blocked_cost(params: ExploreParams) -> int:

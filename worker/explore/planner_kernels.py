@@ -187,6 +187,56 @@ def dijkstra(
 
 
 @njit(cache=True)
+def sealed_off(
+    inflated, unknown, goal_iy, goal_ix, start_iy, start_ix, allow_unknown, blocked,
+    escape_cells, budget, stamp, run_id, queue,
+):  # fmt: skip
+    """True when `dijkstra` from the start provably cannot reach the goal; False when it may.
+
+    Away from the start's escape zone a step may enter a cell only if it is passable (below
+    `blocked`, and known unless unknown space is allowed), whatever cell it comes from, so
+    passable cells form an undirected graph there. The goal's component in it is flooded
+    (8-connected); if it has at most `budget` cells and none within escape_cells + 3 of the
+    start, no path from the start can enter it: the cell a path comes from into the
+    component is either passable (then it would be in the component) or was itself entered
+    by escaping, next to the zone. A goal that is not passable, far from the start, cannot be
+    entered at all. Costs O(component) instead of Dijkstra's O(everything reachable).
+    stamp: reusable (H, W) marks, valid where == run_id; queue: (>= budget,) int64.
+    """
+    h, w = inflated.shape
+    near = (escape_cells + 3) ** 2
+
+    def passable(iy, ix):
+        return inflated[iy, ix] < blocked and (allow_unknown or not unknown[iy, ix])
+
+    if (goal_iy - start_iy) ** 2 + (goal_ix - start_ix) ** 2 <= near:
+        return False
+    if not passable(goal_iy, goal_ix):
+        return True
+    stamp[goal_iy, goal_ix] = run_id
+    queue[0] = goal_iy * w + goal_ix
+    head, tail = 0, 1
+    while head < tail:
+        idx = queue[head]
+        head += 1
+        iy = idx // w
+        ix = idx - iy * w
+        for k in range(8):
+            jy = iy + _DY[k]
+            jx = ix + _DX[k]
+            if jy < 0 or jy >= h or jx < 0 or jx >= w or stamp[jy, jx] == run_id:
+                continue
+            if not passable(jy, jx):
+                continue
+            if (jy - start_iy) ** 2 + (jx - start_ix) ** 2 <= near or tail == budget:
+                return False  # may join the start's side, or too big to settle here
+            stamp[jy, jx] = run_id
+            queue[tail] = jy * w + jx
+            tail += 1
+    return True
+
+
+@njit(cache=True)
 def trace_path(parent, goal_idx, width):
     """Cells `(K, 2) int64 [iy, ix]` from the start to `goal_idx` by following parents."""
     n = 0

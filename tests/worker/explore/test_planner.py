@@ -108,3 +108,52 @@ def test_a_star_plan_costs_the_same_as_dijkstra():
             # A* settles fewer cells
             assert (star.stamp == star.run_id).sum() <= (plain.stamp == plain.run_id).sum()
         _ = k
+
+
+def _walled_in_goal():
+    prob = np.full((200, 200), 0.05)
+    prob[150:180, 150] = prob[150:180, 179] = 0.9  # a closed 30 x 30-cell room, far corner
+    prob[150, 150:180] = prob[179, 150:180] = 0.9
+    return _costmap(prob)
+
+
+def test_a_walled_in_goal_is_proved_unreachable_on_its_side():
+    cm, p = _walled_in_goal(), ExploreParams()
+    search = DijkstraSearch()
+    target = np.zeros(cm.shape, dtype=bool)
+    target[165, 165] = True
+    assert search.run(cm, (10, 10), target, p, goal_cell=(165, 165)).size == 0
+    everything = (search.stamp == search.run_id).sum()  # the search covered all it reached
+    assert search.sealed_off(cm, (10, 10), (165, 165), p)
+    flooded = (search.stamp == search.run_id).sum()
+    assert flooded < 28 * 28 < everything / 40  # only the room's inside was looked at
+    assert GlobalPlanner(p).plan(cm, (0.5, 0.5), (165 * RES, 165 * RES)) is None
+    # outside the room, or with the start inside it: no proof, and the search finds it
+    assert not search.sealed_off(cm, (10, 10), (120, 120), p)
+    assert not search.sealed_off(cm, (160, 160), (165, 165), p)
+    assert GlobalPlanner(p).plan(cm, (0.5, 0.5), (6.0, 6.0)) is not None
+
+
+def test_sealed_off_never_contradicts_the_search():
+    rng = np.random.default_rng(11)
+    prob = np.full((120, 120), 0.05)
+    for _ in range(40):  # wall segments that close off pockets here and there
+        y, x, n = rng.integers(0, 120), rng.integers(0, 120), rng.integers(5, 40)
+        if rng.random() < 0.5:
+            prob[y, x : x + n] = 0.9
+        else:
+            prob[y : y + n, x] = 0.9
+    prob[rng.random((120, 120)) < 0.05] = np.nan
+    cm, p = _costmap(prob), ExploreParams()
+    proofs = 0
+    for _ in range(300):
+        (sy, sx), (gy, gx) = rng.integers(0, 120, size=(2, 2))
+        target = np.zeros(cm.shape, dtype=bool)
+        target[gy, gx] = True
+        for escape in (None, p.pocket_escape_radius):
+            search = DijkstraSearch()
+            found = search.run(cm, (sx, sy), target, p, goal_cell=(gx, gy), escape_m=escape)
+            if search.sealed_off(cm, (sx, sy), (gx, gy), p, escape_m=escape):
+                proofs += 1
+                assert found.size == 0, ((sx, sy), (gx, gy), escape)
+    assert proofs > 20  # the proof is exercised, not only its refusals
