@@ -116,21 +116,21 @@ class GlobalPlanner:
         if self._target.shape != costmap.shape:
             self._target = np.zeros(costmap.shape, dtype=np.bool_)
         self._target[gy, gx] = True
-        search, p, none = self.search, self.params, np.zeros(0, dtype=np.int64)
-        try:
+        search, p = self.search, self.params
+
+        def attempt(escape_m: float | None = None) -> np.ndarray:
             # a goal the map walled in is found out on its side (the search would first
             # cover everything reachable); the plans are the same
-            found = (
-                none
-                if search.sealed_off(costmap, (sx, sy), (gx, gy), p)
-                else search.run(costmap, (sx, sy), self._target, p, goal_cell=(gx, gy))
+            if search.sealed_off(costmap, (sx, sy), (gx, gy), p, escape_m=escape_m):
+                return np.zeros(0, dtype=np.int64)
+            return search.run(
+                costmap, (sx, sy), self._target, p, goal_cell=(gx, gy), escape_m=escape_m
             )
+
+        try:
+            found = attempt()
             if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
-                wide = p.pocket_escape_radius
-                if not search.sealed_off(costmap, (sx, sy), (gx, gy), p, escape_m=wide):
-                    found = search.run(
-                        costmap, (sx, sy), self._target, p, goal_cell=(gx, gy), escape_m=wide
-                    )
+                found = attempt(p.pocket_escape_radius)
         finally:
             self._target[gy, gx] = False
         if found.size == 0:
