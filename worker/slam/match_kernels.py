@@ -13,7 +13,9 @@ Speed, with the same score: the used beams' end and free points are computed onc
 in the robot frame (`prepare_beams`); a window row is read as one bit mask; and a candidate
 pose of the hill climbing stops being scored as soon as it can no longer beat the current
 pose (each beam adds at most 1), with the beams taken worst-matched first (their order at the
-particle's initial pose), so that a losing candidate falls behind early; and each beam's
+particle's initial pose), so that a losing candidate falls behind early; that test runs on an
+upper bound of exp (a polynomial), and the exponentials are taken only for a pose that may
+win (about a quarter of the beams scored: exp was a sixth of the filter's time); each beam's
 matching cells (their hit means, after the occupancy and free-cell tests) are remembered for
 the current pose of the climb, keyed by the end-point cell and free-cell offset: a candidate
 whose end point stays in the same cell (about half of them) reuses them.
@@ -79,6 +81,13 @@ def _ctz(typingctx, x):
     return sig, codegen
 
 
+@njit(cache=True, inline="always")
+def exp_neg_upper(x):
+    """An upper bound of exp(-x) for x >= 0, without exp: the Taylor polynomial to x^2 below
+    1 (the series alternates), 1 / (1 + x) above (e^x >= 1 + x)."""
+    return 1.0 - x + 0.5 * x * x if x < 1.0 else 1.0 / (1.0 + x)
+
+
 @njit(cache=True)
 def prepare_beams(ranges, cos_a, sin_a, cfg):
     """(M, 4) [hx, hy, fx, fy] robot frame [m]: end point and free point of each used beam.
@@ -105,17 +114,24 @@ def prepare_beams(ranges, cos_a, sin_a, cfg):
 
 
 @njit(cache=True)
-def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms, cache, w):
+def _score(
+    mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms, dist2, cache, w
+):
     """(score, log-likelihood, complete) of the beams at pose (x, y, theta), in `order`.
 
-    Stops (complete = False, partial sums) once the score can no longer exceed `bound`.
+    Stops (complete = False, partial sums) as soon as the score can no longer exceed `bound`,
+    judged on an upper bound of each beam's term (exp(-x) <= 1 - x + x^2 / 2 for 0 <= x < 1,
+    <= 1 / (1 + x) above): the exponentials are taken, after the loop, only for a pose that
+    may beat `bound`, in the same order, so the score is the same to the last bit.
     terms: (M,) gets each beam's score term when complete (pass an empty array to skip).
+    dist2: (M,) scratch for each beam's squared distance (inf: no match).
     cache: see _new_cache; a beam whose key matches the committed entry reuses its points,
     the others are scored on the map and recorded in scratch slot w. One flat loop (no
     calls): this is the innermost loop of the whole filter.
     """
     res, kernel, sigma, lsigma = cfg[C_RES], int(cfg[C_KERNEL]), cfg[C_SIGMA], cfg[C_LSIGMA]
     inv_res = 1.0 / res
+    inv_sigma = 1.0 / sigma  # the bound only; the terms divide as GMapping does
     no_hit = NULL_LIKELIHOOD / lsigma
     nb = 2 * kernel + 1
     wmask = (np.int64(1) << nb) - 1
@@ -127,11 +143,11 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
     ckey, cn, cpts, skey, sn, spts, smiss, snmiss = cache
     use = cpts.shape[1] > 0
     snmiss[w] = 0
-    score = 0.0
+    upper = 0.0
     like = 0.0
     for k in range(n):
-        if score + (n - k) + _SLACK < bound:
-            return score, like, False
+        if upper + (n - k) + _SLACK < bound:
+            return upper, like, False
         i = order[k]
         hx = x + c * beams[i, 0] - s * beams[i, 1]
         hy = y + s * beams[i, 0] + c * beams[i, 1]
@@ -210,14 +226,19 @@ def _score(mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound,
                 smiss[w, snmiss[w]] = i
                 snmiss[w] += 1
         if best < np.inf:
-            term = math.exp(-best / sigma)
+            upper += exp_neg_upper(best * inv_sigma)
             like -= best / lsigma
         else:
-            term = 0.0
             like += no_hit
+        dist2[k] = best
+    if upper + _SLACK < bound:
+        return upper, like, False
+    score = 0.0
+    for k in range(n):
+        term = math.exp(-dist2[k] / sigma) if dist2[k] < np.inf else 0.0
         score += term
         if keep:
-            terms[i] = term
+            terms[order[k]] = term
     return score, like, True
 
 
@@ -258,7 +279,7 @@ def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     order = np.arange(beams.shape[0])
     sc, like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, order, cfg, -np.inf,
-        np.empty(0), _new_cache(0, MAX_CACHED_KERNEL + 1), 0,
+        np.empty(0), np.empty(beams.shape[0]), _new_cache(0, MAX_CACHED_KERNEL + 1), 0,
     )  # fmt: skip
     return sc, like
 
@@ -277,11 +298,12 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     lstep, astep, iterations = cfg[C_LSTEP], cfg[C_ASTEP], int(cfg[C_ITERATIONS])
     m = beams.shape[0]
     terms = np.empty(m)
+    dist2 = np.empty(m)
     natural = np.arange(m)
     cache = _new_cache(m, int(cfg[C_KERNEL]))
     cur, cur_like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
-        terms, cache, 0,
+        terms, dist2, cache, 0,
     )  # fmt: skip
     _commit(cache, 0)
     start_score, start_like = cur, cur_like
@@ -320,7 +342,22 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
                 t -= adelta
             w = 1 if slot == 0 else 0
             sc, lk, whole = _score(
-                mean, bits, table, tpx0, tpy0, x, y, t, beams, order, cfg, cur, none, cache, w
+                mean,
+                bits,
+                table,
+                tpx0,
+                tpy0,
+                x,
+                y,
+                t,
+                beams,
+                order,
+                cfg,
+                cur,
+                none,
+                dist2,
+                cache,
+                w,
             )
             if whole and sc > cur:
                 cur, cur_like = sc, lk

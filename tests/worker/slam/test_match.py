@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from worker.slam.base import make_slam
-from worker.slam.match_kernels import match_config, optimize, prepare_beams, score_and_likelihood
+from worker.slam.match_kernels import (
+    exp_neg_upper,
+    match_config,
+    optimize,
+    prepare_beams,
+    score_and_likelihood,
+)
 from worker.slam.params import SlamParams
 
 from .helpers import Laser, box_scan
@@ -144,6 +150,18 @@ def test_score_and_likelihood_equal_the_reference():
             got = _score(slam, laser, pose, ranges, _cfg(lskip))
             want = ref.score(pose)
             assert np.allclose(got, want, rtol=1e-9, atol=1e-9), (lskip, off, got, want)
+
+
+def test_the_early_stop_bound_is_above_exp():
+    # candidates are dropped on this bound: were it below exp anywhere, a winner could be lost
+    x = np.concatenate([np.linspace(0.0, 3.0, 30001), np.geomspace(1e-12, 1e3, 2000)])
+    upper = np.array([exp_neg_upper(v) for v in x])
+    # up to rounding (an ulp, 1.1e-16): the stop test's slack of 1e-6 covers 1e5 beams of it
+    assert np.all(upper >= np.exp(-x) - 2.3e-16)
+    assert np.all(upper <= 1.0)
+    # kernelSize 1: mu < 2 cells diagonally, x = mu^2 / sigma < 0.4; there it is tight
+    near = x < 0.4
+    assert np.max(upper[near] - np.exp(-x[near])) < 0.4**3 / 6 + 1e-15
 
 
 @pytest.mark.parametrize("kernel, lskip", [(1, 2), (2, 4), (3, 6)])
