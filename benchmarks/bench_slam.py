@@ -1,7 +1,8 @@
 """Benchmark of the SLAM stage: ms per rbpf update, peak memory, `mapqual slam` real-time factor.
 
     .venv/bin/python benchmarks/bench_slam.py [--world office_a] [--minutes 30] [--particles 40]
-        [--updates 200] [--repeats 2] [--skip-cli]
+        [--updates 200] [--repeats 2] [--skip-cli] [--log FILE] [--json]
+        [--against OTHER_CHECKOUT [--rounds 3]]
 
 1. simulates a wander log of --minutes simulated minutes in worlds/bormann/<world>.yaml;
 2. times every filter update of rbpf (541 beams) in this process, on one core, over the
@@ -13,6 +14,12 @@
 Figures depend on the machine and its load: the load averages are printed with them. On a
 shared machine the CPU-time figures are the fairer ones (wall time then counts the waits for
 a core), though they too are inflated by the other processes' use of the caches.
+
+A virtual machine's speed can also drift by a third within an hour, so a change is judged
+side by side: --against DIR times the update in this checkout and in another one (a git
+worktree of the reference commit, with a .venv or run with this interpreter; its
+bench_slam.py must know --log and --json), alternately, --rounds times, on the same log, and
+prints each pair and the median ratio.
 """
 
 from __future__ import annotations
@@ -62,6 +69,51 @@ def _time_updates(log, particles: int, n_updates: int) -> tuple[np.ndarray, np.n
     return np.array(wall), np.array(cpu)
 
 
+def _best_pass(log, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]:
+    """(wall, CPU) per update of the pass, out of --repeats, with the lowest CPU mean."""
+    passes = [_time_updates(log, args.particles, args.updates) for _ in range(args.repeats)]
+    return min(passes, key=lambda wc: wc[1].mean())
+
+
+def _print_updates(log, args: argparse.Namespace, wall: np.ndarray, cpu: np.ndarray) -> None:
+    print(
+        f"rbpf update, {args.particles} particles, {log.laser.n_beams} beams, one core, over "
+        f"{len(wall)} updates (best of {args.repeats} passes): wall mean "
+        f"{1000 * wall.mean():.1f} ms, median {1000 * np.median(wall):.1f} ms, "
+        f"p95 {1000 * np.percentile(wall, 95):.1f} ms; CPU "
+        f"mean {1000 * cpu.mean():.1f} ms, median {1000 * np.median(cpu):.1f} ms "
+        f"(target <= 40 ms); {_load()}"
+    )
+
+
+def _side_by_side(log_path: Path, other: Path, args: argparse.Namespace) -> None:
+    """Time the update here and in checkout `other`, alternately, on the same log."""
+    other_py = other / ".venv" / "bin" / "python"
+    trees = {"this": (Path(sys.executable), ROOT), "other": (other_py, other)}
+    if not other_py.exists():
+        trees["other"] = (Path(sys.executable), other)
+    print(f"side by side: this = {ROOT}, other = {other}; {_load()}")
+    ratios = []
+    for r in range(args.rounds):
+        means = {}
+        for name, (python, tree) in trees.items():
+            cmd = [
+                str(python), str(tree / "benchmarks" / "bench_slam.py"), "--log", str(log_path),
+                "--skip-cli", "--json", "--particles", str(args.particles),
+                "--updates", str(args.updates), "--repeats", str(args.repeats),
+            ]  # fmt: skip
+            out = subprocess.run(cmd, capture_output=True, text=True, cwd=tree)
+            if out.returncode != 0:
+                sys.exit(f"{name} ({tree}) failed ({out.returncode}):\n{out.stderr[-2000:]}")
+            means[name] = json.loads(out.stdout.strip().splitlines()[-1])["cpu_mean_ms"]
+        ratios.append(means["this"] / means["other"])
+        print(
+            f"round {r + 1}: this {means['this']:.1f} ms, other {means['other']:.1f} ms CPU mean "
+            f"per update; this / other = {ratios[-1]:.3f}"
+        )
+    print(f"median this / other over {len(ratios)} rounds: {np.median(ratios):.3f}; {_load()}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default="office_a")
@@ -71,12 +123,40 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2, help="timed passes; the best is shown")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--skip-cli", action="store_true", help="skip the whole-log CLI run")
+    ap.add_argument("--log", type=Path, help="time on this CARMEN log instead of simulating one")
+    ap.add_argument("--json", action="store_true", help="only the update figures, one JSON line")
+    ap.add_argument("--against", type=Path, help="another checkout to time side by side")
+    ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
     args = ap.parse_args()
+    if args.against is not None and not (args.against / "benchmarks" / "bench_slam.py").exists():
+        print(
+            f"bench_slam: --against: no benchmarks/bench_slam.py under {args.against}",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+
+    if args.log is not None:
+        if not args.log.is_file():
+            print(f"bench_slam: no log file {args.log}", file=sys.stderr)
+            sys.exit(2)
+        if args.against is not None:
+            _side_by_side(args.log.resolve(), args.against.resolve(), args)
+            return
+        log = read_laser_log(args.log)
+        wall, cpu = _best_pass(log, args)
+        if args.json:
+            print(json.dumps({"updates": len(wall), "cpu_mean_ms": 1000 * cpu.mean()}))
+        else:
+            _print_updates(log, args, wall, cpu)
+        return
 
     world = load_world(ROOT / "worlds" / "bormann" / f"{args.world}.yaml")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         sim = run_simulation(world, tmp / "sim", seed=args.seed, duration_s=60 * args.minutes)
+        if args.against is not None:
+            _side_by_side(tmp / "sim" / "sim.log", args.against.resolve(), args)
+            return
         log = read_laser_log(tmp / "sim" / "sim.log")
         print(
             f"world {args.world}: {world.width_m:.1f} x {world.height_m:.1f} m; log "
@@ -84,16 +164,7 @@ def main() -> None:
             f"{len(log.t)} scans of {log.laser.n_beams} beams"
         )
         print(_load())
-        passes = [_time_updates(log, args.particles, args.updates) for _ in range(args.repeats)]
-        wall, cpu = min(passes, key=lambda wc: wc[1].mean())
-        print(
-            f"rbpf update, {args.particles} particles, {log.laser.n_beams} beams, one core, over "
-            f"{len(wall)} updates (best of {len(passes)} passes): wall mean "
-            f"{1000 * wall.mean():.1f} ms, median {1000 * np.median(wall):.1f} ms, "
-            f"p95 {1000 * np.percentile(wall, 95):.1f} ms; CPU "
-            f"mean {1000 * cpu.mean():.1f} ms, median {1000 * np.median(cpu):.1f} ms "
-            f"(target <= 40 ms); {_load()}"
-        )
+        _print_updates(log, args, *_best_pass(log, args))
         if args.skip_cli:
             return
         mapqual = Path(sys.executable).with_name("mapqual")
