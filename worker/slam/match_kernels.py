@@ -15,8 +15,8 @@ pose of the hill climbing stops being scored as soon as it can no longer beat th
 pose (each beam adds at most 1), with the beams taken worst-matched first (their order at the
 particle's initial pose), so that a losing candidate falls behind early; that test runs on an
 upper bound of exp (a polynomial), and the exponentials are taken only for a pose that may
-win (about a quarter of the beams scored: exp was a sixth of the filter's time); each beam's
-matching cells (their hit means, after the occupancy and free-cell tests) are remembered for
+win (about a quarter of the beams scored; exp had been a sixth of the matcher's time); each
+beam's matching cells (their hit means, after the occupancy and free-cell tests) are remembered for
 the current pose of the climb, keyed by the end-point cell and free-cell offset: a candidate
 whose end point stays in the same cell (about half of them) reuses them.
 """
@@ -119,10 +119,10 @@ def _score(
 ):
     """(score, log-likelihood, complete) of the beams at pose (x, y, theta), in `order`.
 
-    Stops (complete = False, partial sums) as soon as the score can no longer exceed `bound`,
-    judged on an upper bound of each beam's term (exp(-x) <= 1 - x + x^2 / 2 for 0 <= x < 1,
-    <= 1 / (1 + x) above): the exponentials are taken, after the loop, only for a pose that
-    may beat `bound`, in the same order, so the score is the same to the last bit.
+    Stops (complete = False; the bound and likelihood summed so far) as soon as the score can
+    no longer exceed `bound`, judged on an upper bound of each beam's term (exp_neg_upper):
+    the exponentials are taken, after the loop, only for a pose that may beat `bound`, in
+    the same order, so the score is the same to the last bit.
     terms: (M,) gets each beam's score term when complete (pass an empty array to skip).
     dist2: (M,) scratch for each beam's squared distance (inf: no match).
     cache: see _new_cache; a beam whose key matches the committed entry reuses its points,
@@ -342,23 +342,9 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
                 t -= adelta
             w = 1 if slot == 0 else 0
             sc, lk, whole = _score(
-                mean,
-                bits,
-                table,
-                tpx0,
-                tpy0,
-                x,
-                y,
-                t,
-                beams,
-                order,
-                cfg,
-                cur,
-                none,
-                dist2,
-                cache,
-                w,
-            )
+                mean, bits, table, tpx0, tpy0, x, y, t, beams, order, cfg, cur, none, dist2,
+                cache, w,
+            )  # fmt: skip
             if whole and sc > cur:
                 cur, cur_like = sc, lk
                 nx, ny, nt = x, y, t
