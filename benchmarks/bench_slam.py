@@ -89,9 +89,9 @@ def _print_updates(log, args: argparse.Namespace, wall: np.ndarray, cpu: np.ndar
 def _side_by_side(log_path: Path, other: Path, args: argparse.Namespace) -> None:
     """Time the update here and in checkout `other`, alternately, on the same log."""
     other_py = other / ".venv" / "bin" / "python"
-    trees = {"this": (Path(sys.executable), ROOT), "other": (other_py, other)}
     if not other_py.exists():
-        trees["other"] = (Path(sys.executable), other)
+        other_py = Path(sys.executable)
+    trees = {"this": (Path(sys.executable), ROOT), "other": (other_py, other)}
     print(f"side by side: this = {ROOT}, other = {other}; {_load()}")
     ratios = []
     for r in range(args.rounds):
