@@ -27,8 +27,30 @@ class Settings(BaseSettings):
     auth: Literal["on", "off"] = Field(default="on", alias="MAPQUAL_AUTH")
     # Where `mapqual viewer` is reached from a browser (the dashboard links runs there).
     viewer_url: str = Field(default="http://127.0.0.1:8080", alias="MAPQUAL_VIEWER_URL")
-    # Largest accepted upload [bytes].
+    # Largest accepted request body [bytes], counted while it streams in (uploads).
     max_upload_bytes: int = Field(default=20 * 1024 * 1024, alias="MAPQUAL_MAX_UPLOAD_BYTES")
+    # Largest accepted floorplan image [pixels] (25 MP: a 250 m x 250 m building at 5 cm).
+    max_image_pixels: int = Field(default=25_000_000, alias="MAPQUAL_MAX_IMAGE_PIXELS")
+    # Processes that analyse uploaded worlds off the request thread, per API process.
+    world_workers: int = Field(default=1, ge=1, alias="MAPQUAL_WORLD_WORKERS")
+    # Signs viewer tokens; when unset, a random key made once and kept in the database.
+    secret_key: str | None = Field(default=None, alias="MAPQUAL_SECRET_KEY")
+    # How long a viewer link stays valid [s].
+    viewer_token_ttl_s: int = Field(default=3600, ge=10, alias="MAPQUAL_VIEWER_TOKEN_TTL")
+    # How long a dashboard sign-in lasts [s].
+    session_ttl_s: int = Field(default=12 * 3600, ge=60, alias="MAPQUAL_SESSION_TTL")
+    # Dashboard cookies are Secure (sent over HTTPS only; browsers treat http://localhost as
+    # secure too). Switch off only to serve the dashboard over plain HTTP on another host.
+    cookie_secure: bool = Field(default=True, alias="MAPQUAL_COOKIE_SECURE")
+    # Per-owner quotas, answered with 429: runs queued or running at once, simulated hours
+    # they may ask for in all, worlds stored, uploads in the last 24 h.
+    quota_active_runs: int = Field(default=200, ge=1, alias="MAPQUAL_QUOTA_ACTIVE_RUNS")
+    quota_sim_hours: float = Field(default=100.0, gt=0, alias="MAPQUAL_QUOTA_SIM_HOURS")
+    quota_worlds: int = Field(default=500, ge=1, alias="MAPQUAL_QUOTA_WORLDS")
+    quota_uploads_per_day: int = Field(default=200, ge=1, alias="MAPQUAL_QUOTA_UPLOADS_PER_DAY")
+    # A running run whose attempt gave no sign of life for this long [s] may be taken over by
+    # another delivery of its task (the first attempt's worker is presumed dead).
+    run_lease_s: float = Field(default=60.0, gt=0, alias="MAPQUAL_RUN_LEASE")
 
 
 @lru_cache(maxsize=1)

@@ -80,6 +80,33 @@ class User(Base):
     # stolen database reveals no usable key.
     key_hash: Mapped[str] = mapped_column(String(64), unique=True)
     created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    # A revoked user's key and sessions stop working (within the API's key cache time).
+    revoked_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+
+
+class WebSession(Base):
+    """A dashboard sign-in: the browser holds a random token; the database its hash, the CSRF
+    token of its forms and when it expires. Signing out deletes the row."""
+
+    __tablename__ = "web_sessions"
+
+    # SHA-256 of the session token (the cookie's value), as for API keys.
+    token_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    csrf_token: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+    expires_at: Mapped[datetime] = mapped_column(UtcDateTime, index=True)
+
+
+class AppSecret(Base):
+    """Server-side secrets made on first use (e.g. the key that signs viewer tokens), shared by
+    every process that reaches the database; an environment setting overrides them."""
+
+    __tablename__ = "app_secrets"
+
+    name: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(String(200))
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
 class World(Base):
@@ -95,16 +122,24 @@ class World(Base):
     sha256: Mapped[str] = mapped_column(String(64), index=True)
     source_format: Mapped[str] = mapped_column(String(20))  # image | yaml | stage
     source_path: Mapped[str | None] = mapped_column(Text)
-    resolution: Mapped[float] = mapped_column(Float)  # [m/pixel]
-    origin_x: Mapped[float] = mapped_column(Float)  # [m]
-    origin_y: Mapped[float] = mapped_column(Float)  # [m]
-    width_px: Mapped[int] = mapped_column(Integer)
-    height_px: Mapped[int] = mapped_column(Integer)
-    start_pose: Mapped[list[Any]] = mapped_column(JSON)  # [x, y, theta]
+    # pending (uploaded, being analysed off the request thread) | ready | invalid (see error).
+    # Until ready, the geometry columns below are empty.
+    status: Mapped[str] = mapped_column(String(20), default="ready", index=True)
+    error: Mapped[str | None] = mapped_column(Text)
+    # The uploaded files (packed by the API) and the resolution given with them, kept until
+    # the analysis has read them.
+    upload: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    upload_resolution: Mapped[float | None] = mapped_column(Float)  # [m/pixel]
+    resolution: Mapped[float | None] = mapped_column(Float)  # [m/pixel]
+    origin_x: Mapped[float | None] = mapped_column(Float)  # [m]
+    origin_y: Mapped[float | None] = mapped_column(Float)  # [m]
+    width_px: Mapped[int | None] = mapped_column(Integer)
+    height_px: Mapped[int | None] = mapped_column(Integer)
+    start_pose: Mapped[list[Any] | None] = mapped_column(JSON)  # [x, y, theta]
     facts: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     # The occupancy grid as the pipeline sees it (bool [iy, ix], bottom row first), packed;
     # deferred (as are the other blobs): loaded only when read, not with every row.
-    occupancy: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    occupancy: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
     created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
     jobs: Mapped[list[Job]] = relationship(back_populates="world")
@@ -163,12 +198,33 @@ class Run(Base):
     created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
     finished_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    # Exactly once: the attempt that holds the run (a random id per execution), its last sign
+    # of life, how many attempts started, and the broker epoch its message was sent in (a
+    # broker that lost its queue has a new epoch, and the run is sent again).
+    attempt: Mapped[str | None] = mapped_column(String(32))
+    heartbeat_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    broker_epoch: Mapped[str | None] = mapped_column(String(32))
 
     job: Mapped[Job] = relationship(back_populates="runs")
     trajectories: Mapped[list[RunTrajectory]] = relationship(
         back_populates="run", cascade="all, delete-orphan"
     )
     map: Mapped[RunMap | None] = relationship(back_populates="run", cascade="all, delete-orphan")
+
+
+class RunEvent(Base):
+    """One status change of a run (its history): which attempt made it, from what, to what."""
+
+    __tablename__ = "run_events"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    attempt: Mapped[str | None] = mapped_column(String(32))
+    from_status: Mapped[str | None] = mapped_column(String(20))
+    to_status: Mapped[str] = mapped_column(String(20))
+    detail: Mapped[str | None] = mapped_column(Text)
+    at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
 class RunTrajectory(Base):
