@@ -166,7 +166,8 @@ def test_job_page_shows_the_finished_run(site):
     prefix = run_link(VIEWER, site["run"], "")
     assert prefix == f"{VIEWER}/?websocket=ws://viewer.example:8080/run/{site['run']}/"
     (token,) = re.findall(f'href="{re.escape(prefix)}([^"]+)"', page)[:1]
-    grant = verify(signing_key(site["url"], None), site["run"], token)
+    key = signing_key(site["url"], site["app"].state.settings.secret_key)
+    grant = verify(key, site["run"], token)
     assert grant.user_id == site["a_id"]
     assert 'name="mapqual-refresh"' not in page  # nothing runs: no refreshing
     srcs = re.findall(r'<img src="([^"]+)"', page)

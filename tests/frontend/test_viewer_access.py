@@ -26,7 +26,7 @@ from backend.db.models import Run, RunMap, RunTrajectory, User
 from backend.db.session import session_scope
 from backend.main import create_app
 from backend.store import add_user, create_job, save_world
-from backend.viewer_tokens import issue, sign, signing_key
+from backend.viewer_tokens import issue, sign
 from frontend.viewer import ViewerApp, run_link
 from tests.frontend.conftest import free_port
 from tests.services import scratch_database
@@ -64,7 +64,7 @@ def _finished_run(s, owner_id: int, world_id: int, seed: int) -> int:
 
 
 @pytest.fixture(scope="module")
-def env(tmp_path_factory):
+def env():
     """Users a (owner of run_a), b (owner of run_b) and c (revoked); the viewer and the
     dashboard over one scratch PostgreSQL database."""
     with scratch_database("mapqual_viewer") as url:
@@ -83,12 +83,15 @@ def env(tmp_path_factory):
                 runs[name] = _finished_run(s, ids[name], w.id, 3)
             job_a = s.get_one(Run, runs["a"]).job_id
             s.get_one(User, ids["c"]).revoked_at = datetime.now(UTC)
-        app = ViewerApp(url, None, "127.0.0.1", free_port())
-        viewer_url = f"http://127.0.0.1:{app.port}"
-        dash = create_app(Settings(DATABASE_URL=url, MAPQUAL_VIEWER_URL=viewer_url))
+        port = free_port()
+        viewer_url = f"http://127.0.0.1:{port}"
+        settings = Settings(DATABASE_URL=url, MAPQUAL_VIEWER_URL=viewer_url)
+        dash = create_app(settings)
+        # secret_key is None unless a developer's .env sets it: the key made in the database
+        app = ViewerApp(url, None, "127.0.0.1", port, settings.secret_key)
         yield {
             "url": url, "app": app, "viewer_url": viewer_url, "dash": dash, "ids": ids,
-            "keys": keys, "runs": runs, "job_a": job_a, "key": signing_key(url, None),
+            "keys": keys, "runs": runs, "job_a": job_a, "key": app.key,
         }  # fmt: skip
         app.stop()
 

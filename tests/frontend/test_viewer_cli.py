@@ -17,6 +17,7 @@ from tests.frontend.conftest import free_port
 def test_viewer_command_serves_and_stops(tmp_path, own_redis):
     port = free_port()
     env = dict(os.environ, DATABASE_URL=f"sqlite:///{tmp_path / 'v.db'}", REDIS_URL=own_redis.url)
+    env.pop("MAPQUAL_SECRET_KEY", None)  # the key is then made in the database
     proc = subprocess.Popen(
         [sys.executable, "-m", "mapqual", "viewer", "--port", str(port)],
         env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
