@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -21,6 +21,9 @@ NEED_LINK = (
 )
 EXPIRED = "**This viewer link has expired.** Open the run again from its job page in the dashboard."
 ENDED = "**This run is no longer shown:** your access to it has ended."
+UNAVAILABLE = "**The viewer cannot check this link just now.** Reload the page in a moment."
+Note = Literal["link", "expired", "unavailable"]
+NOTES: dict[Note, str] = {"link": NEED_LINK, "expired": EXPIRED, "unavailable": UNAVAILABLE}
 SPEEDS = ("1x", "2x", "5x", "10x", "20x", "50x", "100x")
 REPLAY_POINTS = 20000  # finished paths are drawn with at most this many points
 LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan", "goal & plan")
@@ -284,9 +287,9 @@ class RunView:
             }
 
 
-def refuse(client: Any, expired: bool) -> None:
+def refuse(client: Any, note: Note) -> None:
     """A client without a valid link: a note on its panel, and nothing of any run."""
-    client.gui.add_markdown(EXPIRED if expired else NEED_LINK)
+    client.gui.add_markdown(NOTES[note])
 
 
 def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: dict | None) -> str:

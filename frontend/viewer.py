@@ -20,7 +20,7 @@ from typing import Any
 from backend.db.session import session_scope
 from backend.viewer_tokens import InvalidToken, authorise, check_access, signing_key
 from frontend.live import LiveRun, load_finished, load_floorplan, run_info, run_status
-from frontend.view import RunView, refuse
+from frontend.view import Note, RunView, refuse
 
 log = logging.getLogger("mapqual.viewer")
 _RUN_PATH = re.compile(r"^/run/(\d{1,18})/([^/]*)/?$")
@@ -83,14 +83,21 @@ class ViewerApp:
             run_id, user_id = self._authorise(client)
         except InvalidToken as exc:
             log.info("viewer: client %s refused: %s", client.client_id, exc.reason)
-            with self._lock:
-                self.refused[client.client_id] = exc.reason
-            refuse(client, exc.expired)
+            self._refuse(client, exc.reason, "expired" if exc.expired else "link")
+            return
+        except Exception:  # the database is unreachable: the link cannot be checked now
+            log.exception("viewer: could not check client %s's link", client.client_id)
+            self._refuse(client, "the link could not be checked", "unavailable")
             return
         view = RunView(self, client, user_id)
         with self._lock:
             self.views[client.client_id] = view
         self.show(view, run_id)
+
+    def _refuse(self, client: Any, reason: str, note: Note) -> None:
+        with self._lock:
+            self.refused[client.client_id] = reason
+        refuse(client, note)
 
     def _authorise(self, client: Any) -> tuple[int, int]:
         """The run the client's link names and the user it was made for; InvalidToken unless

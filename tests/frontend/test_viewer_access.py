@@ -288,3 +288,14 @@ def test_no_client_can_open_a_public_share_tunnel(env):
         ws.send(msgspec.msgpack.encode(ShareUrlRequest().as_serializable_dict()))
         time.sleep(1.0)  # the request is handled on viser's thread pool
         assert app.server._share_tunnel is None
+
+
+def test_a_link_that_cannot_be_checked_shows_no_run(env):
+    """The database unreachable (a closed port) while a page connects: refused, not shown."""
+    app, run_a = env["app"], env["runs"]["a"]
+    token = issue(env["key"], run_a, env["ids"]["a"], 60)
+    url, app.url = app.url, "postgresql+psycopg://postgres@127.0.0.1:1/none"
+    try:
+        _assert_refused(env, f"/run/{run_a}/{token}", "could not be checked")
+    finally:
+        app.url = url
