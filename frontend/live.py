@@ -1,5 +1,5 @@
 """What the viewer shows of one run: live state fed by the worker's messages, or a finished
-run read from the database; and the list of runs to choose from."""
+run read from the database."""
 
 from __future__ import annotations
 
@@ -8,19 +8,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from sqlalchemy import case, select
+from sqlalchemy import select
 
 from backend.db.models import Run, World
 from backend.db.session import session_scope
 from backend.progress import FREE, OCCUPIED, UNKNOWN, decode_map_patch
 from backend.store import load_map, load_trajectory, world_occupancy
 
-RECENT_FINISHED = 30  # finished runs listed after the running ones
-
 
 @dataclass
 class RunInfo:
-    """A run as the selector lists it."""
+    """A run as the metrics panel names it."""
 
     id: int
     status: str
@@ -30,25 +28,17 @@ class RunInfo:
     slam: str
     outcome: str | None
 
-    @property
-    def label(self) -> str:
-        state = self.status if self.status != "done" else (self.outcome or "done")
-        return f"#{self.id} {state} · {self.world} · seed {self.seed} · {self.slam}"
 
-
-def list_runs(url: str) -> list[RunInfo]:
-    """Running runs first, then the most recent finished ones (every owner's: the viewer is a
-    trusted-network tool, see `mapqual viewer --help`)."""
-    live = case((Run.status == "running", 0), else_=1)
+def run_info(url: str, run_id: int) -> RunInfo | None:
+    """What the metrics panel says of the run (world, seed, SLAM), or None when it is gone."""
     stmt = (
         select(Run.id, Run.status, Run.world_id, World.name, Run.seed, Run.slam, Run.outcome)
         .join(World, World.id == Run.world_id)
-        .where(Run.status.in_(("running", "done")))
-        .order_by(live, Run.id.desc())
-        .limit(RECENT_FINISHED + 20)
+        .where(Run.id == run_id)
     )
     with session_scope(url) as s:
-        return [RunInfo(*row) for row in s.execute(stmt)]
+        row = s.execute(stmt).first()
+    return None if row is None else RunInfo(*row)
 
 
 def run_status(url: str, run_id: int) -> str | None:

@@ -1,11 +1,11 @@
-"""One browser tab of the viewer: its GUI (run selector, layers, metrics, replay) and its
-scene, showing one run live or replaying it once finished."""
+"""One browser tab of the viewer: its GUI (metrics, layers, replay) and its scene, showing the
+one run its link names, live or replayed once finished; or, without a valid link, a note."""
 
 from __future__ import annotations
 
 import math
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -15,7 +15,15 @@ from frontend.live import Delta, FinishedRun, LiveRun, RunInfo
 if TYPE_CHECKING:
     from frontend.viewer import ViewerApp
 
-NONE_LABEL = "(choose a run)"
+NEED_LINK = (
+    "**No run to show.** This viewer opens a run only through the *open viewer* link on the "
+    "run's job page in the dashboard (signed in as its owner)."
+)
+EXPIRED = "**This viewer link has expired.** Open the run again from its job page in the dashboard."
+ENDED = "**This run is no longer shown:** your access to it has ended."
+UNAVAILABLE = "**The viewer cannot check this link just now.** Reload the page in a moment."
+Note = Literal["link", "expired", "unavailable"]
+NOTES: dict[Note, str] = {"link": NEED_LINK, "expired": EXPIRED, "unavailable": UNAVAILABLE}
 SPEEDS = ("1x", "2x", "5x", "10x", "20x", "50x", "100x")
 REPLAY_POINTS = 20000  # finished paths are drawn with at most this many points
 LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan", "goal & plan")
@@ -24,53 +32,49 @@ LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan",
 class RunView:
     """The GUI and scene of one connected client."""
 
-    def __init__(self, app: ViewerApp, client: Any):
+    def __init__(self, app: ViewerApp, client: Any, user_id: int):
         self.app, self.client, self.scene = app, client, client.scene
+        self.user_id = user_id  # whom the link was made for (access is checked again as it runs)
         self.lock = threading.RLock()
         self.run_id: int | None = None
-        self.mode = "none"  # none | live | replay
+        self.info: RunInfo | None = None
+        self.mode = "none"  # none | live | replay | closed
         self.finished: FinishedRun | None = None
         self.stride = 1
         self.shown_i = -1  # replay: last trajectory index drawn
         self.playing = False
-        self._labels: dict[str, int] = {}
         self._build_gui(client.gui)
         self._layers: dict[str, Any] = {}
 
     # --- GUI ------------------------------------------------------------------------------
     def _build_gui(self, gui: Any) -> None:
-        with gui.add_folder("Run"):
-            self.selector = gui.add_dropdown("run", (NONE_LABEL,), initial_value=NONE_LABEL)
-            self.selector.on_update(lambda _: self._on_select())
-        with gui.add_folder("Metrics"):
-            self.metrics = gui.add_markdown("No run selected.")
-        with gui.add_folder("Layers"):
+        # no run chooser: a link opens one run, and that is all this client may see
+        self._folders = [gui.add_folder("Metrics")]
+        with self._folders[-1]:
+            self.metrics = gui.add_markdown("Loading the run...")
+        self._folders.append(gui.add_folder("Layers"))
+        with self._folders[-1]:
             self.toggles = {name: gui.add_checkbox(name, True) for name in LAYERS}
         for name, box in self.toggles.items():
             box.on_update(lambda _, n=name: self._apply_toggle(n))
-        with gui.add_folder("Replay"):
+        self._folders.append(gui.add_folder("Replay"))
+        with self._folders[-1]:
             self.play = gui.add_button("Play", disabled=True)
             self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="10x")
             self.slider = gui.add_slider("time [s]", 0.0, 1.0, 0.1, 0.0, disabled=True)
         self.play.on_click(lambda _: self._toggle_play())
         self.slider.on_update(lambda _: self._on_slider())
 
-    def set_runs(self, runs: list[RunInfo]) -> None:
-        """New selector options; the selected run stays selected."""
-        labels = {r.label: r.id for r in runs}
-        if self.run_id is not None and self.run_id not in labels.values():
-            labels[f"#{self.run_id}"] = self.run_id
-        current = next((k for k, v in labels.items() if v == self.run_id), NONE_LABEL)
+    def close(self) -> None:
+        """Access ended while watching: the scene and the panel are emptied, a note says why."""
         with self.lock:
-            if labels != self._labels:
-                self._labels = labels
-                self.selector.options = (NONE_LABEL, *labels)
-            self.selector.value = current  # (a no-op when unchanged)
-
-    def _on_select(self) -> None:
-        run_id = self._labels.get(self.selector.value)
-        if run_id is not None and run_id != self.run_id:
-            self.app.show(self, run_id)
+            self._clear()
+            self.scene.reset()  # the layers' parent frames too: this client's scene only
+            self.mode, self.finished, self.playing = "closed", None, False
+            for folder in self._folders:
+                folder.remove()
+            self._folders = []
+            self.client.gui.add_markdown(ENDED)
 
     def _apply_toggle(self, name: str) -> None:
         on = self.toggles[name].value
@@ -99,6 +103,8 @@ class RunView:
     def reset(self, run_id: int, floor) -> None:
         """Clear the scene and lay out the layers for `run_id` over its floorplan."""
         with self.lock:
+            if self.mode == "closed":
+                return
             self._clear()
             reframe = run_id != self.run_id  # the same run again (it finished): keep the camera
             self.run_id, self.mode, self.finished, self.playing = run_id, "none", None, False
@@ -119,6 +125,7 @@ class RunView:
             L["markers"] = Markers(sc, "/nav", on["scan"], on["goal & plan"])
             self._layers = L
             self._sync_replay_gui()
+            self.metrics.content = metrics_markdown(self.info, {}, None)
 
     def _clear(self) -> None:
         L = self._layers
@@ -150,6 +157,8 @@ class RunView:
         """Start showing a running run from what has arrived so far."""
         gt, est, m = live.snapshot()
         with self.lock:
+            if self.mode == "closed":
+                return
             self.mode = "live"
             L = self._layers
             L["gt"].set(gt)
@@ -182,12 +191,14 @@ class RunView:
         if "pose_gt" in p:
             L["robot_gt"].pose(*p["pose_gt"])
             L["robot_est"].pose(*p["pose_est"])
-        self.metrics.content = metrics_markdown(self.app.info(self.run_id), p, None)
+        self.metrics.content = metrics_markdown(self.info, p, None)
 
     # --- replay ---------------------------------------------------------------------------
     def show_finished(self, fin: FinishedRun) -> None:
         """Show a finished run at its end, ready to replay."""
         with self.lock:
+            if self.mode == "closed":
+                return
             self.mode, self.finished, self.playing = "replay", fin, False
             self.stride = max(1, math.ceil(len(fin.t) / REPLAY_POINTS))
             L = self._layers
@@ -254,7 +265,7 @@ class RunView:
         L["robot_gt"].pose(*fin.gt[i])
         L["robot_est"].pose(*fin.est[i])
         p = {"t": float(fin.t[i]), "coverage": fin.summary.get("coverage")}
-        self.metrics.content = metrics_markdown(self.app.info(self.run_id), p, fin.summary)
+        self.metrics.content = metrics_markdown(self.info, p, fin.summary)
 
     def describe(self) -> dict[str, Any]:
         """What the scene holds now (for tests and the status line)."""
@@ -274,6 +285,11 @@ class RunView:
                 "scan": L["markers"].has_scan,
                 "goal": L["markers"].has_goal,
             }
+
+
+def refuse(client: Any, note: Note) -> None:
+    """A client without a valid link: a note on its panel, and nothing of any run."""
+    client.gui.add_markdown(NOTES[note])
 
 
 def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: dict | None) -> str:

@@ -1,9 +1,10 @@
 """The live viewer: one long-lived viser server; running runs arrive over Redis pub/sub,
 finished ones come from the database. `mapqual viewer` starts it.
 
-Open `http://HOST:PORT/` and choose a run, or open a run directly with
-`http://HOST:PORT/?websocket=ws://HOST:PORT/run/<id>` (the link the dashboard gives): viser's
-page connects its websocket to that path, and the path names the run.
+A client sees one run, and only through the link its job's dashboard page gives:
+`http://HOST:PORT/?websocket=ws://HOST:PORT/run/<id>/<token>`. viser's page connects its
+websocket to that path; the path names the run and carries a signed, expiring token for it
+(`backend.viewer_tokens`). Without a valid one the client sees a note and nothing else.
 """
 
 from __future__ import annotations
@@ -16,42 +17,53 @@ import threading
 import time
 from typing import Any
 
-from frontend.live import (
-    LiveRun,
-    RunInfo,
-    list_runs,
-    load_finished,
-    load_floorplan,
-    run_status,
-)
-from frontend.view import RunView
+from backend.db.session import session_scope
+from backend.viewer_tokens import InvalidToken, authorise, check_access, signing_key
+from frontend.live import LiveRun, load_finished, load_floorplan, run_info, run_status
+from frontend.view import Note, RunView, refuse
 
 log = logging.getLogger("mapqual.viewer")
-_RUN_PATH = re.compile(r"^/run/(\d+)/?$")
+_RUN_PATH = re.compile(r"^/run/(\d{1,18})/([^/]*)/?$")
 TICK_S = 0.1  # [s] replay step
-POLL_S = 2.0  # [s] run list and status refresh
+POLL_S = 2.0  # [s] status refresh, and how soon a revoked user's open views go blank
 
 
-def run_link(viewer_url: str, run_id: int) -> str:
-    """The URL that opens the viewer on one run."""
+def run_link(viewer_url: str, run_id: int, token: str) -> str:
+    """The URL that opens the viewer on one run, with a token for it (`viewer_tokens.issue`)."""
     base = viewer_url.rstrip("/")
     ws = "wss://" + base[8:] if base.startswith("https://") else "ws://" + base.split("://")[-1]
-    return f"{base}/?websocket={ws}/run/{run_id}"
+    return f"{base}/?websocket={ws}/run/{run_id}/{token}"
 
 
 class ViewerApp:
     """The viewer server: per-client views, one Redis listener, one housekeeping thread."""
 
-    def __init__(self, database_url: str, redis_url: str | None, host: str, port: int):
+    def __init__(
+        self,
+        database_url: str,
+        redis_url: str | None,
+        host: str,
+        port: int,
+        secret_key: str | None = None,
+    ):
         import viser
 
         self.url = database_url
+        # the key the dashboard signs links with (made in the database on first use)
+        self.key = signing_key(database_url, secret_key)
         self.server = viser.ViserServer(host=host, port=port, label="mapqual", verbose=False)
         self.server.scene.set_up_direction("+z")
+        # viser's Share button has the server open a public tunnel (share.viser.studio) at any
+        # client's request, refused client or not; that would bypass binding the viewer to
+        # 127.0.0.1. Hidden, and refused on the server (its handler looks the method up on
+        # every request, so the instance attribute wins).
+        self.server.gui.configure_theme(show_share_button=False)
+        self.server.request_share_url = _no_share_url  # type: ignore[method-assign]
         self.port = self.server.get_port()
         self.views: dict[int, RunView] = {}
+        # clients refused (client id -> why), shown a note and nothing else
+        self.refused: dict[int, str] = {}
         self.live: dict[int, LiveRun] = {}
-        self.runs: dict[int, RunInfo] = {}
         self._lock = threading.RLock()
         self._subs: queue.Queue[tuple[str, int]] = queue.Queue()
         self._stop = threading.Event()
@@ -62,43 +74,61 @@ class ViewerApp:
             threading.Thread(target=self._housekeeping, name="viewer-poll", daemon=True),
             threading.Thread(target=self._listen, name="viewer-redis", daemon=True),
         ]
-        self._refresh_runs()
         for th in self._threads:
             th.start()
 
     # --- clients --------------------------------------------------------------------------
     def _connect(self, client: Any) -> None:
-        view = RunView(self, client)
+        try:
+            run_id, user_id = self._authorise(client)
+        except InvalidToken as exc:
+            log.info("viewer: client %s refused: %s", client.client_id, exc.reason)
+            self._refuse(client, exc.reason, "expired" if exc.expired else "link")
+            return
+        except Exception:  # the database is unreachable: the link cannot be checked now
+            log.exception("viewer: could not check client %s's link", client.client_id)
+            self._refuse(client, "the link could not be checked", "unavailable")
+            return
+        view = RunView(self, client, user_id)
         with self._lock:
             self.views[client.client_id] = view
-            runs = list(self.runs.values())
-        view.set_runs(runs)
-        wanted = self._requested_run(client)
-        if wanted is not None:
-            self.show(view, wanted)
+        self.show(view, run_id)
 
-    def _requested_run(self, client: Any) -> int | None:
-        """The run named by the websocket path (`/run/<id>`), if any."""
+    def _refuse(self, client: Any, reason: str, note: Note) -> None:
+        with self._lock:
+            self.refused[client.client_id] = reason
+        refuse(client, note)
+
+    def _authorise(self, client: Any) -> tuple[int, int]:
+        """The run the client's link names and the user it was made for; InvalidToken unless
+        the link's token is valid for that run and the user may still see it."""
         # viser 1.1.1 keeps each client's websocket connection here; its request has the path
         conns = getattr(getattr(self.server, "_websock_server", None), "_live_connections", {})
         conn = conns.get(client.client_id)
         path = getattr(getattr(conn, "request", None), "path", "") or ""
         m = _RUN_PATH.match(path.partition("?")[0])
-        return int(m.group(1)) if m else None
+        if m is None:
+            raise InvalidToken(f"no run link in the websocket path {path[:80]!r}")
+        run_id = int(m.group(1))
+        with session_scope(self.url) as s:
+            grant = authorise(s, self.key, run_id, m.group(2))
+        return run_id, grant.user_id
 
     def _disconnect(self, client: Any) -> None:
         with self._lock:
+            self.refused.pop(client.client_id, None)
             view = self.views.pop(client.client_id, None)
             if view is not None and view.run_id is not None:
                 self._unwatch(view.run_id)
 
-    def info(self, run_id: int | None) -> RunInfo | None:
-        return self.runs.get(run_id) if run_id is not None else None
-
     def show(self, view: RunView, run_id: int) -> None:
         """Point `view` at `run_id`: live when it is running, a replay when it is done."""
         old = view.run_id
+        if view.info is None or view.info.id != run_id:
+            view.info = run_info(self.url, run_id)
         view.reset(run_id, load_floorplan(self.url, run_id))
+        if view.mode == "closed":
+            return  # access ended meanwhile: subscribe to nothing for it
         with self._lock:
             if old is not None and old != run_id:
                 self._unwatch(old)
@@ -114,9 +144,6 @@ class ViewerApp:
                     live = self.live[run_id] = LiveRun(run_id)
                     self._subs.put(("subscribe", run_id))
             view.show_live(live)
-        if run_id not in self.runs:
-            self._refresh_runs()
-        view.set_runs(list(self.runs.values()))
 
     def _unwatch(self, run_id: int) -> None:
         if not any(v.run_id == run_id for v in self.views.values()) and run_id in self.live:
@@ -165,7 +192,8 @@ class ViewerApp:
             view.on_delta(live, delta)
 
     def _housekeeping(self) -> None:
-        """Replay ticks; every POLL_S the run list, and finished live runs turn into replays."""
+        """Replay ticks; every POLL_S access is checked again, and finished live runs turn into
+        replays."""
         next_poll = time.monotonic() + POLL_S
         while not self._stop.wait(TICK_S):
             with self._lock:
@@ -180,10 +208,7 @@ class ViewerApp:
                     log.exception("viewer: database poll failed")
 
     def _poll(self, views: list[RunView]) -> None:
-        self._refresh_runs()
-        runs = list(self.runs.values())
-        for view in views:
-            view.set_runs(runs)
+        views = self._recheck(views)
         with self._lock:
             live_ids = list(self.live)
         for run_id in live_ids:
@@ -197,14 +222,42 @@ class ViewerApp:
             if run_status(self.url, view.run_id) in ("running", "done"):
                 self.show(view, view.run_id)  # a queued run has started (or finished)
 
-    def _refresh_runs(self) -> None:
-        self.runs = {r.id: r for r in list_runs(self.url)}
+    def _recheck(self, views: list[RunView]) -> list[RunView]:
+        """Close the views whose user may no longer see the run (revoked, or the run changed
+        owner) and return the others. A token's expiry matters when a page connects only: a
+        run watched live may outlast the link that opened it."""
+        pairs = {(v.run_id, v.user_id) for v in views if v.run_id is not None}
+        if not pairs:
+            return views
+        denied: set[tuple[int | None, int]] = set()
+        with session_scope(self.url) as s:
+            for run_id, user_id in pairs:
+                try:
+                    check_access(s, run_id, user_id)
+                except InvalidToken as exc:
+                    log.info("viewer: run %s closed for user %s: %s", run_id, user_id, exc.reason)
+                    denied.add((run_id, user_id))
+        kept = []
+        for view in views:
+            if (view.run_id, view.user_id) not in denied:
+                kept.append(view)
+                continue
+            view.close()
+            with self._lock:
+                self.views.pop(view.client.client_id, None)
+                self.refused[view.client.client_id] = "access ended while watching"
+                self._unwatch(view.run_id)
+        return kept
 
     def stop(self) -> None:
         self._stop.set()
         for th in self._threads:
             th.join(timeout=2.0)
         self.server.stop()
+
+
+def _no_share_url(verbose: bool = True) -> None:
+    log.warning("viewer: a client asked for a public share URL; refused")
 
 
 def _redis(url: str):

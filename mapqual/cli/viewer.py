@@ -18,9 +18,10 @@ def viewer(
 ) -> None:
     """Watch runs in the browser: live while they run (over Redis), replayed once done.
 
-    Open http://HOST:PORT/ and pick a run; a job's dashboard page links here (MAPQUAL_VIEWER_URL).
-
-    It shows every owner's runs (DATABASE_URL) without a sign-in: serve it on a trusted network.
+    A run opens from the "open viewer" link on its job's dashboard page (MAPQUAL_VIEWER_URL
+    says where browsers reach this server). The link carries a token signed for that run and
+    its owner (MAPQUAL_SECRET_KEY, else a key kept in the database) that expires after
+    MAPQUAL_VIEWER_TOKEN_TTL seconds; without a valid one the page shows no run at all.
     """
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
@@ -31,7 +32,9 @@ def viewer(
         signal.signal(sig, lambda *_: done.set())
     settings = get_settings()
     upgrade(settings.database_url)
-    viewer_app = ViewerApp(settings.database_url, settings.redis_url, host, port)
+    viewer_app = ViewerApp(
+        settings.database_url, settings.redis_url, host, port, settings.secret_key
+    )
     typer.echo(f"mapqual viewer on http://{host}:{viewer_app.port}/ (Ctrl+C stops it)", err=True)
     done.wait()
     viewer_app.stop()

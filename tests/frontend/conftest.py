@@ -70,12 +70,17 @@ class Site:
         from frontend.viewer import ViewerApp
 
         self.service = service
-        self.viewer = ViewerApp(service.db_url, service.redis_url, "127.0.0.1", free_port())
-        self.viewer_url = f"http://127.0.0.1:{self.viewer.port}"
+        viewer_port = free_port()
+        self.viewer_url = f"http://127.0.0.1:{viewer_port}"
         settings = Settings(
             DATABASE_URL=service.db_url,
             REDIS_URL=service.redis_url,
             MAPQUAL_VIEWER_URL=self.viewer_url,
+        )
+        # the dashboard signs the viewer's links with the key the viewer checks (a developer's
+        # .env may set MAPQUAL_SECRET_KEY)
+        self.viewer = ViewerApp(
+            service.db_url, service.redis_url, "127.0.0.1", viewer_port, settings.secret_key
         )
         port = free_port()
         self.url = f"http://127.0.0.1:{port}"

@@ -17,6 +17,7 @@ from backend.db.models import Job, Run
 from backend.db.session import session_scope
 from backend.main import create_app
 from backend.store import add_user, create_job, mark_run_started, save_world, store_run_result
+from backend.viewer_tokens import signing_key, verify
 from frontend.viewer import run_link
 from tests.services import ensure_redis
 from worker.pipeline import RunParams, run_one
@@ -74,12 +75,12 @@ def site(tmp_path_factory):
             map_ros=ex.final_map.to_ros(), map_resolution=ex.final_map.resolution,
             map_origin=ex.final_map.origin, report_dir=str(report),
         )  # fmt: skip
-        job_id = job.id
+        job_id, a_id = job.id, a.id
     redis_url = ensure_redis().rsplit("/", 1)[0] + "/15"
     settings = Settings(DATABASE_URL=url, REDIS_URL=redis_url, MAPQUAL_VIEWER_URL=VIEWER)
     app = create_app(settings)
     return {"app": app, "url": url, "a": key_a, "b": key_b, "job": job_id, "run": run_id,
-            "summary": result.summary, "report": report}  # fmt: skip
+            "summary": result.summary, "report": report, "a_id": a_id}  # fmt: skip
 
 
 def _signed_in(site, who="a") -> TestClient:
@@ -161,9 +162,13 @@ def test_job_page_shows_the_finished_run(site):
     assert f"{b['translation']['mean']:.3f} ± {b['translation']['std']:.3f}" in page
     assert f"{b['rotation']['mean']:.4f} ± {b['rotation']['std']:.4f}" in page
     assert f"{100 * site['summary']['coverage']:.0f} %" in page
-    link = run_link(VIEWER, site["run"])
-    assert link == f"{VIEWER}/?websocket=ws://viewer.example:8080/run/{site['run']}"
-    assert f'href="{link}"' in page
+    # the viewer link carries a token for this run and its owner (see test_viewer_access)
+    prefix = run_link(VIEWER, site["run"], "")
+    assert prefix == f"{VIEWER}/?websocket=ws://viewer.example:8080/run/{site['run']}/"
+    (token,) = re.findall(f'href="{re.escape(prefix)}([^"]+)"', page)[:1]
+    key = signing_key(site["url"], site["app"].state.settings.secret_key)
+    grant = verify(key, site["run"], token)
+    assert grant.user_id == site["a_id"]
     assert 'name="mapqual-refresh"' not in page  # nothing runs: no refreshing
     srcs = re.findall(r'<img src="([^"]+)"', page)
     assert len(srcs) == 3  # map, trajectories, errors

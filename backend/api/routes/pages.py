@@ -177,17 +177,23 @@ def job_page(
     request: Request, job_id: int, session: SessionDep, user: PageUser, settings: SettingsDep
 ) -> HTMLResponse:
     """A job's runs: outcome, coverage, errors, plots, downloads and the live-view link."""
+    from backend.viewer_tokens import issue, signing_key
     from frontend.viewer import run_link
 
     job = owned(user, session.get(Job, job_id), "job", job_id)
-    runs = [_run_row(r, settings.viewer_url, run_link) for r in job.runs]
+    # each viewer link carries a fresh token for its run and this user (it expires)
+    key = signing_key(settings.database_url, settings.secret_key)
+    runs = []
+    for r in job.runs:
+        token = issue(key, r.id, user.id, settings.viewer_token_ttl_s)
+        runs.append(_run_row(r, run_link(settings.viewer_url, r.id, token)))
     return _render(
         request, "job.html", user=user, job=job, world=session.get(World, job.world_id),
         runs=runs, refresh=job.status in ACTIVE,
     )  # fmt: skip
 
 
-def _run_row(run: Run, viewer_url: str, run_link) -> dict[str, Any]:
+def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
     b = (run.summary or {}).get("relations", {}).get("B") or {}
     report = bool(run.report_dir) and Path(run.report_dir).is_dir()
     return {
@@ -195,7 +201,7 @@ def _run_row(run: Run, viewer_url: str, run_link) -> dict[str, Any]:
         "b": b,
         "report": report,
         "errors_plot": report and (Path(run.report_dir) / "errors.png").is_file(),
-        "viewer": run_link(viewer_url, run.id),
+        "viewer": viewer_link,
         "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),
     }
 
