@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 from PIL import Image
 from sqlalchemy import func, select, update
 
-from backend.db.models import Job, WebSession, World, utcnow
+from backend.db.models import Job, User, WebSession, World, utcnow
 from backend.db.session import session_scope
 from backend.store import hash_key
 
@@ -44,6 +44,10 @@ def _png() -> bytes:
 def _count(api, model) -> int:
     with session_scope(api.url) as s:
         return s.scalar(select(func.count()).select_from(model))
+
+
+def _user_id(s, name: str) -> int:
+    return s.scalars(select(User.id).where(User.name == name)).one()
 
 
 def test_the_cookie_is_a_random_session_token_httponly_secure_samesite(api):
@@ -87,6 +91,13 @@ def test_an_expired_session_is_refused_and_purged(api):
     assert browser.get("/api/v1/stats").status_code == 401
     assert browser.get("/", follow_redirects=False).status_code == 303
     assert _count(api, WebSession) == 0
+    # a session never used again is purged when anybody signs in
+    _sign_in(api, "bob")
+    with session_scope(api.url) as s:
+        s.execute(update(WebSession).values(expires_at=utcnow() - timedelta(seconds=1)))
+    _sign_in(api, "alice")
+    with session_scope(api.url) as s:
+        assert s.scalars(select(WebSession.user_id)).all() == [_user_id(s, "alice")]
 
 
 def test_the_old_key_cookie_is_refused_everywhere(api):
