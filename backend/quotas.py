@@ -16,7 +16,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from backend.core.config import Settings
-from backend.db.models import Job, Run, User, World, utcnow
+from backend.db.models import Run, User, World, utcnow
 from worker.explore.params import ExploreParams
 
 ACTIVE = ("queued", "running")
@@ -30,20 +30,19 @@ def check_runs(
     (runs queued or running at once) and `quota_sim_hours` (the simulated time those runs may
     take in all, from each run's `explore.time_limit`). Call before storing anything."""
     _lock_owner(session, owner_id)
-    rows = session.execute(
-        select(Job.params, func.count(Run.id))
-        .join(Run, Run.job_id == Job.id)
-        .where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
-        .group_by(Job.id)
-    ).all()
-    active = sum(n for _, n in rows)
+    active, seconds = session.execute(
+        select(
+            func.count(Run.id),
+            func.coalesce(func.sum(func.coalesce(Run.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
+        ).where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
+    ).one()
     if active + n_new > settings.quota_active_runs:
         _refuse(
             f"{active} runs queued or running and {n_new} more asked for exceed the limit "
             f"of {settings.quota_active_runs} runs at once",
             "quota_active_runs",
         )
-    hours_active = sum(n * time_limit_s(p) for p, n in rows) / 3600.0
+    hours_active = float(seconds) / 3600.0
     hours_new = n_new * time_limit_s(params) / 3600.0
     if hours_active + hours_new > settings.quota_sim_hours:
         _refuse(
@@ -89,7 +88,9 @@ def _lock_owner(session: Session, user_id: int) -> None:
     """Take the owner's row until the transaction ends, so two requests of one owner at the
     same time cannot both pass on the same count (PostgreSQL; SQLite, the embedded
     single-user default, ignores it)."""
-    session.execute(select(User.id).where(User.id == user_id).with_for_update())
+    # FOR NO KEY UPDATE: conflicts with itself (so one owner's checks queue) but not with
+    # other transactions inserting rows that merely reference the user
+    session.execute(select(User.id).where(User.id == user_id).with_for_update(key_share=True))
 
 
 def _refuse(what: str, setting: str) -> None:

@@ -18,6 +18,7 @@ from backend.db.models import Job, Run, World, utcnow
 from backend.db.session import session_scope
 from backend.main import create_app
 from backend.quotas import time_limit_s
+from backend.store import add_job_runs
 
 
 def _client(api, **limits) -> TestClient:
@@ -80,7 +81,7 @@ def test_runs_queued_or_running_at_once(api):
     r = _jobs(client, api, wid, 2, 60)
     _refused(r, "2 runs queued or running", "2 more", "limit of 3 runs",
              "quota_active_runs", "MAPQUAL_QUOTA_ACTIVE_RUNS")  # fmt: skip
-    assert _count(api, Job) == 1 and _count(api, Run) == 2 and api.broker.llen("mapqual") == 2
+    assert _count(api, Job) == 1 and _count(api, Run) == 2
     _refused(_jobs(client, api, wid, 4, 60, user="admin"), "0 runs")  # admins too, per owner
     assert _jobs(client, api, wid, 1, 60).status_code == 202  # up to the limit exactly
     with session_scope(api.url) as s:  # finished runs no longer count
@@ -105,8 +106,17 @@ def test_simulated_hours_asked_for(api):
     _refused(r, "2 runs asking for 0.666667 simulated hours", "0.5 h asked for",
              "limit of 1 h", "quota_sim_hours", "MAPQUAL_QUOTA_SIM_HOURS")  # fmt: skip
     _refused(_jobs(client, api, wid, 1), "2 simulated hours")  # the default limit: 7200 s
-    assert _count(api, Job) == 1 and api.broker.llen("mapqual") == 1
+    assert _count(api, Job) == 1
     assert _jobs(client, api, wid, 1, 1800).status_code == 202  # 1 h exactly
+    with session_scope(api.url) as s:  # summed from a column, copied from the parameters
+        assert s.scalars(select(Run.time_limit_s)).all() == [1800.0, 1800.0]
+        s.execute(update(Run).values(status="done"))
+        job = s.get_one(Job, 1)
+        add_job_runs(s, job.id, [7, 8])  # a batch grown by seeds: the same parameters
+        assert [r.time_limit_s for r in job.runs] == [1800.0, 1800.0, 1800.0]
+        s.execute(update(Run).where(Run.seed == 8).values(time_limit_s=None))
+    # a run stored without it (before the column existed) counts as the default, 2 h
+    _refused(_jobs(client, api, wid, 1, 1), "2.5 h asked for")
 
 
 def test_worlds_stored(api):

@@ -123,7 +123,7 @@ def test_every_form_needs_the_sessions_csrf_token(api):
     for bad in ({}, {"csrf_token": token[:-1] + "x"}):
         r = browser.post("/jobs", data={**job, **bad}, follow_redirects=False)
         assert r.status_code == 403
-    assert _count(api, Job) == 0 and api.broker.llen("mapqual") == 0
+    assert _count(api, Job) == 0
     r = browser.post("/jobs", data={**job, "csrf_token": token}, follow_redirects=False)
     assert r.status_code == 303 and r.headers["location"].startswith("/jobs/")
     assert _count(api, Job) == 1
