@@ -5,6 +5,8 @@ the limits come from the settings (their environment names); the forms show the 
 from __future__ import annotations
 
 import io
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from datetime import timedelta
 
 import numpy as np
@@ -163,3 +165,24 @@ def test_the_forms_show_the_quota_message(api):
 )  # fmt: skip
 def test_a_runs_time_limit_from_its_parameters(params, seconds):
     assert time_limit_s(params) == seconds
+
+
+def test_parallel_requests_of_one_owner_cannot_all_pass(api):
+    if api.url.startswith("sqlite"):
+        pytest.skip("row locks are PostgreSQL's; SQLite is the single-user embedded database")
+    wid = _world(api)
+    limit, n = 4, 12
+    settings = Settings(DATABASE_URL=api.url, REDIS_URL=api.client.app.state.settings.redis_url,
+                        MAPQUAL_QUOTA_ACTIVE_RUNS=limit)  # fmt: skip
+    server = create_app(settings)
+    barrier = threading.Barrier(n)
+
+    def submit(_):
+        with TestClient(server) as client:
+            barrier.wait()
+            return _jobs(client, api, wid, 1, 60).status_code
+
+    with ThreadPoolExecutor(n) as pool:
+        codes = list(pool.map(submit, range(n)))
+    assert sorted(codes) == [202] * limit + [429] * (n - limit)
+    assert _count(api, Run) == limit
