@@ -6,14 +6,15 @@ import dataclasses
 import hashlib
 import secrets
 from collections.abc import Sequence
+from datetime import timedelta
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
-from backend.db.models import Job, Run, RunMap, RunTrajectory, User, World, utcnow
+from backend.db.models import Job, Run, RunMap, RunTrajectory, User, WebSession, World, utcnow
 from worker.world.world import World as WorldModel
 
 TRAJECTORY_KINDS = ("gt", "est")
@@ -39,8 +40,9 @@ def add_user(session: Session, name: str, is_admin: bool = False) -> tuple[User,
 
 
 def user_for_key(session: Session, key: str) -> User | None:
-    """The user holding `key`, or None."""
-    return session.scalars(select(User).where(User.key_hash == hash_key(key))).first()
+    """The user holding `key`, or None (also for a revoked user)."""
+    stmt = select(User).where(User.key_hash == hash_key(key), User.revoked_at.is_(None))
+    return session.scalars(stmt).first()
 
 
 def local_user(session: Session) -> User:
@@ -334,3 +336,80 @@ def get_runs(session: Session, run_ids: Sequence[int]) -> list[Run]:
     if not run_ids:
         return []
     return list(session.scalars(select(Run).where(Run.id.in_([int(i) for i in run_ids]))))
+
+
+# --- users and dashboard sessions -----------------------------------------------------------
+def find_user(session: Session, name: str) -> User:
+    """The user called `name`; LookupError if there is none."""
+    user = session.scalars(select(User).where(User.name == name)).first()
+    if user is None:
+        raise LookupError(f"no user named {name!r}")
+    return user
+
+
+def list_users(session: Session) -> list[User]:
+    """Every user, oldest first (the local user of embedded use included)."""
+    return list(session.scalars(select(User).order_by(User.id)))
+
+
+def revoke_user(session: Session, name: str) -> User:
+    """Revoke a user's key and end their dashboard sessions at once (the API's key cache
+    may trust the key for its TTL more); revoking twice keeps the first time."""
+    user = find_user(session, name)
+    if user.revoked_at is None:
+        user.revoked_at = utcnow()
+    session.execute(delete(WebSession).where(WebSession.user_id == user.id))
+    session.flush()
+    return user
+
+
+def rotate_user_key(session: Session, name: str) -> tuple[User, str]:
+    """A new API key for a user (shown once, never stored); the old key dies and their
+    sessions end. A revoked user is reinstated: rotating is how a revoked user gets back in."""
+    user = find_user(session, name)
+    key = "mq_" + secrets.token_urlsafe(32)  # as add_user makes them
+    user.key_hash = hash_key(key)
+    user.revoked_at = None
+    session.execute(delete(WebSession).where(WebSession.user_id == user.id))
+    session.flush()
+    return user, key
+
+
+def create_web_session(session: Session, user_id: int, ttl_s: float) -> tuple[str, str]:
+    """A new dashboard session of `ttl_s` seconds: (its token, its CSRF token). Only the
+    token's hash is stored; expired sessions (anyone's: those never used again are found no
+    other way) are purged on the way, through the index on their expiry."""
+    now = utcnow()
+    session.execute(delete(WebSession).where(WebSession.expires_at <= now))
+    token, csrf = secrets.token_urlsafe(32), secrets.token_urlsafe(32)
+    session.add(
+        WebSession(
+            token_hash=hash_key(token), user_id=user_id, csrf_token=csrf, created_at=now,
+            expires_at=now + timedelta(seconds=ttl_s),
+        )
+    )  # fmt: skip
+    session.flush()
+    return token, csrf
+
+
+def web_session_user(session: Session, token: str) -> tuple[User, str] | None:
+    """(user, CSRF token) of a live session, or None: unknown, expired (the row is deleted
+    then) or of a revoked user."""
+    token_hash = hash_key(token)
+    row = session.execute(
+        select(User, WebSession.csrf_token, WebSession.expires_at)
+        .join(WebSession, WebSession.user_id == User.id)
+        .where(WebSession.token_hash == token_hash)
+    ).first()
+    if row is None:
+        return None
+    user, csrf, expires_at = row
+    if expires_at <= utcnow():
+        session.execute(delete(WebSession).where(WebSession.token_hash == token_hash))
+        return None
+    return None if user.revoked_at is not None else (user, csrf)
+
+
+def delete_web_session(session: Session, token: str) -> None:
+    """End a dashboard session (signing out); an unknown token is no error."""
+    session.execute(delete(WebSession).where(WebSession.token_hash == hash_key(token)))

@@ -7,6 +7,7 @@ trip to the pool (the hot routes open their own session inside it, see `in_sessi
 
 from __future__ import annotations
 
+import hmac
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
@@ -20,13 +21,21 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.config import Settings, get_settings
 from backend.db.models import User
 from backend.db.session import get_sessionmaker, session_scope
-from backend.store import hash_key, local_user, user_for_key
+from backend.store import hash_key, local_user, user_for_key, web_session_user
 
-API_KEY_COOKIE = "mapqual_key"
-# How long [s] a valid API key is trusted without asking the database again: a user deleted
-# from the database (or whose key_hash is replaced) keeps access for at most this long on each
-# server process. Unknown keys are never cached, so a key added a moment ago works at once and
-# a wrong key is refused every time.
+# The dashboard's cookie: a random session token (the database keeps its SHA-256), never the
+# API key. Sessions are looked up on every request, not cached, so signing out, `users revoke`
+# and `users rotate` end them at once on every server process.
+SESSION_COOKIE = "mapqual_session"
+# Unsafe requests authenticated by that cookie must carry the session's CSRF token, as this
+# form field (the dashboard's forms) or this header (scripts in a signed-in page).
+CSRF_FIELD = "csrf_token"
+CSRF_HEADER = "X-CSRF-Token"
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+# How long [s] a valid API key is trusted without asking the database again: a user deleted,
+# revoked (`mapqual users revoke`) or given a new key (`mapqual users rotate`) keeps access by
+# the old key for at most this long on each server process. Unknown keys are never cached, so
+# a key added a moment ago works at once and a wrong key is refused every time.
 KEY_CACHE_TTL = 5.0
 KEY_CACHE_MAX = 10_000  # entries; past this the cache is emptied (one query per key to refill)
 T = TypeVar("T")
@@ -125,7 +134,7 @@ def key_cache(app: FastAPI) -> KeyCache:
     return cache
 
 
-def _key_from_request(request: Request, authorization: str | None, x_api_key: str | None) -> str:
+def _key_from_request(authorization: str | None, x_api_key: str | None) -> str:
     if authorization:
         scheme, _, token = authorization.partition(" ")
         if scheme.lower() != "bearer" or not token.strip():
@@ -135,9 +144,6 @@ def _key_from_request(request: Request, authorization: str | None, x_api_key: st
         return token.strip()
     if x_api_key:
         return x_api_key.strip()
-    cookie = request.cookies.get(API_KEY_COOKIE)
-    if cookie:
-        return cookie
     raise HTTPException(
         status.HTTP_401_UNAUTHORIZED,
         "an API key is required (Authorization: Bearer <key>); `mapqual users add NAME` makes one",
@@ -156,12 +162,12 @@ def _lookup(session: Session, settings: Settings, key: str | None) -> Principal 
 
 
 def _cache_entry(
-    request: Request, settings: Settings, authorization: str | None, x_api_key: str | None
+    settings: Settings, authorization: str | None, x_api_key: str | None
 ) -> tuple[str, str | None]:
     """The request's key cache entry and its key (None when auth is off); 401 without a key."""
     if settings.auth == "off":
         return _LOCAL, None
-    key = _key_from_request(request, authorization, x_api_key)
+    key = _key_from_request(authorization, x_api_key)
     return hash_key(key), key
 
 
@@ -181,8 +187,14 @@ async def current_user(
     x_api_key: Annotated[str | None, Header()] = None,
 ) -> Principal:
     """The user whose key came with the request (or the local user when auth is off); a valid
-    key is looked up in the database at most once per `KEY_CACHE_TTL` seconds."""
-    entry, key = _cache_entry(request, settings, authorization, x_api_key)
+    key is looked up in the database at most once per `KEY_CACHE_TTL` seconds. Without a key,
+    the dashboard's session cookie, checked against the database every time (and its CSRF
+    token on unsafe methods: the check lives here so no route can skip it)."""
+    if settings.auth == "on" and not authorization and not x_api_key:
+        token = request.cookies.get(SESSION_COOKIE)
+        if token:
+            return await _session_user(request, settings, token)
+    entry, key = _cache_entry(settings, authorization, x_api_key)
     user = key_cache(request.app).get(entry)
     if user is None:  # a database lookup: the only case that needs a thread
         found = await run_in_threadpool(in_session, settings, _lookup, settings, key)
@@ -190,20 +202,50 @@ async def current_user(
     return user
 
 
-def user_in_session(
-    request: Request,
-    session: Session,
-    settings: Settings,
-    authorization: str | None = None,
-    x_api_key: str | None = None,
-) -> Principal:
-    """`current_user` for sync handlers that already hold a session (the sign-in page): the
-    same answers and cache, the lookup made with `session`."""
-    entry, key = _cache_entry(request, settings, authorization, x_api_key)
-    user = key_cache(request.app).get(entry)
-    if user is None:
-        user = _remember(request, entry, _lookup(session, settings, key))
+def _session_lookup(session: Session, token: str) -> tuple[Principal, str] | None:
+    found = web_session_user(session, token)
+    return None if found is None else (Principal.of(found[0]), found[1])
+
+
+async def _session_user(request: Request, settings: Settings, token: str) -> Principal:
+    """The user of a live dashboard session (401 otherwise); its CSRF token is kept on
+    `request.state.csrf_token` for the pages' forms, and checked on unsafe methods."""
+    found = await run_in_threadpool(in_session, settings, _session_lookup, token)
+    if found is None:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "your dashboard session has ended (signed out, expired or revoked); sign in again",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    user, csrf = found
+    request.state.csrf_token = csrf
+    if request.method not in SAFE_METHODS:
+        supplied = request.headers.get(CSRF_HEADER)
+        if supplied is None and _is_form(request):
+            # the route's form is parsed already (FastAPI does it before the dependencies,
+            # and Starlette keeps it), so this reads no body twice
+            supplied = (await request.form()).get(CSRF_FIELD)
+        require_csrf(supplied, csrf)
     return user
+
+
+def _is_form(request: Request) -> bool:
+    kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    return kind in ("application/x-www-form-urlencoded", "multipart/form-data")
+
+
+def require_csrf(supplied: object, expected: str) -> None:
+    """403 unless `supplied` is the session's CSRF token (compared in constant time, so the
+    answer's timing tells nothing about how much of a guess was right)."""
+    ok = isinstance(supplied, str) and hmac.compare_digest(
+        supplied.encode("utf-8"), expected.encode("utf-8")
+    )
+    if not ok:
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            "missing or wrong CSRF token: reload the page and submit the form again "
+            f"(scripts send the {CSRF_HEADER} header, or an API key instead of the cookie)",
+        )
 
 
 CurrentUser = Annotated[Principal, Depends(current_user)]

@@ -167,6 +167,15 @@ class Job(Base):
     runs: Mapped[list[Run]] = relationship(back_populates="job", order_by="Run.id")
 
 
+def _run_time_limit(context: Any) -> float | None:
+    """A new run's simulated-time limit [s] from its params' explore.time_limit (None: the
+    pipeline's default)."""
+    params = context.get_current_parameters().get("params")
+    explore = params.get("explore") if isinstance(params, dict) else None
+    value = explore.get("time_limit") if isinstance(explore, dict) else None
+    return float(value) if isinstance(value, int | float) else None
+
+
 class Run(Base):
     """One simulated exploration with SLAM, and its evaluation."""
 
@@ -205,6 +214,10 @@ class Run(Base):
     heartbeat_at: Mapped[datetime | None] = mapped_column(UtcDateTime)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     broker_epoch: Mapped[str | None] = mapped_column(String(32))
+    # Its explore.time_limit [s], copied from `params` when the run is stored, so that the
+    # per-owner quota on simulated hours is one SQL sum (backend/quotas.py), not a JSON parse
+    # of every active run's parameters.
+    time_limit_s: Mapped[float | None] = mapped_column(Float, default=_run_time_limit)
 
     job: Mapped[Job] = relationship(back_populates="runs")
     trajectories: Mapped[list[RunTrajectory]] = relationship(

@@ -1,4 +1,5 @@
-"""`mapqual serve`, `mapqual worker` and `mapqual users add`: run and administer the service."""
+"""`mapqual serve`, `mapqual worker` and `mapqual users add|list|revoke|rotate`: run and
+administer the service."""
 
 from __future__ import annotations
 
@@ -54,21 +55,34 @@ def worker(
     )
 
 
+def _users_db() -> str:
+    """The settings' database URL, migrated to the current schema."""
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+
+    url = get_settings().database_url
+    upgrade(url)
+    return url
+
+
+def _not_local(name: str) -> None:
+    from backend.store import LOCAL_USER
+
+    if name == LOCAL_USER:
+        raise InputError(f"the name {LOCAL_USER!r} is reserved for embedded use")
+
+
 @users_app.command("add")
 def users_add(
     name: Annotated[str, typer.Argument(help="The user's name (unique).")],
     admin: Annotated[bool, typer.Option("--admin", help="Sees every user's data.")] = False,
 ) -> None:
     """Create a user; the new API key is printed on the last line (shown only once)."""
-    from backend.core.config import get_settings
-    from backend.db.migrate import upgrade
     from backend.db.session import session_scope
-    from backend.store import LOCAL_USER, add_user
+    from backend.store import add_user
 
-    if name == LOCAL_USER:
-        raise InputError(f"the name {LOCAL_USER!r} is reserved for embedded use")
-    url = get_settings().database_url
-    upgrade(url)
+    _not_local(name)
+    url = _users_db()
     try:
         with session_scope(url) as s:
             user, key = add_user(s, name, is_admin=admin)
@@ -76,4 +90,57 @@ def users_add(
     except ValueError as exc:
         raise InputError(str(exc)) from None
     typer.echo(f"created {role} {name!r}; API key (shown only once):", err=True)
+    typer.echo(key)
+
+
+@users_app.command("list")
+def users_list() -> None:
+    """Every user: name, admin, when revoked, when created (never a key)."""
+    from backend.db.session import session_scope
+    from backend.store import list_users
+
+    with session_scope(_users_db()) as s:
+        rows = [
+            (u.name, "yes" if u.is_admin else "no",
+             u.revoked_at.strftime("%Y-%m-%d %H:%M") if u.revoked_at else "no",
+             u.created_at.strftime("%Y-%m-%d %H:%M"))
+            for u in list_users(s)
+        ]  # fmt: skip
+    width = max([4, *(len(r[0]) for r in rows)])
+    typer.echo(f"{'name':<{width}}  admin  {'revoked':<16}  created")
+    for name, admin, revoked, created in rows:
+        typer.echo(f"{name:<{width}}  {admin:<5}  {revoked:<16}  {created}")
+
+
+@users_app.command("revoke")
+def users_revoke(name: Annotated[str, typer.Argument(help="The user's name.")]) -> None:
+    """Revoke a user: their dashboard sessions end at once, their API key within the API's
+    key cache time (5 s); `users rotate` lets them back in with a new key."""
+    from backend.db.session import session_scope
+    from backend.store import revoke_user
+
+    _not_local(name)
+    try:
+        with session_scope(_users_db()) as s:
+            revoke_user(s, name)
+    except LookupError as exc:
+        raise InputError(str(exc.args[0])) from None
+    typer.echo(f"revoked {name!r}: sessions ended, API key refused")
+
+
+@users_app.command("rotate")
+def users_rotate(name: Annotated[str, typer.Argument(help="The user's name.")]) -> None:
+    """Give a user a new API key, printed on the last line (shown only once): the old key
+    stops working (within the API's key cache time, 5 s), sessions end at once, and a revoked
+    user is reinstated."""
+    from backend.db.session import session_scope
+    from backend.store import rotate_user_key
+
+    _not_local(name)
+    try:
+        with session_scope(_users_db()) as s:
+            _, key = rotate_user_key(s, name)
+    except LookupError as exc:
+        raise InputError(str(exc.args[0])) from None
+    typer.echo(f"new API key of {name!r} (shown only once; the old one is dead):", err=True)
     typer.echo(key)

@@ -89,8 +89,14 @@ def upgrade() -> None:
     with op.batch_alter_table("run_events", schema=None) as batch_op:
         batch_op.create_index(batch_op.f("ix_run_events_run_id"), ["run_id"], unique=False)
 
+    # per-owner quota on simulated hours (backend/quotas.py); NULL counts as the default limit
+    with op.batch_alter_table("runs", schema=None) as batch_op:
+        batch_op.add_column(sa.Column("time_limit_s", sa.Float(), nullable=True))
+
 
 def downgrade() -> None:
+    with op.batch_alter_table("runs", schema=None) as batch_op:
+        batch_op.drop_column("time_limit_s")
     with op.batch_alter_table("run_events", schema=None) as batch_op:
         batch_op.drop_index(batch_op.f("ix_run_events_run_id"))
     op.drop_table("run_events")

@@ -33,6 +33,11 @@ def _sign_in(page, site) -> None:
     page.fill('input[name="key"]', site.service.key)
     page.click('button:has-text("Sign in")')
     page.wait_for_url(site.url + "/")
+    # the session cookie is Secure (cookie_secure's default) and Chromium keeps it on
+    # http://127.0.0.1, a loopback origin it trusts as it would https; the key is not in it
+    (cookie,) = [c for c in page.context.cookies() if c["name"] == "mapqual_session"]
+    assert cookie["secure"] and cookie["httpOnly"] and cookie["sameSite"] == "Lax"
+    assert site.service.key not in cookie["value"]
 
 
 def _upload_world(page, site, tmp_path, artifacts) -> int:

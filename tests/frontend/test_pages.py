@@ -83,15 +83,24 @@ def site(tmp_path_factory):
             "summary": result.summary, "report": report, "a_id": a_id}  # fmt: skip
 
 
+def _client(site) -> TestClient:
+    # https: the session cookie is Secure, and the client (as a browser) sends it on https only
+    return TestClient(site["app"], base_url="https://testserver")
+
+
 def _signed_in(site, who="a") -> TestClient:
-    client = TestClient(site["app"])
+    """A client signed in through the form, sending the session's CSRF token as a header (the
+    forms' own token field is tested in tests/backend/api/test_sessions.py)."""
+    client = _client(site)
     r = client.post("/login", data={"key": site[who], "next": "/"}, follow_redirects=False)
     assert r.status_code == 303 and r.headers["location"] == "/"
+    token = re.search(r'name="csrf_token" value="([^"]+)"', client.get("/").text).group(1)
+    client.headers["X-CSRF-Token"] = token
     return client
 
 
-def test_sign_in_with_the_key_in_a_cookie(site):
-    client = TestClient(site["app"])
+def test_sign_in_starts_a_session_in_a_cookie(site):
+    client = _client(site)
     r = client.get("/compare", follow_redirects=False)
     assert r.status_code == 303 and r.headers["location"] == "/login?next=/compare"
     r = client.post("/login", data={"key": "mq_wrong", "next": "/compare"})
@@ -104,10 +113,11 @@ def test_sign_in_with_the_key_in_a_cookie(site):
         "/login", data={"key": site["a"], "next": "//evil.example"}, follow_redirects=False
     )
     assert r.headers["location"] == "/"
-    client.post("/logout")
+    token = re.search(r'name="csrf_token" value="([^"]+)"', client.get("/").text).group(1)
+    client.post("/logout", data={"csrf_token": token})
     assert client.get("/", follow_redirects=False).status_code == 303
     # an Authorization header works without the cookie, as for the API
-    bare = TestClient(site["app"])
+    bare = _client(site)
     assert bare.get("/", headers={"Authorization": f"Bearer {site['b']}"}).status_code == 200
 
 

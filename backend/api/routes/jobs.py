@@ -12,6 +12,7 @@ from sqlalchemy import bindparam, func, select
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
+from backend import quotas
 from backend.api.deps import CurrentUser, Principal, SessionDep, SettingsDep, in_session, owned
 from backend.core.config import Settings
 from backend.db.models import Job, Run, World
@@ -56,6 +57,7 @@ def submit(
         ).first()
         if found is not None:
             return JobOut.of(found)
+    quotas.check_runs(session, user.id, settings, len(body.seed_list()), json.loads(params_json))
     job = create_job(
         session,
         owner_id=user.id,

@@ -1,5 +1,5 @@
 """The dashboard: server-rendered pages (Jinja2) over the same handlers and access rules as
-the REST API; a browser signs in with its API key, kept in a cookie."""
+the REST API; a browser signs in with its API key and then holds a session cookie."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import io
 import json
 from pathlib import Path
 from typing import Annotated, Any
-from urllib.parse import quote
+from urllib.parse import quote, urlsplit
 
 from fastapi import (
     APIRouter,
@@ -27,25 +27,30 @@ from pydantic import ValidationError
 from sqlalchemy import select
 
 from backend.api.deps import (
-    API_KEY_COOKIE,
+    CSRF_FIELD,
+    CSRF_HEADER,
+    SESSION_COOKIE,
     Principal,
     SessionDep,
     SettingsDep,
     current_user,
     owned,
-    user_in_session,
+    require_csrf,
 )
 from backend.api.routes import jobs as jobs_api
 from backend.api.routes import stats as stats_api
 from backend.api.routes import worlds as worlds_api
 from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
+from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from worker.errors import InputError
 
 FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
 templates = Jinja2Templates(directory=FRONTEND / "templates")
 router = APIRouter(include_in_schema=False)
 ACTIVE = ("queued", "running")
+# Where the API key lived in the cookie before sessions: no longer read, deleted on sign-in.
+OLD_KEY_COOKIE = "mapqual_key"
 
 
 class SignInRequired(Exception):
@@ -85,6 +90,9 @@ def install(app: FastAPI) -> None:
 
 def _render(request: Request, name: str, status_code: int = 200, **ctx: Any) -> HTMLResponse:
     ctx.setdefault("user", None)
+    # the session's CSRF token for the page's forms (empty when signed in by a key header,
+    # which needs none)
+    ctx.setdefault("csrf_token", getattr(request.state, "csrf_token", ""))
     return templates.TemplateResponse(request, name, ctx, status_code=status_code)
 
 
@@ -98,6 +106,16 @@ def login_page(request: Request, next: str = "/") -> HTMLResponse:
     return _render(request, "login.html", next=_safe_next(next), error=None)
 
 
+def _same_origin(request: Request) -> bool:
+    """Whether a form was posted from this site. Against login CSRF: a form on another site
+    could sign the browser in under the attacker's key, and what the victim then uploads
+    would be the attacker's. Browsers send Origin with every cross-site POST (Referer in
+    older ones; "null" when hidden, which is refused); a request with neither comes from a
+    client that is not a browser, which no other site can drive."""
+    source = request.headers.get("origin") or request.headers.get("referer")
+    return source is None or urlsplit(source).netloc == request.headers.get("host")
+
+
 @router.post("/login", response_class=HTMLResponse)
 def login(
     request: Request,
@@ -106,20 +124,46 @@ def login(
     key: Annotated[str, Form()],
     next: Annotated[str, Form()] = "/",
 ) -> Response:
-    """Check the key as the API would; keep it in an HTTP-only cookie."""
-    try:
-        user_in_session(request, session, settings, f"Bearer {key.strip()}", None)
-    except HTTPException as exc:
-        return _render(request, "login.html", 401, next=_safe_next(next), error=str(exc.detail))
-    resp = RedirectResponse(_safe_next(next), status_code=303)
-    resp.set_cookie(API_KEY_COOKIE, key.strip(), httponly=True, samesite="lax", max_age=30 * 86400)
+    """Check the key and start a session: the cookie holds a random token, the database its
+    hash. The key is checked in the database, not the key cache: a key revoked or rotated a
+    moment ago must not open a session that outlives the cache."""
+    target = _safe_next(next)
+    if not _same_origin(request):
+        msg = "sign-in refused: the form was posted from another site"
+        return _render(request, "login.html", 403, next=target, error=msg)
+    if settings.auth == "off":
+        return RedirectResponse(target, status_code=303)
+    user = user_for_key(session, key.strip())
+    if user is None:
+        return _render(request, "login.html", 401, next=target, error="unknown API key")
+    token, _ = create_web_session(session, user.id, settings.session_ttl_s)
+    resp = RedirectResponse(target, status_code=303)
+    # SameSite=Lax, not Strict: a link to a job page from elsewhere (mail, the viewer) opens
+    # signed in; every unsafe request needs the CSRF token anyway.
+    resp.set_cookie(
+        SESSION_COOKIE, token, max_age=settings.session_ttl_s, httponly=True,
+        secure=settings.cookie_secure, samesite="lax",
+    )  # fmt: skip
+    resp.delete_cookie(OLD_KEY_COOKIE)  # a raw key left by an older version: gone
     return resp
 
 
 @router.post("/logout")
-def logout() -> RedirectResponse:
+def logout(
+    request: Request,
+    session: SessionDep,
+    settings: SettingsDep,
+    csrf_token: Annotated[str | None, Form(alias=CSRF_FIELD)] = None,
+) -> RedirectResponse:
+    """End the session (its row is deleted: the same cookie is refused from now on, on every
+    server process) and clear the cookie; the form must carry the session's CSRF token."""
+    token = request.cookies.get(SESSION_COOKIE)
+    live = web_session_user(session, token) if token else None
+    if live is not None:
+        require_csrf(request.headers.get(CSRF_HEADER) or csrf_token, live[1])
+        delete_web_session(session, token)
     resp = RedirectResponse("/login", status_code=303)
-    resp.delete_cookie(API_KEY_COOKIE)
+    resp.delete_cookie(SESSION_COOKIE, httponly=True, secure=settings.cookie_secure, samesite="lax")
     return resp
 
 
@@ -168,7 +212,8 @@ def submit_job_form(
         return _jobs_page(request, session, user, f"invalid job: {msg}", 400)
     except (HTTPException, InputError) as exc:
         session.rollback()
-        return _jobs_page(request, session, user, str(getattr(exc, "detail", exc)), 400)
+        code = 429 if getattr(exc, "status_code", 400) == 429 else 400  # 429: over a quota
+        return _jobs_page(request, session, user, str(getattr(exc, "detail", exc)), code)
     return RedirectResponse(f"/jobs/{job.id}", status_code=303)
 
 

@@ -15,6 +15,7 @@ from fastapi import APIRouter, File, Form, HTTPException, Query, Request, Upload
 from fastapi.responses import JSONResponse, Response
 from sqlalchemy import select
 
+from backend import quotas
 from backend.api.deps import CurrentUser, SessionDep, SettingsDep, owned
 from backend.db.models import World
 from backend.schemas import WorldOut
@@ -82,6 +83,8 @@ def upload_world(
 ) -> JSONResponse:
     """Store a floorplan; the same content uploaded again answers 200 with the existing world."""
     from worker.world.loader import load_world
+
+    quotas.check_upload(session, user.id, settings)  # 429 before anything is stored
 
     declared = request.headers.get("content-length")
     if declared and declared.isdigit() and int(declared) > settings.max_upload_bytes + 65536:

@@ -1,0 +1,101 @@
+"""Per-owner quotas on runs and uploads, read from the settings and answered with 429.
+
+Admins are held to the same limits: the quotas protect the service (its queue, workers and
+disk), which a runaway script of an admin's fills as surely as anyone's; an operator who needs
+more raises the setting the message names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from datetime import timedelta
+from typing import Any
+
+from fastapi import HTTPException, status
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from backend.core.config import Settings
+from backend.db.models import Run, User, World, utcnow
+from worker.explore.params import ExploreParams
+
+ACTIVE = ("queued", "running")
+DEFAULT_TIME_LIMIT_S = ExploreParams.time_limit  # [s] what a run without the parameter gets
+
+
+def check_runs(
+    session: Session, owner_id: int, settings: Settings, n_new: int, params: Mapping[str, Any]
+) -> None:
+    """429 unless `n_new` more runs with `params` keep the owner within `quota_active_runs`
+    (runs queued or running at once) and `quota_sim_hours` (the simulated time those runs may
+    take in all, from each run's `explore.time_limit`). Call before storing anything."""
+    _lock_owner(session, owner_id)
+    active, seconds = session.execute(
+        select(
+            func.count(Run.id),
+            func.coalesce(func.sum(func.coalesce(Run.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
+        ).where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
+    ).one()
+    if active + n_new > settings.quota_active_runs:
+        _refuse(
+            f"{active} runs queued or running and {n_new} more asked for exceed the limit "
+            f"of {settings.quota_active_runs} runs at once",
+            "quota_active_runs",
+        )
+    hours_active = float(seconds) / 3600.0
+    hours_new = n_new * time_limit_s(params) / 3600.0
+    if hours_active + hours_new > settings.quota_sim_hours:
+        _refuse(
+            f"{n_new} runs asking for {hours_new:g} simulated hours, with {hours_active:g} h "
+            f"asked for by runs queued or running, exceed the limit of "
+            f"{settings.quota_sim_hours:g} h",
+            "quota_sim_hours",
+        )
+
+
+def check_upload(session: Session, owner_id: int, settings: Settings) -> None:
+    """429 unless one more world keeps the owner within `quota_worlds` (worlds stored) and
+    `quota_uploads_per_day` (worlds created in the last 24 hours)."""
+    _lock_owner(session, owner_id)
+    since = utcnow() - timedelta(days=1)
+    stored, recent = session.execute(
+        select(func.count(World.id), func.count(World.id).filter(World.created_at > since)).where(
+            World.owner_id == owner_id
+        )
+    ).one()
+    if stored >= settings.quota_worlds:
+        _refuse(
+            f"{stored} worlds stored reach the limit of {settings.quota_worlds}", "quota_worlds"
+        )
+    if recent >= settings.quota_uploads_per_day:
+        _refuse(
+            f"{recent} worlds uploaded in the last 24 h reach the limit of "
+            f"{settings.quota_uploads_per_day} per day",
+            "quota_uploads_per_day",
+        )
+
+
+def time_limit_s(params: Mapping[str, Any] | None) -> float:
+    """A run's simulated-time limit [s] from its stored parameters (the default if absent)."""
+    explore = (params or {}).get("explore") or {}
+    try:
+        return float(explore.get("time_limit", DEFAULT_TIME_LIMIT_S))
+    except (TypeError, ValueError, AttributeError):
+        return DEFAULT_TIME_LIMIT_S
+
+
+def _lock_owner(session: Session, user_id: int) -> None:
+    """Take the owner's row until the transaction ends, so two requests of one owner at the
+    same time cannot both pass on the same count (PostgreSQL; SQLite, the embedded
+    single-user default, ignores it)."""
+    # FOR NO KEY UPDATE: conflicts with itself (so one owner's checks queue) but not with
+    # other transactions inserting rows that merely reference the user
+    session.execute(select(User.id).where(User.id == user_id).with_for_update(key_share=True))
+
+
+def _refuse(what: str, setting: str) -> None:
+    env = Settings.model_fields[setting].alias
+    raise HTTPException(
+        status.HTTP_429_TOO_MANY_REQUESTS,
+        f"quota exceeded: {what} (setting {setting}, environment {env})",
+    )
