@@ -33,6 +33,7 @@ class StageMap:
     center: tuple[float, float]  # [m] where the bitmap's centre sits in the world
     quarter_turns: int  # the bitmap's rotation in the world, counter-clockwise, 0..3 x 90 deg
     robot_pose: tuple[float, float, float] | None  # [m, m, rad] if a robot is placed
+    bitmap_ref: str = ""  # the `bitmap` value as written (checked by worker.world.refs)
 
 
 def _tokens(text: str) -> list[tuple[str, str, int]]:
@@ -181,4 +182,5 @@ def read_stage_world(path: Path) -> StageMap:
         center=center,
         quarter_turns=quarter_turns % 4,
         robot_pose=robot_pose,
+        bitmap_ref=bitmap,
     )
