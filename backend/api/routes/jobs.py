@@ -32,7 +32,7 @@ def _run_params(overrides_json: str) -> tuple[str, str]:
     return params.algorithm, json.dumps(params.to_json())
 
 
-_WORLD_OWNER = select(World.owner_id).where(World.id == bindparam("world_id"))
+_WORLD_OWNER = select(World.owner_id, World.status).where(World.id == bindparam("world_id"))
 
 
 def submit(
@@ -46,6 +46,11 @@ def submit(
     used by the dashboard's form)."""
     world = session.connection().execute(_WORLD_OWNER, {"world_id": body.world_id}).first()
     owned(user, world, "world", body.world_id)
+    if world.status != "ready":  # pending (being analysed) or invalid: no geometry to run on
+        raise HTTPException(
+            status.HTTP_409_CONFLICT,
+            f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
+        )
     data = dict(body.params)
     if body.slam is not None:
         data["algorithm"] = body.slam

@@ -4,7 +4,6 @@ the REST API; a browser signs in with its API key, kept in a cookie."""
 from __future__ import annotations
 
 import io
-import json
 from pathlib import Path
 from typing import Annotated, Any
 from urllib.parse import quote
@@ -40,6 +39,7 @@ from backend.api.routes import stats as stats_api
 from backend.api.routes import worlds as worlds_api
 from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
+from backend.world_analysis import world_pool
 from worker.errors import InputError
 
 FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
@@ -246,9 +246,11 @@ FACT_LABELS = {
 
 
 def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
+    worlds = _worlds(session, user)
+    refresh = any(w.status == "pending" for w in worlds)  # until every analysis is done
     return _render(
-        request, "worlds.html", status_code, user=user, worlds=_worlds(session, user),
-        error=error, notice=notice, fact_labels=FACT_LABELS,
+        request, "worlds.html", status_code, user=user, worlds=worlds,
+        error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
     )  # fmt: skip
 
 
@@ -276,15 +278,20 @@ def upload_world_form(
         msg = f"the resolution must be a positive number of metres per pixel, not {resolution!r}"
         return _worlds_page(request, session, user, msg, None, 400)
     try:
-        resp = worlds_api.upload_world(request, session, user, settings, file, res)
+        names = worlds_api.checked_names(file)
+        files = {name: f.file.read() for name, f in zip(names, file, strict=True)}
+        row, fresh = worlds_api.accept_upload(session, user, settings, files, res)
     except (HTTPException, InputError) as exc:
         session.rollback()
         msg = str(getattr(exc, "detail", exc))
         return _worlds_page(request, session, user, msg, None, getattr(exc, "status_code", 400))
-    doc = json.loads(resp.body)
-    verb = "stored" if resp.status_code == 201 else "already stored"
-    notice = f"world {doc['name']!r} {verb} as #{doc['id']}"
-    return _worlds_page(request, session, user, None, notice, resp.status_code)
+    session.commit()  # the analysis runs in another process: it must see the row
+    if fresh:
+        world_pool(request.app).submit(row.id)
+    state = {"pending": "is being analysed", "ready": "is ready", "invalid": "is invalid"}
+    verb = "stored" if fresh else "already stored"
+    notice = f"world {row.name!r} {verb} as #{row.id}; it {state[row.status]}"
+    return _worlds_page(request, session, user, None, notice, 202 if fresh else 200)
 
 
 # --- compare --------------------------------------------------------------------------------
