@@ -18,7 +18,6 @@ from backend.db.models import Job, Run, World
 from backend.queue import enqueue_run
 from backend.schemas import JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
-from worker.pipeline import RunParams
 
 router = APIRouter(tags=["jobs"])
 JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
@@ -28,6 +27,9 @@ JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
 def _run_params(overrides_json: str) -> tuple[str, str]:
     """(algorithm, RunParams JSON) for the overrides: validated by the pipeline's own rules
     (InputError -> 400), once per distinct set of overrides."""
+    # imported here, not with the app: worker.pipeline brings the numeric stack (numba)
+    from worker.pipeline import RunParams
+
     params = RunParams.from_json(json.loads(overrides_json))
     return params.algorithm, json.dumps(params.to_json())
 
