@@ -247,17 +247,34 @@ FACT_LABELS = {
 
 def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
     worlds = _worlds(session, user)
-    refresh = any(w.status == "pending" for w in worlds)  # until every analysis is done
+    # reload until every analysis is done; not an error page, which answers a POST (a reload
+    # would send the form again)
+    refresh = error is None and any(w.status == "pending" for w in worlds)
     return _render(
         request, "worlds.html", status_code, user=user, worlds=worlds,
         error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
     )  # fmt: skip
 
 
+_STATE = {"pending": "is being analysed", "ready": "is ready", "invalid": "is invalid"}
+
+
 @router.get("/worlds", response_class=HTMLResponse)
-def worlds_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
-    """Worlds as thumbnails with their facts; an upload form."""
-    return _worlds_page(request, session, user)
+def worlds_page(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    uploaded: int | None = None,
+    again: bool = False,
+) -> HTMLResponse:
+    """Worlds as thumbnails with their facts; an upload form. After an upload (`uploaded`),
+    a notice says where that world stands."""
+    notice = None
+    w = session.get(World, uploaded) if uploaded is not None else None
+    if w is not None and (user.is_admin or w.owner_id == user.id):
+        verb = "already stored" if again else "stored"
+        notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]}"
+    return _worlds_page(request, session, user, None, notice)
 
 
 @router.post("/worlds", response_class=HTMLResponse)
@@ -288,10 +305,9 @@ def upload_world_form(
     session.commit()  # the analysis runs in another process: it must see the row
     if fresh:
         world_pool(request.app).submit(row.id)
-    state = {"pending": "is being analysed", "ready": "is ready", "invalid": "is invalid"}
-    verb = "stored" if fresh else "already stored"
-    notice = f"world {row.name!r} {verb} as #{row.id}; it {state[row.status]}"
-    return _worlds_page(request, session, user, None, notice, 202 if fresh else 200)
+    # POST, redirect, GET: the page then reloads itself while the world is pending
+    again = "" if fresh else "&again=1"
+    return RedirectResponse(f"/worlds?uploaded={row.id}{again}", status_code=303)
 
 
 # --- compare --------------------------------------------------------------------------------
