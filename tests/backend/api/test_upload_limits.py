@@ -5,6 +5,7 @@ memory (VmRSS) and CPU time (utime + stime) measured around it."""
 
 from __future__ import annotations
 
+import io
 import os
 import select
 import socket
@@ -250,3 +251,25 @@ def test_a_yaml_naming_another_owners_report_file_is_400_and_stores_nothing(serv
         detail = r.json()["detail"]
         assert "`image`" in detail and "outside" in detail and "\n" not in detail
     assert _worlds(server) == []
+
+
+def test_the_analysis_runs_in_the_pool_and_the_api_process_never_loads_numba(server):
+    img = np.full((40, 60), 255, np.uint8)
+    img[[0, -1], :] = 0
+    img[:, [0, -1]] = 0
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    r = _post_world(server, [("room.png", buf.getvalue(), "image/png")], wait=30)
+    assert r.status_code == 201 and r.json()["status"] == "ready", r.text
+    children = Path(f"/proc/{server['pid']}/task/{server['pid']}/children").read_text().split()
+    cmdlines = [Path(f"/proc/{pid}/cmdline").read_bytes() for pid in children]
+    assert any(b"spawn_main" in c for c in cmdlines), "no spawned pool process"
+    maps = Path(f"/proc/{server['pid']}/maps").read_text()
+    assert "llvmlite" not in maps and "/numba/" not in maps
+    out = subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", "import backend.main"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert " numba" not in out.stderr

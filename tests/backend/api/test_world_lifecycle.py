@@ -5,9 +5,13 @@ again when the API starts."""
 from __future__ import annotations
 
 import io
+import os
+import signal
 import time
+from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 from sqlalchemy import select
@@ -17,7 +21,7 @@ from backend.db.models import User, World
 from backend.db.session import session_scope
 from backend.main import create_app
 from backend.store import create_pending_world
-from backend.world_analysis import pack_upload
+from backend.world_analysis import CRASHED, WorldPool, pack_upload
 
 
 def _png(value: int | None = None) -> bytes:
@@ -111,3 +115,32 @@ def test_worlds_left_pending_are_analysed_when_the_api_starts(api):
         good, dark = (_wait_done(api, i) for i in ids)
     assert good["status"] == "ready" and good["width_px"] == 60
     assert dark["status"] == "invalid" and "no free cell" in dark["error"]
+
+
+def test_a_pool_process_that_dies_leaves_its_world_invalid_and_the_pool_is_replaced(api):
+    pool = WorldPool(api.url, workers=1, max_pixels=25_000_000)
+    with session_scope(api.url) as s:
+        owner = s.scalars(select(User).where(User.name == "alice")).one().id
+        ids = [
+            create_pending_world(
+                s, owner_id=owner, name=name, sha256=name * 8, source_format="image",
+                source_path=f"{name}.png", upload=pack_upload({f"{name}.png": _png()}),
+                resolution=0.05,
+            ).id
+            for name in ("killed", "after")
+        ]  # fmt: skip
+    try:
+        future = pool.submit(ids[0])
+        # SIGKILL the process while it is still starting (a spawned one imports for ~1 s)
+        for proc in list(pool._executor._processes.values()):
+            os.kill(proc.pid, signal.SIGKILL)
+        with pytest.raises(BrokenProcessPool):
+            future.result(timeout=30)
+        deadline = time.monotonic() + 10
+        while (w := api.get(f"/api/v1/worlds/{ids[0]}").json())["status"] == "pending":
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        assert w["status"] == "invalid" and w["error"] == CRASHED
+        assert pool.submit(ids[1]).result(timeout=60) == "ready"  # a fresh pool
+    finally:
+        pool.shutdown()
