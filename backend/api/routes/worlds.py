@@ -16,6 +16,7 @@ import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
@@ -109,10 +110,16 @@ def accept_upload(
     if existing is not None:
         session.delete(existing)  # invalid worlds have no jobs; the retry gets a new id
         session.flush()
-    row = create_pending_world(
-        session, owner_id=user.id, name=Path(main).stem, sha256=sha, source_format=fmt,
-        source_path=main, upload=pack_upload(files), resolution=resolution,
-    )  # fmt: skip
+    try:
+        with session.begin_nested():  # the same upload racing in: the first one stays
+            row = create_pending_world(
+                session, owner_id=user.id, name=Path(main).stem, sha256=sha, source_format=fmt,
+                source_path=main, upload=pack_upload(files), resolution=resolution,
+            )  # fmt: skip
+    except IntegrityError:
+        return session.scalars(
+            select(World).where(World.owner_id == user.id, World.sha256 == sha)
+        ).one(), False
     return row, True
 
 

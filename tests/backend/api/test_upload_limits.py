@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import httpx
@@ -273,3 +274,17 @@ def test_the_analysis_runs_in_the_pool_and_the_api_process_never_loads_numba(ser
         check=True,
     )
     assert " numba" not in out.stderr
+
+
+def test_the_same_upload_sent_twice_at_once_makes_one_world(server):
+    img = np.full((30, 50), 255, np.uint8)
+    img[[0, -1], :] = 0
+    img[:, [0, -1]] = 0
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    files = [("twin.png", buf.getvalue(), "image/png")]
+    with ThreadPoolExecutor(4) as ex:
+        answers = list(ex.map(lambda _: _post_world(server, files, user="bob"), range(4)))
+    assert all(r.status_code in (200, 202) for r in answers), [r.text for r in answers]
+    assert len({r.json()["id"] for r in answers}) == 1
+    assert len(_worlds(server, "bob")) == 1
