@@ -71,7 +71,8 @@ def analyse_world(database_url: str, world_id: int, max_pixels: int) -> str:
             world = load_world(folder / main, resolution, max_pixels=max_pixels)
         except InputError as exc:
             error = without_folder(str(exc), folder)
-        except (MemoryError, zipfile.BadZipFile, ArithmeticError, ValueError) as exc:
+        except Exception as exc:  # a loader bug must not leave the world pending forever
+            log.exception("analysis of world %s failed", world_id)
             error = f"the floorplan could not be analysed ({exc.__class__.__name__})"
     with session_scope(database_url) as s:
         if world is not None:

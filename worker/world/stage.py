@@ -28,7 +28,7 @@ class StageEntity:
 class StageMap:
     """What mapqual needs from a `.world` file."""
 
-    bitmap: Path  # the image, resolved against the file's folder
+    bitmap: Path  # the image, joined to the file's folder (unchecked: see bitmap_ref)
     size: tuple[float, float]  # [m] width, height of the bitmap in the world
     center: tuple[float, float]  # [m] where the bitmap's centre sits in the world
     quarter_turns: int  # the bitmap's rotation in the world, counter-clockwise, 0..3 x 90 deg
