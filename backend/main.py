@@ -9,9 +9,13 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import SQLAlchemyError
+from starlette.concurrency import run_in_threadpool
 
+from backend.api.limits import BodyLimit
 from backend.api.routes import health, jobs, pages, runs, stats, worlds
 from backend.core.config import Settings, get_settings
+from backend.world_analysis import recover_pending, world_pool
 from worker.errors import InputError
 
 API_PREFIX = "/api/v1"
@@ -22,17 +26,29 @@ _frozen = False
 
 
 @asynccontextmanager
-async def _lifespan(_app: FastAPI) -> AsyncIterator[None]:
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     """At the first start in a process, move everything alive then (modules, routes, ORM
     mappers, schemas: it lives as long as the process) out of the cyclic garbage collector's
     sight. A full collection then scans only what requests made since, instead of ~200,000
-    objects: a 50-130 ms pause that every request in flight would wait out (p99 latency)."""
+    objects: a 50-130 ms pause that every request in flight would wait out (p99 latency).
+
+    Worlds a dead process left `pending` are analysed again; at the end the world pool's
+    processes stop (what they had not started stays pending for the next start)."""
     global _frozen
     if not _frozen:
         _frozen = True
         gc.collect()
         gc.freeze()
-    yield
+    try:
+        recovered = await run_in_threadpool(recover_pending, app)
+        if recovered:
+            log.info("analysing %d world(s) left pending: %s", len(recovered), recovered)
+    except SQLAlchemyError as exc:  # no database yet: the API still starts (health says so)
+        log.warning("could not look for pending worlds: %s", exc.__class__.__name__)
+    try:
+        yield
+    finally:
+        await run_in_threadpool(world_pool(app).shutdown)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -59,6 +75,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (worlds, jobs, runs, stats):
         app.include_router(module.router, prefix=API_PREFIX)
     pages.install(app)  # the dashboard at /
+    # outermost: bodies are counted before any parser (or other middleware) reads them
+    app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes)
     return app
 
 

@@ -14,35 +14,46 @@ MAX_RUNS_PER_JOB = 1000
 
 
 class WorldOut(BaseModel):
-    """A stored floorplan and its facts."""
+    """A stored floorplan and its facts; the geometry is known once it is `ready`."""
 
     id: int
     name: str
-    resolution: float = Field(description="metres per pixel")
-    origin: list[float] = Field(description="[x, y] of the image's lower-left corner, metres")
-    width_px: int
-    height_px: int
-    width_m: float
-    height_m: float
-    start_pose: list[float] = Field(description="[x, y, theta] in metres and radians")
+    status: Literal["pending", "ready", "invalid"] = Field(
+        description="pending: being analysed; ready: usable; invalid: refused (see error)"
+    )
+    error: str | None = Field(default=None, description="why the world is invalid")
+    resolution: float | None = Field(default=None, description="metres per pixel")
+    origin: list[float] | None = Field(
+        default=None, description="[x, y] of the image's lower-left corner, metres"
+    )
+    width_px: int | None = None
+    height_px: int | None = None
+    width_m: float | None = None
+    height_m: float | None = None
+    start_pose: list[float] | None = Field(
+        default=None, description="[x, y, theta] in metres and radians"
+    )
     facts: dict[str, Any]
     created_at: datetime
 
     @classmethod
     def of(cls, w: World) -> WorldOut:
-        return cls(
+        out = cls(
             id=w.id,
             name=w.name,
-            resolution=w.resolution,
-            origin=[w.origin_x, w.origin_y],
-            width_px=w.width_px,
-            height_px=w.height_px,
-            width_m=w.width_px * w.resolution,
-            height_m=w.height_px * w.resolution,
-            start_pose=list(w.start_pose),
-            facts=w.facts,
+            status=w.status,
+            error=w.error,
+            facts=w.facts or {},
             created_at=w.created_at,
         )
+        if w.status == "ready":
+            out.resolution = w.resolution
+            out.origin = [w.origin_x, w.origin_y]
+            out.width_px, out.height_px = w.width_px, w.height_px
+            out.width_m = w.width_px * w.resolution
+            out.height_m = w.height_px * w.resolution
+            out.start_pose = list(w.start_pose)
+        return out
 
 
 class JobIn(BaseModel):

@@ -10,7 +10,7 @@ from datetime import timedelta
 from typing import Any
 
 import numpy as np
-from sqlalchemy import delete, select
+from sqlalchemy import delete, select, update
 from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
@@ -413,3 +413,88 @@ def web_session_user(session: Session, token: str) -> tuple[User, str] | None:
 def delete_web_session(session: Session, token: str) -> None:
     """End a dashboard session (signing out); an unknown token is no error."""
     session.execute(delete(WebSession).where(WebSession.token_hash == hash_key(token)))
+
+
+# --- worlds analysed off the request thread (pending -> ready | invalid) --------------------
+def create_pending_world(
+    session: Session,
+    *,
+    owner_id: int,
+    name: str,
+    sha256: str,
+    source_format: str,
+    source_path: str,
+    upload: bytes,
+    resolution: float | None,
+) -> World:
+    """A world whose files are stored (`upload`, packed) but not yet analysed: `pending`."""
+    world = World(
+        owner_id=owner_id,
+        name=name,
+        sha256=sha256,
+        source_format=source_format,
+        source_path=source_path,
+        status="pending",
+        upload=upload,
+        upload_resolution=resolution,
+        facts={},
+    )
+    session.add(world)
+    session.flush()
+    return world
+
+
+def mark_world_ready(session: Session, world_id: int, world: WorldModel) -> bool:
+    """Fill a pending world's geometry and facts from its analysis, drop its upload; False if
+    it is no longer pending (another process finished it first: the first result stays)."""
+    facts = dataclasses.asdict(world.facts)
+    facts["warnings"] = list(world.warnings)
+    values = {
+        "status": "ready",
+        "error": None,
+        "upload": None,
+        "resolution": float(world.resolution),
+        "origin_x": float(world.origin[0]),
+        "origin_y": float(world.origin[1]),
+        "width_px": int(world.occ.shape[1]),
+        "height_px": int(world.occ.shape[0]),
+        "start_pose": [float(v) for v in world.start_pose],
+        "facts": facts,
+        "occupancy": pack_array(np.asarray(world.occ, dtype=bool)),
+    }
+    return _finish_world(session, world_id, values)
+
+
+def mark_world_invalid(session: Session, world_id: int, error: str) -> bool:
+    """A pending world whose files the loader refused: `invalid`, with its one-line reason
+    (the upload is dropped); False if it is no longer pending."""
+    return _finish_world(session, world_id, {"status": "invalid", "error": error, "upload": None})
+
+
+def _finish_world(session: Session, world_id: int, values: dict[str, Any]) -> bool:
+    """Compare-and-set on `status = pending`: two analyses of one world store one result."""
+    result = session.execute(
+        update(World)
+        .where(World.id == world_id, World.status == "pending")
+        .values(**values)
+        .execution_options(synchronize_session=False)
+    )
+    return result.rowcount == 1
+
+
+def pending_world_ids(session: Session) -> list[int]:
+    """Worlds still waiting for their analysis (e.g. left by a process that died), oldest first."""
+    stmt = select(World.id).where(World.status == "pending").order_by(World.id)
+    return list(session.scalars(stmt))
+
+
+def world_upload(session: Session, world_id: int) -> tuple[bytes, float | None, str] | None:
+    """(packed upload, resolution given with it, main file name) of a pending world, or None."""
+    row = session.execute(
+        select(World.upload, World.upload_resolution, World.source_path).where(
+            World.id == world_id, World.status == "pending"
+        )
+    ).first()
+    if row is None or row[0] is None:
+        return None
+    return bytes(row[0]), row[1], str(row[2])

@@ -10,12 +10,14 @@ import signal
 import sys
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from mapqual.cli import app
+from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
 
 
@@ -161,6 +163,7 @@ def batch(
         bool, typer.Option("--dry-run", help="List the runs and how many are left; run none.")
     ] = False,
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")] = Path("batch"),
+    allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Run an experiment (WORLDS x seeds x --slam x --laser-noise) and write its tables,
     figures and report.html to OUT. Re-running the same command resumes it.
@@ -172,6 +175,7 @@ def batch(
     """
     from worker.batch.experiment import build_groups, expand, load_experiment, load_params, merge
     from worker.batch.state import BatchDir
+    from worker.world.loader import load_world
 
     if worlds and experiment:
         raise InputError("give WORLDS or --experiment, not both (--only GLOB narrows one)")
@@ -186,7 +190,7 @@ def batch(
     )
     if only is not None:
         groups = _only(groups, only)
-    specs, loaded = expand(groups)
+    specs, loaded = expand(groups, partial(load_world, allow_outside=allow_outside))
     bdir = BatchDir(out)
     records = bdir.load_records(s.key for s in specs)
     redo = {k for k, r in records.items() if retry_failed and r["status"] != "done"}
@@ -199,7 +203,8 @@ def batch(
         return
     command = "mapqual " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
-    _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log)
+    _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log,
+             allow_outside=allow_outside)  # fmt: skip
 
 
 def _only(groups, pattern: str):
@@ -214,7 +219,9 @@ def _only(groups, pattern: str):
     return kept
 
 
-def _execute(specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log) -> None:
+def _execute(
+    specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log, *, allow_outside=False
+) -> None:
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
     from mapqual.cli.batch_db import DbBatch, run_celery
@@ -232,7 +239,9 @@ def _execute(specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log) 
             else:
                 # runs a killed invocation left `running` are this pool's to redo: queued
                 db.interrupted(todo)
-                run_local(todo, bdir, workers, db, progress, sim_log=sim_log)
+                run_local(
+                    todo, bdir, workers, db, progress, sim_log=sim_log, allow_outside=allow_outside
+                )
     finally:
         signal.signal(signal.SIGTERM, previous)
         records = bdir.load_records(s.key for s in specs)

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from mapqual.cli import app
+from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
 
 
@@ -113,6 +114,7 @@ def run(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the summary as JSON on stdout.")
     ] = False,
+    allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Simulate, explore with SLAM, evaluate, and store one run of WORLD."""
     from backend.core.config import get_settings
@@ -134,7 +136,7 @@ def run(
     if slam is not None and slam not in ALGORITHMS:
         raise InputError(f"--slam must be one of {', '.join(ALGORITHMS)}, not {slam!r}")
     params = build_params(params_file, slam, laser_noise, time_limit)
-    world = load_world(world_path, resolution)
+    world = load_world(world_path, resolution, allow_outside=allow_outside)
     settings = get_settings()
     url = settings.database_url
     upgrade(url)

@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from mapqual.cli import app
+from mapqual.cli.world import AllowOutsideOpt
 
 
 class Drive(StrEnum):
@@ -52,6 +53,7 @@ def simulate(
         bool, typer.Option(help="Also draw DIR/sim.png: paths and the last scan on the map.")
     ] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Simulate a robot (laser, odometry, ground truth) and write DIR/sim.log (CARMEN: ODOM,
     ROBOTLASER1, TRUEPOS), DIR/gt.tum, DIR/odom.tum and DIR/sim.json."""
@@ -67,7 +69,7 @@ def simulate(
         raise InputError("--path is only used with --drive path")
     params = SimParams(laser_noise_sigma=laser_noise, odom_model=odom_model.value)
     waypoints = read_waypoints(path) if path is not None else None
-    w = load_world(world, resolution, start_pose=start)
+    w = load_world(world, resolution, start_pose=start, allow_outside=allow_outside)
     result = run_simulation(
         w,
         out,

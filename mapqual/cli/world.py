@@ -23,6 +23,16 @@ ResolutionOpt = Annotated[
     typer.Option(help="Metres per pixel (needed for a bare image; overrides a YAML's)."),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object.")]
+# Every command that loads a world takes this: a YAML's `image:`/`segmentation:` or a .world's
+# `bitmap` naming a file outside the describing file's folder is refused without it.
+AllowOutsideOpt = Annotated[
+    bool,
+    typer.Option(
+        "--allow-outside",
+        help="Let a YAML or .world refer to images outside its own folder (../, absolute "
+        "paths, links pointing out).",
+    ),
+]
 
 
 def world_summary(world) -> dict:
@@ -46,11 +56,18 @@ def info(
     ] = None,
     max_pixels: Annotated[int, typer.Option(help="Refuse larger images.")] = 64_000_000,
     as_json: JsonOpt = False,
+    allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Facts about a floorplan: size, free area, regions, clearance, rooms, start pose."""
     from worker.world import load_world
 
-    w = load_world(world, resolution, segmentation=segmentation, max_pixels=max_pixels)
+    w = load_world(
+        world,
+        resolution,
+        segmentation=segmentation,
+        max_pixels=max_pixels,
+        allow_outside=allow_outside,
+    )
     summary = world_summary(w)
     if as_json:
         print(json.dumps(summary))
@@ -92,6 +109,7 @@ def list_worlds(
         Path | None, typer.Argument(help="Folder to scan (default: ./worlds, else mapqual's).")
     ] = None,
     as_json: JsonOpt = False,
+    allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """The worlds catalogue: every map_server YAML and Stage .world under a folder."""
     from worker.world.catalogue import default_worlds_dir, find_worlds
@@ -100,7 +118,8 @@ def list_worlds(
     folder = folder or default_worlds_dir()
     paths = find_worlds(folder)
     if as_json:
-        print(json.dumps([world_summary(load_world(p)) for p in paths]))
+        worlds = [load_world(p, allow_outside=allow_outside) for p in paths]
+        print(json.dumps([world_summary(w) for w in worlds]))
         return
     header = (
         f"{'world':<28} {'w x h [m]':>13} {'free [m2]':>9} {'free':>6} {'regions':>7} "
@@ -108,7 +127,7 @@ def list_worlds(
     )
     print(header)
     for p in paths:
-        w = load_world(p)
+        w = load_world(p, allow_outside=allow_outside)
         f = w.facts
         size = f"{f.width_m:.1f} x {f.height_m:.1f}"
         start = "{:.2f}, {:.2f}, {:.2f}".format(*w.start_pose)

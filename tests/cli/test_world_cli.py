@@ -94,12 +94,15 @@ def test_list_a_folder(run, tmp_path, plan):
     (tmp_path / "plan.yaml").write_text("image: plan.png\nresolution: 0.1\n")
     (tmp_path / "sub").mkdir()
     (tmp_path / "sub" / "other.yaml").write_text("image: ../plan.png\nresolution: 0.05\n")
+    # sub/other.yaml reaches out of its folder: refused unless --allow-outside
     code, out, err = run("world", "list", tmp_path, "--json")
+    assert code == 2 and "`image` '../plan.png' lies outside" in err
+    code, out, err = run("world", "list", tmp_path, "--json", "--allow-outside")
     assert code == 0, err
     rows = json.loads(out)
     assert [r["name"] for r in rows] == ["plan", "other"]
     assert rows[1]["width_m"] == pytest.approx(4.0)
-    code, out, _ = run("world", "list", tmp_path)
+    code, out, _ = run("world", "list", tmp_path, "--allow-outside")
     assert code == 0 and "2 worlds in" in out and "plan" in out
     code, _, err = run("world", "list", tmp_path / "missing")
     assert code == 2 and "no such folder" in err

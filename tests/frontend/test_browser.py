@@ -50,7 +50,8 @@ def _upload_world(page, site, tmp_path, artifacts) -> int:
     notice = page.locator(".notice").inner_text()
     world_id = int(re.search(r"as #(\d+)", notice).group(1))
     thumb = f"document.querySelector('#world-{world_id} img')"
-    page.wait_for_function(f"{thumb}.complete && {thumb}.naturalWidth > 0")
+    # the thumbnail appears once the world is analysed (the page reloads itself until then)
+    page.wait_for_function(f"{thumb} && {thumb}.complete && {thumb}.naturalWidth > 0")
     # the floorplan's 601 x 361 px reduced by 2 (ceil(601 / 480)) for the thumbnail
     assert page.evaluate(f"[{thumb}.naturalWidth, {thumb}.naturalHeight]") == [301, 181]
     page.screenshot(path=artifacts / "worlds.png", full_page=True)

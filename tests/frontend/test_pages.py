@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import re
+import time
 
 import numpy as np
 import pytest
@@ -121,16 +122,35 @@ def test_sign_in_starts_a_session_in_a_cookie(site):
     assert bare.get("/", headers={"Authorization": f"Bearer {site['b']}"}).status_code == 200
 
 
+def _wait_ready(client, world_id: int, seconds: float = 30.0) -> None:
+    deadline = time.monotonic() + seconds
+    while client.get(f"/api/v1/worlds/{world_id}").json()["status"] == "pending":
+        assert time.monotonic() < deadline, "the world's analysis did not finish"
+        time.sleep(0.1)
+    assert client.get(f"/api/v1/worlds/{world_id}").json()["status"] == "ready"
+
+
 def test_upload_form_stores_a_world_and_reports_bad_input(site):
     client = _signed_in(site, "b")
     occ = _room()
     occ[40, 20:100] = True
     r = client.post("/worlds", files={"file": ("hall.png", _png(occ))}, data={"resolution": "0.05"})
-    assert r.status_code == 201 and "stored as #" in r.text
+    # stored at once, analysed in the background: redirected to the list, which says so and
+    # reloads itself (a GET: nothing is sent twice) until the analysis is done
+    assert r.status_code == 200 and r.history[0].status_code == 303, r.text
     listed = client.get("/api/v1/worlds").json()
     assert [w["name"] for w in listed] == ["hall"]
-    assert f'src="/api/v1/worlds/{listed[0]["id"]}/image?max_px=480"' in r.text
+    wid = listed[0]["id"]
+    assert r.url.path == "/worlds" and r.url.params["uploaded"] == str(wid)
+    if client.get(f"/api/v1/worlds/{wid}").json()["status"] == "pending":  # pending then too
+        assert f"stored as #{wid}; it is being analysed" in r.text
+        assert 'name="mapqual-refresh"' in r.text and f'id="world-{wid}"' in r.text
+    _wait_ready(client, wid)
+    r = client.get(f"/worlds?uploaded={wid}")
+    assert f"stored as #{wid}; it is ready" in r.text
+    assert f'src="/api/v1/worlds/{wid}/image?max_px=480"' in r.text
     assert "<th>free area</th>" in r.text and "m²" in r.text
+    assert 'name="mapqual-refresh"' not in r.text
     again = client.post(
         "/worlds", files={"file": ("hall.png", _png(occ))}, data={"resolution": "0.05"}
     )

@@ -40,6 +40,7 @@ class Task:
     spec: RunSpec
     report_dir: str
     sim_log: bool  # also write the full CARMEN log (sim.log.gz, every scan: large)
+    allow_outside: bool = False  # the world's files may lie outside its folder (--allow-outside)
 
 
 @dataclass(frozen=True)
@@ -79,10 +80,10 @@ class NullSink:
 
 
 @lru_cache(maxsize=8)
-def _world(path: str):
+def _world(path: str, allow_outside: bool = False):
     from worker.world.loader import load_world
 
-    return load_world(Path(path))
+    return load_world(Path(path), allow_outside=allow_outside)
 
 
 def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
@@ -102,7 +103,9 @@ def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
     out = Path(task.report_dir)
     log = out / "sim.log.gz" if task.sim_log else None
     params = RunParams.from_json(spec.params)
-    result = run_one(_world(spec.world_path), params, spec.seed, on_progress, sim_log=log)
+    result = run_one(
+        _world(spec.world_path, task.allow_outside), params, spec.seed, on_progress, sim_log=log
+    )
     write_report(result, out)
     ex = result.exploration
     return RunOutput(
@@ -125,12 +128,13 @@ def run_local(
     on_event: Callable[[Event], None],
     *,
     sim_log: bool = False,
+    allow_outside: bool = False,
     fn: Callable[[Task, Callable[[Any], None]], RunOutput] = execute,
 ) -> None:
     """Run `specs` (the unfinished runs) in `workers` processes. Each run is persisted to the
     sink, then recorded in OUT; an error fails that run only. Interrupted, the runs in flight
     are handed back to the sink (requeued) and the KeyboardInterrupt propagates."""
-    tasks = [Task(s, str(bdir.run_dir(s.key)), sim_log) for s in specs]
+    tasks = [Task(s, str(bdir.run_dir(s.key)), sim_log, allow_outside) for s in specs]
     in_flight: dict[int, RunSpec] = {}
 
     def handle(msg: PoolMessage) -> None:

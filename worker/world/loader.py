@@ -6,14 +6,18 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from worker.errors import InputError
 from worker.world.image_io import MAX_PIXELS, read_grey
-from worker.world.stage import read_stage_world
+from worker.world.refs import (
+    check_resolution,
+    read_map_yaml,
+    stage_references,
+    yaml_references,
+)
 from worker.world.world import FOOTPRINT_M, World
 
-FREE_GREY_MIN = 250.0  # default rule: grey >= 250 is free, anything else is an obstacle
+FREE_GREY_MIN = 250  # default rule: grey >= 250 is free, anything else is an obstacle
 IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".pbm", ".bmp", ".gif", ".tif", ".tiff", ".jpg", ".jpeg"}
 
 
@@ -25,12 +29,14 @@ def load_world(
     segmentation: str | Path | None = None,
     max_pixels: int = MAX_PIXELS,
     footprint_m: float = FOOTPRINT_M,
+    allow_outside: bool = False,
 ) -> World:
     """Load a floorplan: `.yaml` (map_server), `.world` (Stage) or an image plus `resolution`.
 
     `resolution` [m/pixel] overrides the file's own. A `segmentation` image (Bormann's
     gt_segmentation style) adds a room count; a map_server YAML may name one with the extra
-    key `segmentation:`. Raises InputError on any bad input.
+    key `segmentation:`. Files a YAML or `.world` names must lie under its folder unless
+    `allow_outside` (see `worker.world.refs`). Raises InputError on any bad input.
     """
     path = Path(path)
     if not path.exists():
@@ -39,9 +45,13 @@ def load_world(
         raise InputError("is a folder, not a floorplan file", path=path)
     suffix = path.suffix.lower()
     if suffix in (".yaml", ".yml"):
-        return _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint_m)
+        return _load_yaml(
+            path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
+        )
     if suffix == ".world":
-        return _load_stage(path, resolution, start_pose, segmentation, max_pixels, footprint_m)
+        return _load_stage(
+            path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
+        )
     if resolution is None:
         raise InputError("an image needs its resolution in m/pixel (--resolution)", path=path)
     grey, alpha = read_grey(path, max_pixels)
@@ -77,7 +87,7 @@ def _build(
     notes,
 ) -> World:
     """Flip the image rows to the grid's bottom-first order, count rooms, build the World."""
-    _check_resolution(resolution, source)
+    check_resolution(resolution, source)
     occ = np.flipud(~free_img)
     n_rooms = None
     if segmentation is not None:
@@ -102,34 +112,17 @@ def _build(
         raise InputError(str(exc), path=source) from None
 
 
-def _check_resolution(resolution, source) -> None:
-    """Resolution must be a finite number in (0.005, 1] m/pixel."""
-    try:
-        r = float(resolution)
-    except (TypeError, ValueError):
-        raise InputError(f"resolution must be a number, got {resolution!r}", path=source) from None
-    if not math.isfinite(r) or not (0.005 < r <= 1.0):
-        raise InputError(f"resolution {r:g} m/pixel is outside (0.005, 1] m", path=source)
-
-
-def _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint_m) -> World:
+def _load_yaml(
+    path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
+) -> World:
     """ROS map_server YAML: image, resolution, origin, negate, occupied_thresh, free_thresh."""
-    try:
-        meta = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
-    except yaml.YAMLError as exc:
-        line = getattr(getattr(exc, "problem_mark", None), "line", None)
-        raise InputError(
-            "not valid YAML", path=path, line=None if line is None else line + 1
-        ) from None
-    if not isinstance(meta, dict) or "image" not in meta:
-        raise InputError("not a map_server YAML (no `image:` key)", path=path)
+    meta = read_map_yaml(path)
+    refs = yaml_references(path, meta, allow_outside=allow_outside)
     if resolution is None:
         if "resolution" not in meta:
             raise InputError("no `resolution:` key (or give --resolution)", path=path)
         resolution = meta["resolution"]
-    _check_resolution(resolution, path)
+    check_resolution(resolution, path)
     origin = meta.get("origin", [0.0, 0.0, 0.0])
     try:
         origin = [float(v) for v in origin]
@@ -154,19 +147,20 @@ def _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint
         notes.append(f"map_server mode {mode!r} is read as trinary (free / obstacle)")
     if len(origin) > 2 and origin[2] != 0.0:
         notes.append("the YAML origin's yaw is ignored (as most map_server users do)")
-    grey, alpha = read_grey(path.parent / str(meta["image"]), max_pixels)
+    grey, alpha = read_grey(refs["image"], max_pixels)
     # map_server: p = (255 - grey) / 255 is the occupancy probability (grey inverted if negate);
     # free if p < free_thresh, occupied if p > occupied_thresh, unknown between. Unknown is not
-    # free space for the robot, so it counts as an obstacle here.
+    # free space for the robot, so it counts as an obstacle here. Grey is uint8, so the rule is
+    # a table of its 256 levels: no float image is ever made.
+    levels = np.arange(256, dtype=np.float64)
     if negate:
-        grey = 255.0 - grey
-    p_occ = (255.0 - grey) / 255.0
-    free = p_occ < free_thresh
+        levels = 255.0 - levels
+    free = ((255.0 - levels) / 255.0 < free_thresh)[grey]
     if alpha is not None:
         free &= alpha >= 128
         notes.append("transparent pixels count as obstacles")
-    if segmentation is None and meta.get("segmentation"):
-        segmentation = path.parent / str(meta["segmentation"])
+    if segmentation is None and "segmentation" in refs:
+        segmentation = refs["segmentation"]
     return _build(
         path.stem,
         free,
@@ -181,10 +175,12 @@ def _load_yaml(path, resolution, start_pose, segmentation, max_pixels, footprint
     )
 
 
-def _load_stage(path, resolution, start_pose, segmentation, max_pixels, footprint_m) -> World:
+def _load_stage(
+    path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
+) -> World:
     """Stage `.world`: bitmap scaled to `size`, centred on the block's `pose`; robot pose."""
-    stage = read_stage_world(path)
-    grey, alpha = read_grey(stage.bitmap, max_pixels)
+    stage, bitmap = stage_references(path, allow_outside=allow_outside)
+    grey, alpha = read_grey(bitmap, max_pixels)
     h, w = grey.shape
     res_x, res_y = stage.size[0] / w, stage.size[1] / h
     if resolution is None:

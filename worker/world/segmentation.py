@@ -32,7 +32,7 @@ def count_rooms(
             f"{shape[1]} x {shape[0]}",
             path=path,
         )
-    labels, n = ndimage.label(grey >= 250.0, structure=_FOUR)
+    labels, n = ndimage.label(grey >= 250, structure=_FOUR)
     if n == 0:
         return 0
     sizes = np.bincount(labels.ravel())[1:]

@@ -28,11 +28,12 @@ class StageEntity:
 class StageMap:
     """What mapqual needs from a `.world` file."""
 
-    bitmap: Path  # the image, resolved against the file's folder
+    bitmap: Path  # the image, joined to the file's folder (unchecked: see bitmap_ref)
     size: tuple[float, float]  # [m] width, height of the bitmap in the world
     center: tuple[float, float]  # [m] where the bitmap's centre sits in the world
     quarter_turns: int  # the bitmap's rotation in the world, counter-clockwise, 0..3 x 90 deg
     robot_pose: tuple[float, float, float] | None  # [m, m, rad] if a robot is placed
+    bitmap_ref: str = ""  # the `bitmap` value as written (checked by worker.world.refs)
 
 
 def _tokens(text: str) -> list[tuple[str, str, int]]:
@@ -181,4 +182,5 @@ def read_stage_world(path: Path) -> StageMap:
         center=center,
         quarter_turns=quarter_turns % 4,
         robot_pose=robot_pose,
+        bitmap_ref=bitmap,
     )

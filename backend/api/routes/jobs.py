@@ -19,7 +19,6 @@ from backend.db.models import Job, Run, World
 from backend.queue import enqueue_run
 from backend.schemas import JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
-from worker.pipeline import RunParams
 
 router = APIRouter(tags=["jobs"])
 JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
@@ -29,11 +28,14 @@ JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
 def _run_params(overrides_json: str) -> tuple[str, str]:
     """(algorithm, RunParams JSON) for the overrides: validated by the pipeline's own rules
     (InputError -> 400), once per distinct set of overrides."""
+    # imported here, not with the app: worker.pipeline brings the numeric stack (numba)
+    from worker.pipeline import RunParams
+
     params = RunParams.from_json(json.loads(overrides_json))
     return params.algorithm, json.dumps(params.to_json())
 
 
-_WORLD_OWNER = select(World.owner_id).where(World.id == bindparam("world_id"))
+_WORLD_OWNER = select(World.owner_id, World.status).where(World.id == bindparam("world_id"))
 
 
 def submit(
@@ -47,6 +49,11 @@ def submit(
     used by the dashboard's form)."""
     world = session.connection().execute(_WORLD_OWNER, {"world_id": body.world_id}).first()
     owned(user, world, "world", body.world_id)
+    if world.status != "ready":  # pending (being analysed) or invalid: no geometry to run on
+        raise HTTPException(
+            status.HTTP_409_CONFLICT,
+            f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
+        )
     data = dict(body.params)
     if body.slam is not None:
         data["algorithm"] = body.slam

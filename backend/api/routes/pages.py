@@ -4,7 +4,6 @@ the REST API; a browser signs in with its API key and then holds a session cooki
 from __future__ import annotations
 
 import io
-import json
 from pathlib import Path
 from typing import Annotated, Any
 from urllib.parse import quote, urlsplit
@@ -43,6 +42,7 @@ from backend.api.routes import worlds as worlds_api
 from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
+from backend.world_analysis import world_pool
 from worker.errors import InputError
 
 FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
@@ -297,16 +297,35 @@ FACT_LABELS = {
 
 
 def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
+    worlds = _worlds(session, user)
+    # reload until every analysis is done; not an error page, which answers a POST (a reload
+    # would send the form again)
+    refresh = error is None and any(w.status == "pending" for w in worlds)
     return _render(
-        request, "worlds.html", status_code, user=user, worlds=_worlds(session, user),
-        error=error, notice=notice, fact_labels=FACT_LABELS,
+        request, "worlds.html", status_code, user=user, worlds=worlds,
+        error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
     )  # fmt: skip
 
 
+_STATE = {"pending": "is being analysed", "ready": "is ready", "invalid": "is invalid"}
+
+
 @router.get("/worlds", response_class=HTMLResponse)
-def worlds_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
-    """Worlds as thumbnails with their facts; an upload form."""
-    return _worlds_page(request, session, user)
+def worlds_page(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    uploaded: int | None = None,
+    again: bool = False,
+) -> HTMLResponse:
+    """Worlds as thumbnails with their facts; an upload form. After an upload (`uploaded`),
+    a notice says where that world stands."""
+    notice = None
+    w = session.get(World, uploaded) if uploaded is not None else None
+    if w is not None and (user.is_admin or w.owner_id == user.id):
+        verb = "already stored" if again else "stored"
+        notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]}"
+    return _worlds_page(request, session, user, None, notice)
 
 
 @router.post("/worlds", response_class=HTMLResponse)
@@ -327,15 +346,19 @@ def upload_world_form(
         msg = f"the resolution must be a positive number of metres per pixel, not {resolution!r}"
         return _worlds_page(request, session, user, msg, None, 400)
     try:
-        resp = worlds_api.upload_world(request, session, user, settings, file, res)
+        names = worlds_api.checked_names(file)
+        files = {name: f.file.read() for name, f in zip(names, file, strict=True)}
+        row, fresh = worlds_api.accept_upload(session, user, settings, files, res)
     except (HTTPException, InputError) as exc:
         session.rollback()
         msg = str(getattr(exc, "detail", exc))
         return _worlds_page(request, session, user, msg, None, getattr(exc, "status_code", 400))
-    doc = json.loads(resp.body)
-    verb = "stored" if resp.status_code == 201 else "already stored"
-    notice = f"world {doc['name']!r} {verb} as #{doc['id']}"
-    return _worlds_page(request, session, user, None, notice, resp.status_code)
+    session.commit()  # the analysis runs in another process: it must see the row
+    if fresh:
+        world_pool(request.app).submit(row.id)
+    # POST, redirect, GET: the page then reloads itself while the world is pending
+    again = "" if fresh else "&again=1"
+    return RedirectResponse(f"/worlds?uploaded={row.id}{again}", status_code=303)
 
 
 # --- compare --------------------------------------------------------------------------------

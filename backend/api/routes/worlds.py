@@ -3,48 +3,51 @@ bitmap), list them, read one, and get its image."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import hashlib
 import io
 import re
 import tempfile
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import JSONResponse, Response
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 
 from backend import quotas
-from backend.api.deps import CurrentUser, SessionDep, SettingsDep, owned
+from backend.api.deps import CurrentUser, Principal, SessionDep, SettingsDep, in_session, owned
+from backend.core.config import Settings
 from backend.db.models import World
 from backend.schemas import WorldOut
-from backend.store import save_world, world_occupancy
+from backend.store import create_pending_world, world_occupancy
+from backend.world_analysis import pack_upload, without_folder, world_pool
 from worker.errors import InputError
+from worker.world.image_io import ImageTooLarge
+from worker.world.refs import check_floorplan
 
 router = APIRouter(tags=["worlds"])
 
+POLL_S = 0.25  # [s] between looks at a world another process is analysing (`wait`)
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._ -]{0,120}$")
 
 
-def _read_uploads(files: list[UploadFile], limit: int) -> dict[str, bytes]:
-    """Name -> bytes of the uploaded files; 413 past `limit` bytes in all, 400 on bad names."""
-    out: dict[str, bytes] = {}
-    total = 0
+def checked_names(files: list[UploadFile]) -> list[str]:
+    """The uploaded files' names; 400 on an unsafe or repeated one."""
+    names: list[str] = []
     for f in files:
         name = Path(f.filename or "").name
         if not _SAFE_NAME.match(name):
             raise HTTPException(status.HTTP_400_BAD_REQUEST, f"unsafe file name {f.filename!r}")
-        if name in out:
+        if name in names:
             raise HTTPException(status.HTTP_400_BAD_REQUEST, f"file {name!r} uploaded twice")
-        data = f.file.read(limit + 1 - total)
-        total += len(data)
-        if total > limit:
-            raise HTTPException(
-                status.HTTP_413_CONTENT_TOO_LARGE, f"upload larger than {limit:,} bytes"
-            )
-        out[name] = data
-    return out
+        names.append(name)
+    return names
 
 
 def _main_file(names: list[str]) -> tuple[str, str]:
@@ -57,7 +60,7 @@ def _main_file(names: list[str]) -> tuple[str, str]:
         if found:
             return found[0], fmt
     if len(names) == 1:
-        return names[0], "image"  # the loader says so if it is not an image
+        return names[0], "image"  # the check says so if it is not an image
     raise HTTPException(
         status.HTTP_400_BAD_REQUEST,
         "upload one image, or a map_server YAML with its image, or a Stage .world with its bitmap",
@@ -72,45 +75,120 @@ def _content_hash(files: dict[str, bytes], resolution: float | None) -> str:
     return h.hexdigest()
 
 
-@router.post("/worlds", response_model=WorldOut, status_code=status.HTTP_201_CREATED)
-def upload_world(
-    request: Request,
-    session: SessionDep,
-    user: CurrentUser,
-    settings: SettingsDep,
-    file: Annotated[list[UploadFile], File(description="The floorplan file(s).")],
-    resolution: Annotated[float | None, Form(gt=0, description="metres per pixel")] = None,
-) -> JSONResponse:
-    """Store a floorplan; the same content uploaded again answers 200 with the existing world."""
-    from worker.world.loader import load_world
+def check_upload(files: dict[str, bytes], main: str, resolution: float | None, max_px: int) -> None:
+    """Refuse in the request what needs no decoding: references leaving the uploaded files,
+    a missing or bad resolution, unreadable image headers (400), too many pixels (413)."""
+    with tempfile.TemporaryDirectory(prefix="mapqual-upload-") as tmp:
+        folder = Path(tmp)
+        for name, data in files.items():
+            (folder / name).write_bytes(data)
+        try:
+            check_floorplan(folder / main, resolution, max_px)
+        except ImageTooLarge as exc:
+            detail = without_folder(str(exc), folder)
+            raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, detail) from None
+        except InputError as exc:  # -> 400, naming the uploaded file rather than our temp path
+            raise InputError(without_folder(str(exc), folder)) from None
 
-    quotas.check_upload(session, user.id, settings)  # 429 before anything is stored
 
-    declared = request.headers.get("content-length")
-    if declared and declared.isdigit() and int(declared) > settings.max_upload_bytes + 65536:
-        raise HTTPException(
-            status.HTTP_413_CONTENT_TOO_LARGE,
-            f"upload larger than {settings.max_upload_bytes:,} bytes",
-        )
-    files = _read_uploads(file, settings.max_upload_bytes)
+def accept_upload(
+    session: Session,
+    user: Principal,
+    settings: Settings,
+    files: dict[str, bytes],
+    resolution: float | None,
+) -> tuple[World, bool]:
+    """Check an upload and store it as a pending world: (the world, whether it needs an
+    analysis). The same content again is the existing world (an invalid one is retried)."""
     main, fmt = _main_file(list(files))
     sha = _content_hash(files, resolution)
     existing = session.scalars(
         select(World).where(World.owner_id == user.id, World.sha256 == sha)
     ).first()
+    if existing is not None and existing.status != "invalid":
+        return existing, False
+    quotas.check_upload(session, user.id, settings)  # 429 before anything is stored
+    check_upload(files, main, resolution, settings.max_image_pixels)
     if existing is not None:
-        return JSONResponse(WorldOut.of(existing).model_dump(mode="json"), status_code=200)
-    with tempfile.TemporaryDirectory(prefix="mapqual-upload-") as tmp:
-        for name, data in files.items():
-            (Path(tmp) / name).write_bytes(data)
-        try:
-            world = load_world(Path(tmp) / main, resolution)
-        except InputError as exc:  # -> 400, naming the uploaded file rather than our temp path
-            raise InputError(str(exc).replace(f"{tmp}/", "")) from None
-    row = save_world(session, owner_id=user.id, world=world, sha256=sha, source_format=fmt)
-    row.source_path = main
-    session.flush()
-    return JSONResponse(WorldOut.of(row).model_dump(mode="json"), status_code=201)
+        session.delete(existing)  # invalid worlds have no jobs; the retry gets a new id
+        session.flush()
+    try:
+        with session.begin_nested():  # the same upload racing in: the first one stays
+            row = create_pending_world(
+                session, owner_id=user.id, name=Path(main).stem, sha256=sha, source_format=fmt,
+                source_path=main, upload=pack_upload(files), resolution=resolution,
+            )  # fmt: skip
+    except IntegrityError:
+        return session.scalars(
+            select(World).where(World.owner_id == user.id, World.sha256 == sha)
+        ).one(), False
+    return row, True
+
+
+def _world_out(session: Session, world_id: int) -> WorldOut:
+    return WorldOut.of(session.get_one(World, world_id))
+
+
+async def settle(request: Request, settings: Settings, out: WorldOut, wait: float) -> WorldOut:
+    """`out` after waiting up to `wait` seconds for its analysis, on the event loop (no thread
+    is held meanwhile); a world analysed by another process is polled instead."""
+    if out.status != "pending" or wait <= 0:
+        return out
+    deadline = asyncio.get_running_loop().time() + wait
+    future = world_pool(request.app).running(out.id)
+    if future is not None:
+        # still pending at the deadline, or the pool failed (the world is then invalid)
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(future)), wait)
+    while True:
+        out = await run_in_threadpool(in_session, settings, _world_out, out.id)
+        left = deadline - asyncio.get_running_loop().time()
+        if out.status != "pending" or left <= 0:
+            return out
+        await asyncio.sleep(min(POLL_S, left))
+
+
+_ANSWERS: dict[str, Any] = {
+    200: {"model": WorldOut, "description": "The same content was uploaded before: that world."},
+    201: {"model": WorldOut, "description": "Analysed within `wait`: ready."},
+    202: {"model": WorldOut, "description": "Stored, analysis pending (poll GET /worlds/{id})."},
+    400: {"description": "Bad files, or analysed within `wait` and invalid (the reason)."},
+    413: {"description": "Body over the upload limit, or an image over the pixel limit."},
+}
+
+
+@router.post("/worlds", response_model=WorldOut, status_code=202, responses=_ANSWERS)
+async def upload_world(
+    request: Request,
+    user: CurrentUser,
+    settings: SettingsDep,
+    file: Annotated[list[UploadFile], File(description="The floorplan file(s).")],
+    resolution: Annotated[float | None, Form(gt=0, description="metres per pixel")] = None,
+    wait: Annotated[
+        float, Query(ge=0, le=30, description="Seconds to wait for the analysis's outcome.")
+    ] = 0.0,
+) -> JSONResponse:
+    """Store a floorplan (202, pending) and analyse it off the request thread; with `wait`,
+    answer its outcome if it comes in time: 201 ready, 400 invalid (with the reason)."""
+    names = checked_names(file)
+    # The body limit (BodyLimit) bounds these reads; the files are spooled, not in memory.
+    files = {name: await f.read() for name, f in zip(names, file, strict=True)}
+    row, fresh = await run_in_threadpool(
+        in_session, settings, accept_upload, user, settings, files, resolution
+    )
+    out = WorldOut.of(row)
+    if fresh:
+        world_pool(request.app).submit(out.id)
+    out = await settle(request, settings, out, wait)
+    return world_answer(out, fresh)
+
+
+def world_answer(out: WorldOut, fresh: bool) -> JSONResponse:
+    """201/200 ready (new/existing), 202 pending, 400 invalid with its reason."""
+    if out.status == "invalid":
+        return JSONResponse({"detail": out.error, "world": out.model_dump(mode="json")}, 400)
+    code = 202 if out.status == "pending" else (201 if fresh else 200)
+    return JSONResponse(out.model_dump(mode="json"), status_code=code)
 
 
 @router.get("/worlds", response_model=list[WorldOut])
@@ -126,6 +204,13 @@ def list_worlds(session: SessionDep, user: CurrentUser) -> list[WorldOut]:
 def get_world(world_id: int, session: SessionDep, user: CurrentUser) -> WorldOut:
     """A world's facts and start pose."""
     return WorldOut.of(owned(user, session.get(World, world_id), "world", world_id))
+
+
+def not_ready(w: World) -> str:
+    """Why a world cannot be used yet (pending) or at all (invalid)."""
+    if w.status == "pending":
+        return f"world {w.id} is still being analysed (pending); try again shortly"
+    return f"world {w.id} is invalid: {w.error}"
 
 
 def shrink_occupancy(occ: np.ndarray, max_px: int) -> np.ndarray:
@@ -152,6 +237,8 @@ def world_image(
     from PIL import Image
 
     w = owned(user, session.get(World, world_id), "world", world_id)
+    if w.status != "ready":
+        raise HTTPException(status.HTTP_409_CONFLICT, not_ready(w))
     occ = world_occupancy(w)
     if max_px is not None:
         occ = shrink_occupancy(occ, max_px)

@@ -39,7 +39,14 @@ def _bomb_png(w=100_000, h=100_000) -> bytes:
 
 
 def _upload(api, files, user="alice", **data):
-    return api.post("/api/v1/worlds", user=user, files=[("file", f) for f in files], data=data)
+    """Upload and wait (up to 30 s) for the analysis's outcome, as a client that needs it."""
+    return api.post(
+        "/api/v1/worlds",
+        user=user,
+        files=[("file", f) for f in files],
+        data=data,
+        params={"wait": 30},
+    )
 
 
 def test_upload_an_image_then_the_same_again_returns_the_existing_world(api):
@@ -95,7 +102,7 @@ def test_upload_a_map_server_yaml_with_its_image(api):
             400,
             "not a readable image",
         ),
-        ([("bomb.png", _bomb_png(), "image/png")], {"resolution": "0.05"}, 400, "bomb.png: "),
+        ([("bomb.png", _bomb_png(), "image/png")], {"resolution": "0.05"}, 413, "bomb.png: "),
         ([("box.png", _png(), "image/png")], {"resolution": "5"}, 400, "resolution"),
         ([("box.png", _png(), "image/png")], {"resolution": "-1"}, 422, "resolution"),
         ([("../../etc/x.png", _png(), "image/png")], {"resolution": "0.05"}, 201, ""),

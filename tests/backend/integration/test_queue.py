@@ -123,7 +123,10 @@ class Service:
 
     def world(self, png: bytes) -> int:
         r = self.client.post(
-            "/api/v1/worlds", files={"file": ("w.png", png)}, data={"resolution": "0.05"}
+            "/api/v1/worlds",
+            files={"file": ("w.png", png)},
+            data={"resolution": "0.05"},
+            params={"wait": 30},  # the analysis's outcome, not just the stored upload
         )
         assert r.status_code in (200, 201), r.text
         return r.json()["id"]
