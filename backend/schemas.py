@@ -4,13 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field, model_validator
 
 from backend.db.models import Job, Run, World
 
 MAX_RUNS_PER_JOB = 1000
+# Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
+# values cannot name a row or be stored, so the schema bounds them (422) instead of letting
+# the database fail the query (500).
+MAX_ID = 2**31 - 1
+MAX_SEED = 2**31 - 1
 
 
 class WorldOut(BaseModel):
@@ -61,9 +66,11 @@ class JobIn(BaseModel):
 
     model_config = {"extra": "forbid"}
 
-    world_id: int
+    world_id: int = Field(ge=1, le=MAX_ID)
     runs: int | None = Field(default=None, ge=1, le=MAX_RUNS_PER_JOB)
-    seeds: list[int] | None = Field(default=None, min_length=1, max_length=MAX_RUNS_PER_JOB)
+    seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] | None = Field(
+        default=None, min_length=1, max_length=MAX_RUNS_PER_JOB
+    )
     slam: Literal["rbpf", "odometry", "oracle"] | None = None
     params: dict[str, Any] = Field(
         default_factory=dict,
@@ -76,8 +83,6 @@ class JobIn(BaseModel):
             raise ValueError("give exactly one of `runs` (a count) and `seeds` (a list)")
         if self.seeds is not None and len(set(self.seeds)) != len(self.seeds):
             raise ValueError("`seeds` has duplicates")
-        if self.seeds is not None and any(s < 0 or s >= 2**63 for s in self.seeds):
-            raise ValueError("seeds are integers in [0, 2^63)")
         return self
 
     def seed_list(self) -> list[int]:

@@ -24,7 +24,12 @@ finish times as the database holds them:
   are left than workers (with n runs over k workers it costs up to one run's time in n / k).
 
     .venv/bin/python benchmarks/bench_api.py [--requests 2000] [--clients 50] [--period 0.5]
-        [--queue-runs 24] [--queue-time-limit 60]
+        [--queue-runs 24] [--queue-time-limit 60] [--against OTHER_CHECKOUT [--rounds 3]]
+
+--against DIR measures the two latencies here and in another checkout (a git worktree of the
+reference commit with its own .venv), alternately, --rounds times, each on a fresh database,
+and prints each round and the median ratio: this machine's speed drifts within the hour, so
+only side-by-side figures compare two versions.
 """
 
 from __future__ import annotations
@@ -197,69 +202,155 @@ def main() -> None:
     ap.add_argument("--server-workers", type=int, default=1, help="uvicorn worker processes")
     ap.add_argument("--queue-runs", type=int, default=24, help="0 skips the queue figures")
     ap.add_argument("--queue-time-limit", type=float, default=60.0, help="[s] simulated")
+    ap.add_argument(
+        "--against", type=Path, help="another checkout (with its .venv) to measure side by side"
+    )
+    ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
     args = ap.parse_args()
-
+    if args.against is not None:
+        other_py = args.against / ".venv" / "bin" / "python"
+        if not (args.against / "backend" / "main.py").is_file() or not other_py.is_file():
+            msg = f"bench_api: --against: no checkout with a .venv at {args.against}"
+            print(msg, file=sys.stderr)
+            raise SystemExit(2)
+        _side_by_side(args, args.against.resolve())
+        return
     with scratch_database("mapqual_bench") as db_url:
         _bench(args, db_url)
 
 
-def _bench(args, db_url: str) -> None:
-    redis_url = ensure_redis().rsplit("/", 1)[0] + "/12"
-    # thousands of queued 2-hour runs measure the API, not a quota (they would answer 429)
-    quotas = {"MAPQUAL_QUOTA_ACTIVE_RUNS": "100000000", "MAPQUAL_QUOTA_SIM_HOURS": "1e12"}
-    env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url, **quotas)
-    mq = [sys.executable, "-m", "mapqual"]
+# The benchmark submits thousands of one-run jobs: far past the per-owner quotas a service
+# has by default (they answer 429), so its servers run with the quotas out of the way.
+NO_QUOTAS = {
+    "MAPQUAL_QUOTA_ACTIVE_RUNS": "100000000",
+    "MAPQUAL_QUOTA_SIM_HOURS": "100000000",
+    "MAPQUAL_QUOTA_WORLDS": "100000000",
+    "MAPQUAL_QUOTA_UPLOADS_PER_DAY": "100000000",
+}
+
+
+def _start(python: str, tree: Path, env: dict, args) -> tuple[subprocess.Popen, str, str]:
+    """A user and a server of the checkout `tree`: (server process, base URL, API key)."""
+    mq = [python, "-m", "mapqual"]
     key = (
         subprocess.run(
-            [*mq, "users", "add", "bench"], env=env, capture_output=True, text=True, check=True
-        )
+            [*mq, "users", "add", "bench"],
+            env=env,
+            cwd=tree,
+            capture_output=True,
+            text=True,
+            check=True,
+        )  # fmt: skip
         .stdout.strip()
         .splitlines()[-1]
     )
     server = subprocess.Popen(
         [*mq, "serve", "--port", str(args.port), "--workers", str(args.server_workers)],
         env=env,
+        cwd=tree,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
     base = f"http://127.0.0.1:{args.port}"
+    for _ in range(150):
+        try:
+            if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
+                break
+        except httpx.HTTPError:
+            time.sleep(0.2)
+    return server, base, key
+
+
+def _upload(base: str, hdr: dict, name: str, png: bytes) -> dict:
+    """Upload a plan and wait for its analysis (`wait`; a server that has no such parameter
+    analyses in the request and ignores it)."""
+    r = httpx.post(
+        f"{base}/api/v1/worlds",
+        headers=hdr,
+        params={"wait": 30},
+        files={"file": (name, png)},
+        data={"resolution": "0.05"},
+        timeout=60,
+    )
+    _check(r)
+    return r.json()
+
+
+def _latencies(base: str, key: str, args) -> dict[str, tuple]:
+    """POST /jobs and GET /jobs/{id}: (sequential, open loop, saturation rate) of each."""
+    hdr = {"Authorization": f"Bearer {key}"}
+    world = _upload(base, hdr, "b.png", _png())
+    body = {"world_id": world["id"], "runs": 1, "slam": "odometry"}
+
+    async def post_job(client, i):
+        return await client.post("/api/v1/jobs", json=body)
+
+    post = asyncio.run(_measure(base, key, args, post_job))
+    page = httpx.get(f"{base}/api/v1/jobs", headers=hdr, params={"limit": 200}).json()
+    job_ids = [j["id"] for j in page["items"]]
+
+    async def get_job(client, i):
+        return await client.get(f"/api/v1/jobs/{job_ids[i % len(job_ids)]}")
+
+    return {"POST /jobs": post, "GET /jobs/{id}": asyncio.run(_measure(base, key, args, get_job))}
+
+
+def _side_by_side(args, other: Path) -> None:
+    """Open-loop p50/p99 of both endpoints here and in `other`, alternately, --rounds times,
+    each on a fresh database; the median ratio (this / other) of each figure."""
+    import redis
+
+    redis_url = ensure_redis().rsplit("/", 1)[0] + "/12"
+    trees = {"this": (sys.executable, ROOT), "other": (str(other / ".venv/bin/python"), other)}
+    figures: dict[str, dict[str, list[float]]] = {name: {} for name in trees}
+    print(f"side by side: this = {ROOT}, other = {other}; {args.rounds} rounds")
+    for r in range(args.rounds):
+        for name, (python, tree) in trees.items():
+            with scratch_database("mapqual_bench") as db_url:
+                env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url, **NO_QUOTAS)
+                redis.Redis.from_url(redis_url).flushdb()
+                server, base, key = _start(python, tree, env, args)
+                try:
+                    got = _latencies(base, key, args)
+                finally:
+                    server.terminate()
+                    server.wait(timeout=10)
+                    redis.Redis.from_url(redis_url).flushdb()
+            line = []
+            for label, (_, opn, _) in got.items():
+                p50, p99 = np.percentile(opn, [50, 99])
+                figures[name].setdefault(f"{label} p50", []).append(float(p50))
+                figures[name].setdefault(f"{label} p99", []).append(float(p99))
+                line.append(f"{label} p50 {p50:5.1f} p99 {p99:5.1f} ms")
+            print(f"  round {r + 1} {name:5s}: " + "; ".join(line), flush=True)
+    print(
+        f"{args.clients} clients every {args.period:g} s (open loop); median over rounds, "
+        f"ratio this / other (below 1: this is faster); load average "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    )
+    for fig in figures["this"]:
+        a, b = figures["this"][fig], figures["other"][fig]
+        ratios = [x / y for x, y in zip(a, b, strict=True)]
+        print(
+            f"  {fig:22s} this {np.median(a):6.1f} ms  other {np.median(b):6.1f} ms  "
+            f"ratio {np.median(ratios):.2f} (rounds {', '.join(f'{x:.2f}' for x in ratios)})"
+        )
+
+
+def _bench(args, db_url: str) -> None:
+    redis_url = ensure_redis().rsplit("/", 1)[0] + "/12"
+    env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url, **NO_QUOTAS)
+    server, base, key = _start(sys.executable, ROOT, env, args)
     try:
-        for _ in range(100):
-            try:
-                if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.2)
         hdr = {"Authorization": f"Bearer {key}"}
-        world = httpx.post(
-            f"{base}/api/v1/worlds",
-            headers=hdr,
-            files={"file": ("b.png", _png())},
-            data={"resolution": "0.05"},
-        ).json()
-        body = {"world_id": world["id"], "runs": 1, "slam": "odometry"}
-
-        async def post_job(client, i):
-            return await client.post("/api/v1/jobs", json=body)
-
-        post = asyncio.run(_measure(base, key, args, post_job))
-        page = httpx.get(f"{base}/api/v1/jobs", headers=hdr, params={"limit": 200}).json()
-        job_ids = [j["id"] for j in page["items"]]
-
-        async def get_job(client, i):
-            return await client.get(f"/api/v1/jobs/{job_ids[i % len(job_ids)]}")
-
-        get = asyncio.run(_measure(base, key, args, get_job))
+        got = _latencies(base, key, args)
         offered = args.clients / args.period
         print(
             f"PostgreSQL + Redis on loopback, {args.server_workers} uvicorn process(es), "
             f"{args.clients} clients every {args.period:g} s; load average "
             f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
         )
-        for label, (seq, opn, rate), target in (
-            ("POST /jobs", post, 50),
-            ("GET /jobs/{id}", get, 20),
-        ):
+        for (label, (seq, opn, rate)), target in zip(got.items(), (50, 20), strict=True):
             s50, s99 = np.percentile(seq, [50, 99])
             o50, o99 = np.percentile(opn, [50, 99])
             verdict = "ok" if o99 < target else "MISSED"
@@ -274,12 +365,7 @@ def _bench(args, db_url: str) -> None:
             import redis
 
             redis.Redis.from_url(redis_url).flushdb()  # the latency phase's runs stay unrun
-            rooms = httpx.post(
-                f"{base}/api/v1/worlds",
-                headers=hdr,
-                files={"file": ("rooms.png", _png((3, 2), 120))},
-                data={"resolution": "0.05"},
-            ).json()
+            rooms = _upload(base, hdr, "rooms.png", _png((3, 2), 120))
 
             def body_for(n):
                 return {

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from typing import Annotated, TypeVar
 
 from anyio import CancelScope, CapacityLimiter, to_thread
-from fastapi import Depends, FastAPI, Header, HTTPException, Request, status
+from fastapi import Depends, FastAPI, Header, HTTPException, Path, Query, Request, status
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.config import Settings, get_settings
 from backend.db.models import User
 from backend.db.session import get_sessionmaker, session_scope
+from backend.schemas import MAX_ID
 from backend.store import hash_key, local_user, user_for_key, web_session_user
 
 # The dashboard's cookie: a random session token (the database keeps its SHA-256), never the
@@ -256,3 +257,9 @@ def owned(user: Principal, obj, what: str, obj_id: int):
     if obj is None or (not user.is_admin and obj.owner_id != user.id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no {what} with id {obj_id}")
     return obj
+
+
+# Ids a client sends in a path or a query, bounded as the schema's (see MAX_ID): FastAPI
+# answers anything outside with 422.
+IdPath = Annotated[int, Path(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]
+IdQuery = Annotated[int | None, Query(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]

@@ -13,11 +13,20 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend import quotas
-from backend.api.deps import CurrentUser, Principal, SessionDep, SettingsDep, in_session, owned
+from backend.api.deps import (
+    CurrentUser,
+    IdPath,
+    IdQuery,
+    Principal,
+    SessionDep,
+    SettingsDep,
+    in_session,
+    owned,
+)
 from backend.core.config import Settings
 from backend.db.models import Job, Run, World
 from backend.queue import enqueue_run
-from backend.schemas import JobIn, JobOut, JobPage
+from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
 
 router = APIRouter(tags=["jobs"])
@@ -115,9 +124,9 @@ def list_jobs(
     session: SessionDep,
     user: CurrentUser,
     status_: Annotated[JobStatus | None, Query(alias="status")] = None,
-    world_id: int | None = None,
+    world_id: IdQuery = None,
     limit: Annotated[int, Query(ge=1, le=200)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> JobPage:
     """Your jobs, newest first, optionally filtered by status and world."""
     stmt = select(Job)
@@ -153,13 +162,13 @@ def read_job(session: Session, user: Principal, job_id: int) -> JobOut:
 
 
 @router.get("/jobs/{job_id}", response_model=JobOut)
-async def get_job(job_id: int, user: CurrentUser, settings: SettingsDep) -> Response:
+async def get_job(job_id: IdPath, user: CurrentUser, settings: SettingsDep) -> Response:
     """A job's status and its runs with their progress."""
     return json_response(await run_in_threadpool(in_session, settings, read_job, user, job_id))
 
 
 @router.post("/jobs/{job_id}/cancel", response_model=JobOut)
-def cancel_job(job_id: int, session: SessionDep, user: CurrentUser) -> JobOut:
+def cancel_job(job_id: IdPath, session: SessionDep, user: CurrentUser) -> JobOut:
     """Cancel what has not finished: queued runs never start, running ones stop at their next
     step. Finished runs keep their results."""
     job = owned(user, session.get(Job, job_id), "job", job_id)

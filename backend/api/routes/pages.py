@@ -29,6 +29,7 @@ from backend.api.deps import (
     CSRF_FIELD,
     CSRF_HEADER,
     SESSION_COOKIE,
+    IdPath,
     Principal,
     SessionDep,
     SettingsDep,
@@ -219,7 +220,7 @@ def submit_job_form(
 
 @router.get("/jobs/{job_id}", response_class=HTMLResponse)
 def job_page(
-    request: Request, job_id: int, session: SessionDep, user: PageUser, settings: SettingsDep
+    request: Request, job_id: IdPath, session: SessionDep, user: PageUser, settings: SettingsDep
 ) -> HTMLResponse:
     """A job's runs: outcome, coverage, errors, plots, downloads and the live-view link."""
     from backend.viewer_tokens import issue, signing_key
@@ -252,7 +253,7 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
 
 
 @router.get("/runs/{run_id}/plot/{name}.png")
-def run_plot(run_id: int, name: str, session: SessionDep, user: PageUser) -> Response:
+def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> Response:
     """The run's trajectories or errors plot: the report's file, else drawn from the database."""
     from backend.store import load_trajectory, world_occupancy
     from worker.report.plots import trajectories_png

@@ -11,7 +11,7 @@ from typing import Literal
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
 
-from backend.api.deps import CurrentUser, SessionDep, owned
+from backend.api.deps import CurrentUser, IdPath, SessionDep, owned
 from backend.db.models import Run
 from backend.schemas import RunOut
 from backend.store import load_map, load_trajectory
@@ -37,14 +37,14 @@ def _require_done(run: Run) -> None:
 
 
 @router.get("/runs/{run_id}", response_model=RunOut)
-def get_run(run_id: int, session: SessionDep, user: CurrentUser) -> RunOut:
+def get_run(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunOut:
     """A run: status, progress, and once done its summary and metrics."""
     return RunOut.of(_run(session, user, run_id))
 
 
 @router.get("/runs/{run_id}/trajectory")
 def get_trajectory(
-    run_id: int,
+    run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
     kind: Literal["gt", "est"] = Query("est", description="ground truth or estimate"),
@@ -88,7 +88,7 @@ def _map_files(run: Run, session) -> dict[str, bytes]:
 
 @router.get("/runs/{run_id}/map.{ext}")
 def get_map(
-    run_id: int, ext: Literal["png", "pgm", "yaml"], session: SessionDep, user: CurrentUser
+    run_id: IdPath, ext: Literal["png", "pgm", "yaml"], session: SessionDep, user: CurrentUser
 ) -> Response:
     """The final SLAM map as map_server files (PGM + YAML) or PNG (with its errors written
     on it when the report folder is there)."""
@@ -104,7 +104,7 @@ _MEDIA = {"png": "image/png", "pgm": "image/x-portable-graymap", "yaml": "applic
 
 @router.get("/runs/{run_id}/relations")
 def get_relations(
-    run_id: int,
+    run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
     kind: Literal["A", "B", "SM"] = Query("B"),
@@ -117,7 +117,7 @@ def get_relations(
 
 
 @router.get("/runs/{run_id}/report.zip")
-def get_report(run_id: int, session: SessionDep, user: CurrentUser) -> Response:
+def get_report(run_id: IdPath, session: SessionDep, user: CurrentUser) -> Response:
     """The whole report folder as one zip."""
     folder = _report_dir(_run(session, user, run_id))
     buf = io.BytesIO()

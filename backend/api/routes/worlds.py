@@ -21,7 +21,15 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend import quotas
-from backend.api.deps import CurrentUser, Principal, SessionDep, SettingsDep, in_session, owned
+from backend.api.deps import (
+    CurrentUser,
+    IdPath,
+    Principal,
+    SessionDep,
+    SettingsDep,
+    in_session,
+    owned,
+)
 from backend.core.config import Settings
 from backend.db.models import World
 from backend.schemas import WorldOut
@@ -201,7 +209,7 @@ def list_worlds(session: SessionDep, user: CurrentUser) -> list[WorldOut]:
 
 
 @router.get("/worlds/{world_id}", response_model=WorldOut)
-def get_world(world_id: int, session: SessionDep, user: CurrentUser) -> WorldOut:
+def get_world(world_id: IdPath, session: SessionDep, user: CurrentUser) -> WorldOut:
     """A world's facts and start pose."""
     return WorldOut.of(owned(user, session.get(World, world_id), "world", world_id))
 
@@ -227,7 +235,7 @@ def shrink_occupancy(occ: np.ndarray, max_px: int) -> np.ndarray:
 
 @router.get("/worlds/{world_id}/image", response_class=Response)
 def world_image(
-    world_id: int,
+    world_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
     max_px: Annotated[int | None, Query(ge=16, le=4096)] = None,
