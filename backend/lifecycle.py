@@ -136,7 +136,7 @@ def _apply(
             detail=detail, at=utcnow(),
         )
     )  # fmt: skip
-    refresh_job_status(session, session.get_one(Job, cur.job_id))
+    refresh_job_status(session, session.get_one(Job, cur.job_id, populate_existing=True))
     # the ORM copy (e.g. in job.runs) would otherwise still show the state before the update
     return session.get_one(Run, cur.run_id, populate_existing=True)
 
