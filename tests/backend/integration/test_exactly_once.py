@@ -35,7 +35,8 @@ from backend.main import create_app
 from backend.store import add_user
 from tests.services import ensure_redis, scratch_database
 
-REDIS_DB = 13  # apart from the batch tests (12) and the queue tests (14)
+# apart from the batch (12), API (13, flushed by its fixtures), queue (14) and page (15) tests
+REDIS_DB = 11
 LEASE_S = 4
 VISIBILITY_S = 6
 
@@ -119,6 +120,11 @@ class Service:
             time.sleep(0.1)
         raise AssertionError(f"timed out waiting for {what}; see {self.tmp / 'workers.log'}")
 
+    def resent(self) -> int:
+        """How many runs the workers' sweepers sent again (their log says so)."""
+        self.log.flush()
+        return (self.tmp / "workers.log").read_text(errors="replace").count("sent again")
+
     def folders(self) -> list[str]:
         return sorted(p.name for p in self.runs_dir.iterdir()) if self.runs_dir.exists() else []
 
@@ -184,6 +190,7 @@ def test_two_workers_on_the_same_run_store_one_result(service):
     svc.wait("the first attempt's folder gone", lambda: first_dir not in svc.folders(), 60)
     time.sleep(3)  # and whatever it still does afterwards changes nothing
     assert_each_stored_exactly_once(svc, [run_id])
+    assert svc.resent() == 0  # the broker kept its queue: the sweepers sent nothing
     run = svc.runs([run_id])[run_id]
     assert (run.attempt, run.finished_at, run.summary) == (
         done.attempt, done.finished_at, done.summary
@@ -214,6 +221,7 @@ def test_a_worker_killed_in_the_middle_of_each_of_10_runs(service):
         240,
     )
     assert_each_stored_exactly_once(svc, run_ids)
+    assert svc.resent() == 0
     for run_id, run in svc.runs(run_ids).items():
         assert run.attempts >= 2 and run.attempt != killed[run_id]
 
@@ -277,6 +285,7 @@ def test_a_redis_restart_loses_no_run_and_runs_none_twice(tmp_path, db_url, own_
                 select(func.count()).select_from(RunEvent).where(RunEvent.to_status == "done")
             )
         assert n_done == 20
+        assert svc.resent() > 0  # what the broker lost, the sweepers sent again
     finally:
         svc.stop()
 
