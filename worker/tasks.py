@@ -46,7 +46,8 @@ def _start_sweeper(**_: Any) -> None:
     start_sweeper(settings.database_url, settings.redis_url, settings.run_lease_s)
 
 
-def _redis(url: str):
+def _redis(url: str) -> Any:
+    """A Redis client for the live feed, or None when Redis is away (the run goes on)."""
     import redis
 
     try:
