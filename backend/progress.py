@@ -22,11 +22,11 @@ import zlib
 from typing import Any
 
 import numpy as np
-from sqlalchemy import update
+from sqlalchemy import select, true, update
 
-from backend.db.models import Run
+from backend.db.models import Run, utcnow
 from backend.db.session import get_engine
-from worker.pipeline import RunCancelled, RunProgress
+from worker.pipeline import RunCancelled, RunProgress, RunSuperseded
 
 # map cell codes on the wire
 UNKNOWN, FREE, OCCUPIED = 0, 1, 2
@@ -110,9 +110,11 @@ def scan_points(p: RunProgress) -> np.ndarray:
 class ProgressReporter:
     """The `on_progress` callback of a run executed by a worker.
 
-    Every `store_every_s` of wall time it writes the progress to the run's row and reads the
-    run's status back: a run cancelled meanwhile raises `RunCancelled`, which stops it at its
-    next step. Every `publish_every_s` it publishes the progress on the run's channel (every
+    Every `store_every_s` of wall time it writes the progress and a heartbeat to the run's
+    row, on condition that the run is still running under `attempt` (any attempt if None): a
+    run cancelled meanwhile raises `RunCancelled`, one taken over by another attempt (or put
+    back to queued) `RunSuperseded`, either of which stops it at its next step. Every
+    `publish_every_s` it publishes the progress on the run's channel (every
     `idle_publish_every_s` while nobody listens); path points, scan, plan and map go out only
     while somebody listens, the map at most every `map_every_s`.
     """
@@ -122,6 +124,7 @@ class ProgressReporter:
         database_url: str,
         run_id: int,
         redis_client: Any | None = None,
+        attempt: str | None = None,
         store_every_s: float = 2.0,
         publish_every_s: float = 0.2,
         map_every_s: float = 1.0,
@@ -130,6 +133,7 @@ class ProgressReporter:
         self.url = database_url
         self.run_id = run_id
         self.redis = redis_client
+        self.attempt = attempt
         self.store_every_s = store_every_s
         self.publish_every_s = publish_every_s
         self.map_every_s = map_every_s
@@ -174,16 +178,21 @@ class ProgressReporter:
             self._store(p)
 
     def _store(self, p: RunProgress) -> None:
-        """One statement: store the progress unless the run was cancelled (or is gone)."""
+        """One statement: the progress and a heartbeat, while this attempt holds the run."""
+        held = Run.attempt == self.attempt if self.attempt is not None else true()
         stmt = (
             update(Run)
-            .where(Run.id == self.run_id, Run.status != "cancelled")
-            .values(progress=self.payload(p))
+            .where(Run.id == self.run_id, Run.status == "running", held)
+            .values(progress=self.payload(p), heartbeat_at=utcnow())
             .returning(Run.id)
         )
         with get_engine(self.url).begin() as conn:
-            if conn.execute(stmt).first() is None:
-                raise RunCancelled(f"run {self.run_id} was cancelled (or deleted)")
+            if conn.execute(stmt).first() is not None:
+                return
+            status = conn.scalar(select(Run.status).where(Run.id == self.run_id))
+        if status in (None, "cancelled"):
+            raise RunCancelled(f"run {self.run_id} was cancelled (or deleted)")
+        raise RunSuperseded(f"run {self.run_id} is no longer held by attempt {self.attempt}")
 
     def _record(self, p: RunProgress) -> None:
         if self._n == len(self._path):

@@ -1,12 +1,26 @@
-"""Enqueueing runs: the API sends Celery tasks by name, so it never imports the pipeline."""
+"""Enqueueing runs: the API sends Celery tasks by name, so it never imports the pipeline.
+
+Each run sent is stamped with the broker's epoch: a random id kept in a Redis key beside the
+queue, made when missing. A broker that lost its queue (Redis restarted without persistence)
+lost that key too, and the workers' sweeper (`backend.recovery`) sends again the runs stamped
+with an older epoch.
+"""
 
 from __future__ import annotations
 
+import secrets
+from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 from celery import Celery
+from sqlalchemy import update
+from sqlalchemy.orm import Session
+
+from backend.db.models import Run
 
 RUN_TASK = "mapqual.run"
+EPOCH_KEY = "mapqual:broker_epoch"
 
 
 @lru_cache(maxsize=4)
@@ -24,6 +38,41 @@ def _client(broker_url: str) -> Celery:
     return app
 
 
+@lru_cache(maxsize=4)
+def _redis(broker_url: str) -> Any:
+    import redis
+
+    return redis.Redis.from_url(broker_url, socket_connect_timeout=2, socket_timeout=5)
+
+
+def broker_epoch(broker_url: str) -> str:
+    """The broker's current epoch, made (SET NX: one winner among racing processes) when the
+    key is missing; raises on a broker that cannot be reached."""
+    client = _redis(broker_url)
+    epoch = client.get(EPOCH_KEY)
+    if epoch is None:
+        client.set(EPOCH_KEY, secrets.token_hex(16), nx=True)
+        epoch = client.get(EPOCH_KEY)
+    return epoch.decode("ascii")
+
+
 def enqueue_run(broker_url: str, run_id: int) -> None:
     """Queue one run; raises on a broker that cannot be reached."""
     _client(broker_url).send_task(RUN_TASK, args=[run_id], retry=False)
+
+
+def enqueue_runs(session: Session, broker_url: str, run_ids: Sequence[int]) -> None:
+    """Stamp the runs with the broker's epoch, commit, and queue them (committed first: a
+    worker may pick a run up at once). Raises on a broker that cannot be reached."""
+    if not run_ids:
+        return
+    epoch = broker_epoch(broker_url)
+    session.execute(
+        update(Run)
+        .where(Run.id.in_([int(i) for i in run_ids]))
+        .values(broker_epoch=epoch)
+        .execution_options(synchronize_session=False)
+    )
+    session.commit()
+    for run_id in run_ids:
+        enqueue_run(broker_url, run_id)

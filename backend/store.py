@@ -7,6 +7,7 @@ import hashlib
 import secrets
 from collections.abc import Sequence
 from datetime import timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,6 +16,16 @@ from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
 from backend.db.models import Job, Run, RunMap, RunTrajectory, User, WebSession, World, utcnow
+from backend.lifecycle import (
+    TransitionRefused,
+    claim_run,
+    fail_run,
+    finish_run,
+    move_into_place,
+    new_attempt,
+    requeue,
+)
+from backend.lifecycle import refresh_job_status as _refresh_job_status
 from worker.world.world import World as WorldModel
 
 TRAJECTORY_KINDS = ("gt", "est")
@@ -184,15 +195,14 @@ def create_job(
     return job
 
 
-def mark_run_started(session: Session, run_id: int) -> Run:
-    """Mark a run running; a restarted run (a redelivered task) starts over cleanly."""
-    run = session.get_one(Run, run_id)
-    run.status = "running"
-    run.started_at = utcnow()
-    run.finished_at = None
-    run.error = None
-    run.progress = {}
-    _refresh_job_status(session, run.job)
+def mark_run_started(
+    session: Session, run_id: int, attempt: str | None = None, lease_s: float = 0.0
+) -> Run:
+    """Make `attempt` (a new one if None) the run's holder: a queued run, or a running one
+    whose holder gave no sign of life for `lease_s`; raises `TransitionRefused` otherwise."""
+    answer, run = claim_run(session, run_id, attempt or new_attempt(), lease_s)
+    if run is None:
+        raise TransitionRefused(run_id, "running", answer)
     return run
 
 
@@ -208,14 +218,31 @@ def store_run_result(
     map_resolution: float,
     map_origin: Sequence[float],
     report_dir: str | None,
+    attempt: str | None = None,
+    folder: Path | None = None,
 ) -> Run:
-    """Store a finished run, replacing anything a previous attempt of the same run stored.
+    """Store the result of the attempt that holds the run (None: whichever holds it) and mark
+    it done, or raise `TransitionRefused` (the caller's transaction then stores nothing).
 
+    `folder` is the attempt's report folder: renamed to `report_dir` here, after the
+    compare-and-set, so that the commit that follows keeps exactly this attempt's files.
     `t (N,)`, `pose_gt`/`pose_est (N, 3)` at the same timestamps; `map_ros (H, W) int8`.
     `summary` is the report's summary.json; its headline figures are copied into columns.
     """
-    run = session.get_one(Run, run_id)
-    run.trajectories.clear()
+    b_trans = summary.get("relations", {}).get("B", {}).get("translation", {})
+    b_rot = summary.get("relations", {}).get("B", {}).get("rotation", {})
+    timings = summary.get("timings", {})
+    run = finish_run(
+        session, run_id, attempt, {
+            "summary": summary, "outcome": summary.get("outcome"),
+            "metrics": {k: summary[k] for k in ("relations", "ate") if k in summary},
+            "reason": summary.get("reason"), "coverage": summary.get("coverage"),
+            "b_mean_t": b_trans.get("mean"), "b_mean_r": b_rot.get("mean"),
+            "sim_time": timings.get("sim_time_s"), "wall_time": timings.get("wall_time_s"),
+            "report_dir": report_dir,
+        },
+    )  # fmt: skip
+    run.trajectories.clear()  # none, unless a crash left rows of a run never marked done
     run.map = None
     session.flush()
     for kind, poses in (("gt", pose_gt), ("est", pose_est)):
@@ -229,33 +256,17 @@ def store_run_result(
         height=int(map_ros.shape[0]),
         data=pack_array(np.asarray(map_ros, dtype=np.int8)),
     )
-    b_trans = summary.get("relations", {}).get("B", {}).get("translation", {})
-    b_rot = summary.get("relations", {}).get("B", {}).get("rotation", {})
-    timings = summary.get("timings", {})
-    run.summary = summary
-    run.metrics = {k: summary[k] for k in ("relations", "ate") if k in summary}
-    run.outcome = summary.get("outcome")
-    run.reason = summary.get("reason")
-    run.coverage = summary.get("coverage")
-    run.b_mean_t = b_trans.get("mean")
-    run.b_mean_r = b_rot.get("mean")
-    run.sim_time = timings.get("sim_time_s")
-    run.wall_time = timings.get("wall_time_s")
-    run.report_dir = report_dir
-    run.status = "done"
-    run.finished_at = utcnow()
-    _refresh_job_status(session, run.job)
+    session.flush()
+    if folder is not None and report_dir is not None:
+        move_into_place(folder, Path(report_dir))
     return run
 
 
-def mark_run_failed(session: Session, run_id: int, error: str) -> Run:
-    """An internal error (not a failed exploration, which is a done run with outcome failed)."""
-    run = session.get_one(Run, run_id)
-    run.status = "failed"
-    run.error = error
-    run.finished_at = utcnow()
-    _refresh_job_status(session, run.job)
-    return run
+def mark_run_failed(session: Session, run_id: int, error: str, attempt: str | None = None) -> bool:
+    """An internal error (not a failed exploration, which is a done run with outcome failed),
+    stored only while `attempt` holds the run (None: for a queued run that could not be sent);
+    False when it does not: a cancelled run stays cancelled."""
+    return fail_run(session, run_id, error, attempt)
 
 
 def load_trajectory(session: Session, run_id: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
@@ -285,23 +296,6 @@ def list_runs(session: Session, limit: int = 50, world_id: int | None = None) ->
     return list(session.scalars(stmt))
 
 
-def _refresh_job_status(session: Session, job: Job) -> None:
-    """A job's status follows its runs: cancelled, running, queued, failed, or done."""
-    session.flush()
-    states = {r.status for r in job.runs}
-    if job.status == "cancelled":
-        return
-    if "running" in states or ("queued" in states and len(states) > 1):
-        job.status = "running"
-    elif states == {"queued"}:
-        job.status = "queued"
-    elif "failed" in states:
-        job.status = "failed"
-    else:
-        job.status = "done"
-    job.updated_at = utcnow()
-
-
 def add_job_runs(session: Session, job_id: int, seeds: Sequence[int]) -> dict[int, Run]:
     """The job's run for each seed, adding a queued run (with the job's world, algorithm and
     parameters) for any seed it lacks; a batch grown by more seeds extends its jobs this way."""
@@ -320,15 +314,10 @@ def add_job_runs(session: Session, job_id: int, seeds: Sequence[int]) -> dict[in
     return {int(s): by_seed[int(s)] for s in seeds}
 
 
-def requeue_run(session: Session, run_id: int) -> Run:
-    """Put a run that was interrupted before it finished back to queued (a batch resumes it)."""
-    run = session.get_one(Run, run_id)
-    if run.status == "running":
-        run.status = "queued"
-        run.started_at = None
-        run.progress = {}
-        _refresh_job_status(session, run.job)
-    return run
+def requeue_run(session: Session, run_id: int, detail: str = "requeued") -> bool:
+    """Put a failed or interrupted (running) run back to queued, explicitly: a batch resumes
+    or retries it. False for a run in any other state."""
+    return requeue(session, run_id, detail)
 
 
 def get_runs(session: Session, run_ids: Sequence[int]) -> list[Run]:

@@ -11,8 +11,9 @@ REDIS_URL = os.environ.get("REDIS_URL", "redis://127.0.0.1:6379/0")
 SOFT_TIME_LIMIT_S = int(os.environ.get("MAPQUAL_TASK_SOFT_TIME_LIMIT", "7200"))
 HARD_TIME_LIMIT_S = int(os.environ.get("MAPQUAL_TASK_TIME_LIMIT", "7500"))
 # Redis redelivers a message that no worker acknowledged after this long (a worker died
-# mid-run, since tasks are acknowledged late). It must exceed the longest run, or a slow run
-# is started twice; runs are idempotent (keyed by run id), so that only costs time.
+# mid-run, since tasks are acknowledged late). It should exceed the longest run: a message
+# redelivered while its run's attempt is alive only comes back later (the run's lease,
+# MAPQUAL_RUN_LEASE, decides when an attempt is dead), and one result is kept in any case.
 VISIBILITY_TIMEOUT_S = int(
     os.environ.get("MAPQUAL_VISIBILITY_TIMEOUT", str(HARD_TIME_LIMIT_S + 300))
 )
@@ -28,7 +29,7 @@ app.conf.update(
     # One run at a time per worker process: a run is long, prefetching would starve others.
     worker_prefetch_multiplier=1,
     # Acknowledge after the run, and requeue when the worker process dies: at-least-once
-    # delivery, which the idempotent run task turns into exactly one stored result.
+    # delivery, which the run task's compare-and-set claim turns into exactly one result.
     task_acks_late=True,
     task_reject_on_worker_lost=True,
     task_soft_time_limit=SOFT_TIME_LIMIT_S,

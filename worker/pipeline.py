@@ -75,6 +75,11 @@ class RunCancelled(Exception):
     """Raised from an `on_progress` callback to stop a run at its next step."""
 
 
+class RunSuperseded(RunCancelled):
+    """Raised from an `on_progress` callback when another attempt now holds the run: this one
+    stops and keeps nothing (a run stopped by it is handled as a cancelled one)."""
+
+
 @dataclass(frozen=True)
 class RunProgress:
     """What a running run reports about once per simulated second."""

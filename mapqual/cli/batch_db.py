@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -14,6 +15,7 @@ from worker.batch.local import Event, RunOutput
 from worker.batch.state import BatchDir, record_of
 from worker.world.world import World
 
+log = logging.getLogger("mapqual.batch")
 POLL_S = 1.0  # [s] between database polls while Celery workers run the batch
 
 
@@ -33,6 +35,7 @@ class DbBatch:
         from worker.batch.experiment import world_fingerprint
 
         self.url = url
+        self.attempts: dict[str, str | None] = {}  # the local pool's attempt of each run
         self.run_ids: dict[str, int] = {}
         self.job_ids: dict[str, int] = {}
         cells: dict[str, list[RunSpec]] = {}
@@ -65,39 +68,58 @@ class DbBatch:
         return {"run_id": self.run_ids[spec.key], "job_id": self.job_ids[spec.key]}
 
     def started(self, spec: RunSpec) -> None:
+        """Claim the run under a new attempt of this process (a run the database holds as done
+        already, the batch killed before its record was written, is kept as it is)."""
         from backend.db.session import session_scope
-        from backend.store import mark_run_started
+        from backend.lifecycle import claim_run, new_attempt
 
+        attempt = new_attempt()
         with session_scope(self.url) as s:
-            mark_run_started(s, self.run_ids[spec.key])
+            # no lease: the local pool writes no heartbeat, and a run still running here is
+            # this batch's own (resuming requeued those a killed invocation left)
+            _, run = claim_run(s, self.run_ids[spec.key], attempt, lease_s=0.0)
+        self.attempts[spec.key] = attempt if run is not None else None
 
     def finished(self, spec: RunSpec, out: RunOutput) -> dict[str, Any]:
         from backend.db.session import session_scope
+        from backend.lifecycle import TransitionRefused
         from backend.store import store_run_result
 
-        with session_scope(self.url) as s:
-            store_run_result(
-                s, self.run_ids[spec.key], summary=out.summary, t=out.t, pose_gt=out.pose_gt,
-                pose_est=out.pose_est, map_ros=out.map_ros, map_resolution=out.map_resolution,
-                map_origin=out.map_origin, report_dir=out.report_dir,
-            )  # fmt: skip
+        attempt = self.attempts.pop(spec.key, None)
+        if attempt is None:
+            return self.ids(spec)
+        try:
+            with session_scope(self.url) as s:
+                store_run_result(
+                    s, self.run_ids[spec.key], summary=out.summary, t=out.t,
+                    pose_gt=out.pose_gt, pose_est=out.pose_est, map_ros=out.map_ros,
+                    map_resolution=out.map_resolution, map_origin=out.map_origin,
+                    report_dir=out.report_dir, attempt=attempt,
+                )  # fmt: skip
+        except TransitionRefused as exc:  # cancelled or requeued meanwhile: not this result
+            log.warning("%s", exc)
         return self.ids(spec)
 
     def failed(self, spec: RunSpec, error: str) -> dict[str, Any]:
         from backend.db.session import session_scope
         from backend.store import mark_run_failed
 
-        with session_scope(self.url) as s:
-            mark_run_failed(s, self.run_ids[spec.key], error)
+        attempt = self.attempts.pop(spec.key, None)
+        if attempt is not None:
+            with session_scope(self.url) as s:
+                mark_run_failed(s, self.run_ids[spec.key], error, attempt)
         return self.ids(spec)
 
     def interrupted(self, specs: Sequence[RunSpec]) -> None:
+        """Put the runs back to queued, explicitly: runs in flight when this batch stopped,
+        or (on resume) runs a killed invocation left running or that failed and are redone."""
         from backend.db.session import session_scope
         from backend.store import requeue_run
 
         with session_scope(self.url) as s:
             for spec in specs:
-                requeue_run(s, self.run_ids[spec.key])
+                requeue_run(s, self.run_ids[spec.key], "batch resumed or interrupted")
+                self.attempts.pop(spec.key, None)
 
 
 def _record_from_run(spec: RunSpec, run: Any, ids: dict[str, Any]) -> dict[str, Any] | None:
@@ -126,8 +148,8 @@ def run_celery(
     the workers carry on and a re-run collects their results.
     """
     from backend.db.session import session_scope
-    from backend.queue import enqueue_run
-    from backend.store import get_runs
+    from backend.queue import enqueue_runs
+    from backend.store import get_runs, requeue_run
 
     sent = {e["run_id"] for e in bdir.read_journal() if e["event"] == "enqueued"}
     by_id = {db.run_ids[s.key]: s for s in specs}
@@ -137,9 +159,10 @@ def run_celery(
         fresh = status.get(run_id) in ("queued", "running") and run_id not in sent
         retry = retry_failed and status.get(run_id) == "failed"
         if fresh or retry:
-            if retry:
-                db.interrupted([spec])  # back to queued; the task skips only done runs
-            enqueue_run(broker_url, run_id)
+            with session_scope(db.url) as s:
+                if retry:  # failed -> queued, explicitly: the task runs queued runs only
+                    requeue_run(s, run_id, "--retry-failed")
+                enqueue_runs(s, broker_url, [run_id])
             bdir.journal("enqueued", spec.key, run_id=run_id)
     waiting = dict(by_id)
     started: set[int] = set()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -120,6 +121,7 @@ def run(
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
     from backend.db.session import session_scope
+    from backend.lifecycle import attempt_dir, new_attempt
     from backend.store import (
         create_job,
         local_user,
@@ -140,6 +142,7 @@ def run(
     settings = get_settings()
     url = settings.database_url
     upgrade(url)
+    attempt = new_attempt()
     with session_scope(url) as s:
         owner = local_user(s).id
         row = save_world(
@@ -158,25 +161,32 @@ def run(
             seeds=[seed],
         )
         run_id = job.runs[0].id
-        mark_run_started(s, run_id)
-    out_dir = out if out is not None else settings.runs_dir / str(run_id)
+        mark_run_started(s, run_id, attempt)
+    # the default runs/<id>/ is filled like a worker's: in the attempt's folder, renamed into
+    # place with the commit of the result; a folder the user named (-o) is written directly
+    shown = out if out is not None else settings.runs_dir / str(run_id)
+    out_dir = shown.resolve()
+    folder = out_dir if out is not None else attempt_dir(out_dir, attempt)
     try:
         with _Progress(params.explore.time_limit, quiet=as_json) as progress:
-            result = run_one(world, params, seed, progress, sim_log=out_dir / SIM_LOG)
-        write_report(result, out_dir)
+            result = run_one(world, params, seed, progress, sim_log=folder / SIM_LOG)
+        write_report(result, folder)
         ex = result.exploration
         with session_scope(url) as s:
             store_run_result(
                 s, run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
                 pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
                 map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
-                report_dir=str(out_dir.resolve()),
+                report_dir=str(out_dir), attempt=attempt,
+                folder=None if out is not None else folder,
             )  # fmt: skip
     except BaseException as exc:
         with session_scope(url) as s:
-            mark_run_failed(s, run_id, f"{type(exc).__name__}: {exc}")
+            mark_run_failed(s, run_id, f"{type(exc).__name__}: {exc}", attempt)
+        if out is None:
+            shutil.rmtree(folder, ignore_errors=True)
         raise
-    summary = {"run_id": run_id, "report_dir": str(out_dir), **result.summary}
+    summary = {"run_id": run_id, "report_dir": str(shown), **result.summary}
     if as_json:
         print(json.dumps(summary))
     else:

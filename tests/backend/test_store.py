@@ -8,6 +8,7 @@ from sqlalchemy import func, select
 
 from backend.db.models import Job, Run, RunTrajectory
 from backend.db.session import session_scope
+from backend.lifecycle import TransitionRefused
 from backend.store import (
     add_user,
     create_job,
@@ -112,7 +113,7 @@ def test_result_round_trips_bit_for_bit_and_fills_headline_columns(db_url):
         assert s.scalar(select(func.count()).select_from(RunTrajectory)) == 2
 
 
-def test_storing_a_run_again_replaces_its_result_instead_of_adding_one(db_url):
+def test_a_run_taken_over_keeps_only_the_new_holders_result(db_url):
     t, gt, est, grid = _result_arrays()
     with session_scope(db_url) as s:
         world, _ = _world(s)
@@ -123,24 +124,32 @@ def test_storing_a_run_again_replaces_its_result_instead_of_adding_one(db_url):
             .runs[0]
             .id
         )
-    for attempt, b_t in enumerate((0.5, 0.25)):
+    # attempt "a" claims; "b" takes over once a's heartbeat is older than the lease (0 s)
+    for attempt in ("a" * 32, "b" * 32):
         with session_scope(db_url) as s:
-            mark_run_started(s, run_id)
-            store_run_result(
-                s,
-                run_id,
-                summary=_summary(b_t=b_t),
-                t=t[: 500 + attempt],
-                pose_gt=gt[: 500 + attempt],
-                pose_est=est[: 500 + attempt],
-                map_ros=grid,
-                map_resolution=0.05,
-                map_origin=(0, 0),
-                report_dir=None,
-            )
+            mark_run_started(s, run_id, attempt, lease_s=0.0)
+    for attempt, b_t in (("b" * 32, 0.25), ("a" * 32, 0.5)):
+        try:
+            with session_scope(db_url) as s:
+                store_run_result(
+                    s,
+                    run_id,
+                    summary=_summary(b_t=b_t),
+                    t=t[: 500 + int(b_t * 4)],
+                    pose_gt=gt[: 500 + int(b_t * 4)],
+                    pose_est=est[: 500 + int(b_t * 4)],
+                    map_ros=grid,
+                    map_resolution=0.05,
+                    map_origin=(0, 0),
+                    report_dir=None,
+                    attempt=attempt,
+                )
+        except TransitionRefused:
+            assert attempt == "a" * 32  # the superseded attempt stores nothing
     with session_scope(db_url) as s:
         assert s.scalar(select(func.count()).select_from(RunTrajectory)) == 2
-        assert s.get_one(Run, run_id).b_mean_t == 0.25
+        run = s.get_one(Run, run_id)
+        assert (run.b_mean_t, run.attempt, run.attempts) == (0.25, "b" * 32, 2)
         assert len(load_trajectory(s, run_id, "est")[0]) == 501
 
 
@@ -199,8 +208,9 @@ def test_job_status_follows_its_runs(db_url):
             report_dir=None,
         )
         assert s.get_one(Job, job_id).status == "running"  # r2 still queued
-        mark_run_started(s, r2)
-        mark_run_failed(s, r2, "worker crashed")
+        attempt = mark_run_started(s, r2).attempt
+        assert not mark_run_failed(s, r2, "worker crashed", "another attempt")
+        assert mark_run_failed(s, r2, "worker crashed", attempt)
         assert s.get_one(Job, job_id).status == "failed"
 
 

@@ -25,7 +25,8 @@ from backend.api.deps import (
 )
 from backend.core.config import Settings
 from backend.db.models import Job, Run, World
-from backend.queue import enqueue_run
+from backend.lifecycle import cancel_run
+from backend.queue import enqueue_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
 
@@ -85,8 +86,7 @@ def submit(
     )
     session.commit()  # the runs must exist before a worker can pick them up
     try:
-        for run in job.runs:
-            enqueue_run(settings.redis_url, run.id)
+        enqueue_runs(session, settings.redis_url, [run.id for run in job.runs])
     except Exception as exc:
         for run in job.runs:
             if run.status == "queued":
@@ -174,9 +174,8 @@ def cancel_job(job_id: IdPath, session: SessionDep, user: CurrentUser) -> JobOut
     job = owned(user, session.get(Job, job_id), "job", job_id)
     if job.status in ("done", "failed", "cancelled"):
         raise HTTPException(status.HTTP_409_CONFLICT, f"job {job_id} is already {job.status}")
-    for run in job.runs:
-        if run.status in ("queued", "running"):
-            run.status = "cancelled"
+    for run_id in [run.id for run in job.runs]:
+        cancel_run(session, run_id, "job cancelled")  # by compare-and-set: races a claim
     job.status = "cancelled"
     session.flush()
     return JobOut.of(job)

@@ -1,0 +1,145 @@
+"""One delivery of a run, in this process, with the real pipeline on real PostgreSQL: a run
+done once, a second delivery doing nothing, the soft time limit failing the run by
+compare-and-set with its folder removed, and an exception on a cancelled run leaving it
+cancelled. The soft limit arrives as Celery's does: an exception raised from a signal."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from celery.exceptions import SoftTimeLimitExceeded
+from sqlalchemy import func, select
+
+from backend.core.config import Settings
+from backend.db.migrate import upgrade
+from backend.db.models import Run, RunTrajectory
+from backend.db.session import session_scope
+from backend.execute import execute_run
+from backend.lifecycle import cancel_run, history, history_faults
+from backend.store import create_job, local_user, save_world
+from tests.services import scratch_database
+from worker.pipeline import RunParams
+from worker.world.world import World
+
+
+@pytest.fixture(scope="module")
+def pg_url() -> Iterator[str]:
+    with scratch_database("mapqual_exec") as url:
+        upgrade(url)
+        yield url
+
+
+def _rooms(nx: int, ny: int, room_px: int = 120) -> World:
+    """nx x ny rooms of 6 m with 1 m doors."""
+    occ = np.zeros((ny * room_px + 1, nx * room_px + 1), bool)
+    occ[:, ::room_px] = True
+    occ[::room_px, :] = True
+    for i in range(1, nx):
+        occ[50:-50, i * room_px] = np.arange(ny * room_px - 99) % room_px >= 20
+    for j in range(1, ny):
+        occ[j * room_px, 50:-50] = np.arange(nx * room_px - 99) % room_px >= 20
+    return World.from_array(occ, 0.05, name=f"rooms_{nx}x{ny}")
+
+
+def _run(url: str, slam: str, time_limit: float, world: World) -> int:
+    params = RunParams.from_json({"algorithm": slam, "explore": {"time_limit": time_limit}})
+    with session_scope(url) as s:
+        owner = local_user(s).id
+        sha = world.fingerprint()
+        row = save_world(s, owner_id=owner, world=world, sha256=sha, source_format="image")
+        job = create_job(
+            s, owner_id=owner, world_id=row.id, slam=slam, params=params.to_json(), seeds=[1]
+        )
+        return job.runs[0].id
+
+
+def _settings(url: str, runs: Path) -> Settings:
+    return Settings(DATABASE_URL=url, MAPQUAL_RUNS_DIR=str(runs), MAPQUAL_RUN_LEASE=30.0)
+
+
+def _raise_once_running(url: str, run_id: int, exc: BaseException, before=None) -> None:
+    """Raise `exc` in the main thread, from a signal handler, once the run has stored its first
+    progress (a wall-clock timer could land inside numba's compiler, which swallows it)."""
+
+    def handler(_sig, _frame):
+        if before is not None:
+            before()
+        raise exc
+
+    def watch() -> None:
+        for _ in range(1200):
+            with session_scope(url) as s:
+                if s.get_one(Run, run_id).progress.get("t", 0) > 0:
+                    break
+            time.sleep(0.1)
+        os.kill(os.getpid(), signal.SIGALRM)
+
+    signal.signal(signal.SIGALRM, handler)
+    threading.Thread(target=watch, daemon=True).start()
+
+
+@pytest.fixture(autouse=True)
+def _no_alarm() -> Iterator[None]:
+    yield
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)
+
+
+def _folders(runs: Path) -> list[str]:
+    return sorted(p.name for p in runs.iterdir()) if runs.exists() else []
+
+
+def test_a_run_is_done_once_and_a_second_delivery_does_nothing(pg_url, tmp_path):
+    run_id = _run(pg_url, "oracle", 60.0, _rooms(2, 1))
+    settings = _settings(pg_url, tmp_path / "runs")
+    first = execute_run(run_id, settings)
+    assert first.kind == "done", first
+    assert _folders(tmp_path / "runs") == [str(run_id)]  # renamed into place, nothing beside
+    assert (tmp_path / "runs" / str(run_id) / "summary.json").exists()
+    again = execute_run(run_id, settings)
+    assert (again.kind, again.message) == ("skipped", f"run {run_id}: not run (done)")
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, run_id)
+        assert (run.status, run.attempts, run.report_dir) == (
+            "done", 1, str((tmp_path / "runs" / str(run_id)).resolve())
+        )  # fmt: skip
+        assert [e.to_status for e in history(s, run_id)] == ["running", "done"]
+        n = s.scalar(select(func.count()).where(RunTrajectory.run_id == run_id))
+        assert n == 2
+
+
+def test_the_soft_time_limit_fails_the_run_and_removes_its_folder(pg_url, tmp_path):
+    run_id = _run(pg_url, "rbpf", 3000.0, _rooms(5, 3))  # minutes: the limit comes first
+    _raise_once_running(pg_url, run_id, SoftTimeLimitExceeded())
+    outcome = execute_run(run_id, _settings(pg_url, tmp_path / "runs"))
+    assert outcome.kind == "failed", outcome
+    assert _folders(tmp_path / "runs") == []  # neither the attempt's folder nor the run's
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, run_id)
+        assert run.status == "failed" and run.error.startswith("SoftTimeLimitExceeded")
+        events = history(s, run_id)
+        assert [e.to_status for e in events] == ["running", "failed"]
+        assert history_faults(events) == [] and events[1].attempt == run.attempt
+
+
+def test_an_exception_on_a_cancelled_run_leaves_it_cancelled(pg_url, tmp_path):
+    run_id = _run(pg_url, "rbpf", 3000.0, _rooms(5, 3))
+
+    def cancel() -> None:  # the user cancels; the run breaks before it notices
+        with session_scope(pg_url) as s:
+            assert cancel_run(s, run_id)
+
+    _raise_once_running(pg_url, run_id, RuntimeError("boom"), before=cancel)
+    outcome = execute_run(run_id, _settings(pg_url, tmp_path / "runs"))
+    assert outcome.kind == "lost", outcome
+    assert _folders(tmp_path / "runs") == []
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, run_id)
+        assert (run.status, run.error) == ("cancelled", None)
+        assert [e.to_status for e in history(s, run_id)] == ["running", "cancelled"]
