@@ -12,7 +12,7 @@ from datetime import timedelta
 from typing import Any
 
 from fastapi import HTTPException, status
-from sqlalchemy import func, select
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from backend.core.config import Settings
@@ -86,10 +86,15 @@ def time_limit_s(params: Mapping[str, Any] | None) -> float:
 
 def _lock_owner(session: Session, user_id: int) -> None:
     """Take the owner's row until the transaction ends, so two requests of one owner at the
-    same time cannot both pass on the same count (PostgreSQL; SQLite, the embedded
-    single-user default, ignores it)."""
-    # FOR NO KEY UPDATE: conflicts with itself (so one owner's checks queue) but not with
-    # other transactions inserting rows that merely reference the user
+    same time cannot both pass on the same count."""
+    if session.get_bind().dialect.name == "sqlite":
+        # SQLite locks the whole database for writing, not rows: a write (that changes
+        # nothing) takes that lock now, before the counts are read, and holds it to the commit,
+        # so a parallel request waits (busy timeout) and then counts what this one stored
+        session.execute(update(User).where(User.id == user_id).values(is_admin=User.is_admin))
+        return
+    # PostgreSQL, FOR NO KEY UPDATE: conflicts with itself (so one owner's checks queue) but
+    # not with other transactions inserting rows that merely reference the user
     session.execute(select(User.id).where(User.id == user_id).with_for_update(key_share=True))
 
 

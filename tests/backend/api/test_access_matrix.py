@@ -108,7 +108,11 @@ def site(tmp_path_factory):
     world = World.from_array(_rooms(), 0.05, name="two_rooms")
     params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 30.0}})
     result = run_one(world, params, 2)
-    redis_url = ensure_redis().rsplit("/", 1)[0] + "/11"
+    import redis
+
+    # a broker database no other test uses (jobs submitted here are sent, never run)
+    redis_url = ensure_redis().rsplit("/", 1)[0] + "/10"
+    redis.Redis.from_url(redis_url).flushdb()
     with scratch_database("mapqual_access") as url:
         upgrade(url)
         keys, ids, owned = {}, {}, {}
@@ -135,6 +139,7 @@ def site(tmp_path_factory):
         settings = Settings(DATABASE_URL=url, REDIS_URL=redis_url)
         with TestClient(create_app(settings)) as client:
             yield Site(client, url, keys, ids, owned)
+        redis.Redis.from_url(redis_url).flushdb()
 
 
 def _fill(path: str, objects: Owned) -> str:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import re
+import time
 from datetime import timedelta
 
 import numpy as np
@@ -107,6 +108,15 @@ def test_the_old_key_cookie_is_refused_everywhere(api):
     assert browser.get("/", follow_redirects=False).headers["location"] == "/login?next=/"
 
 
+def _wait_ready(api, world_id: int, timeout_s: float = 30.0) -> None:
+    """Until the uploaded world's analysis (in the app's process pool) has made it ready."""
+    deadline = time.monotonic() + timeout_s
+    while (status := api.get(f"/api/v1/worlds/{world_id}").json()["status"]) == "pending":
+        assert time.monotonic() < deadline, f"world {world_id} still pending"
+        time.sleep(0.1)
+    assert status == "ready", status
+
+
 def test_every_form_needs_the_sessions_csrf_token(api):
     browser, token = _sign_in(api)
     other, other_token = _sign_in(api, "bob")
@@ -119,6 +129,7 @@ def test_every_form_needs_the_sessions_csrf_token(api):
     r = browser.post("/worlds", files=world, data={"resolution": "0.05", "csrf_token": token})
     assert r.status_code < 300 and "as #" in r.text, r.text
     wid = int(re.search(r"as #(\d+)", r.text).group(1))
+    _wait_ready(api, wid)
     job = {"world_id": str(wid), "runs": "1", "slam": "odometry"}
     for bad in ({}, {"csrf_token": token[:-1] + "x"}):
         r = browser.post("/jobs", data={**job, **bad}, follow_redirects=False)
@@ -140,6 +151,7 @@ def test_the_api_reached_by_cookie_needs_the_csrf_header_and_by_key_needs_none(a
         headers={"X-CSRF-Token": token},
     ).text  # fmt: skip
     wid = int(re.search(r"as #(\d+)", wid).group(1))
+    _wait_ready(api, wid)
     body = {"world_id": wid, "runs": 1, "slam": "odometry"}
     r = browser.post("/api/v1/jobs", json=body)
     assert r.status_code == 403 and "X-CSRF-Token" in r.json()["detail"]

@@ -98,8 +98,9 @@ class Service:
 
     def job(self, png: bytes, seeds: list[int], slam: str, time_limit: float) -> list[int]:
         r = self.client.post(
-            "/api/v1/worlds", files={"file": ("w.png", png)}, data={"resolution": "0.05"}
-        )
+            "/api/v1/worlds", files={"file": ("w.png", png)}, data={"resolution": "0.05"},
+            params={"wait": 30},
+        )  # fmt: skip
         assert r.status_code in (200, 201), r.text
         body = {"world_id": r.json()["id"], "seeds": seeds, "slam": slam,
                 "params": {"explore": {"time_limit": time_limit}}}  # fmt: skip
