@@ -24,17 +24,33 @@ DEFAULT_TIME_LIMIT_S = ExploreParams.time_limit  # [s] what a run without the pa
 
 
 def check_runs(
-    session: Session, owner_id: int, settings: Settings, n_new: int, params: Mapping[str, Any]
+    session: Session,
+    owner_id: int,
+    settings: Settings,
+    n_new: int,
+    params: Mapping[str, Any],
+    *,
+    locked: bool = False,
 ) -> None:
     """429 unless `n_new` more runs with `params` keep the owner within `quota_active_runs`
     (runs queued or running at once) and `quota_sim_hours` (the simulated time those runs may
-    take in all, from each run's `explore.time_limit`). Call before storing anything."""
-    _lock_owner(session, owner_id)
+    take in all, from each run's `explore.time_limit`). Call before storing anything; `locked`:
+    the transaction holds the owner's lock already (`lock_owner`, or a statement of its own)."""
+    if not locked:
+        lock_owner(session, owner_id)
+    # at most one run past the limit is read: past it the answer is 429 whatever the rest, so
+    # the check costs O(limit), not O(runs the owner has queued)
+    mine = (
+        select(Run.time_limit_s)
+        .where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
+        .limit(settings.quota_active_runs + 1)
+        .subquery()
+    )
     active, seconds = session.execute(
         select(
-            func.count(Run.id),
-            func.coalesce(func.sum(func.coalesce(Run.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
-        ).where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
+            func.count(),
+            func.coalesce(func.sum(func.coalesce(mine.c.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
+        ).select_from(mine)
     ).one()
     if active + n_new > settings.quota_active_runs:
         _refuse(
@@ -56,7 +72,7 @@ def check_runs(
 def check_upload(session: Session, owner_id: int, settings: Settings) -> None:
     """429 unless one more world keeps the owner within `quota_worlds` (worlds stored) and
     `quota_uploads_per_day` (worlds created in the last 24 hours)."""
-    _lock_owner(session, owner_id)
+    lock_owner(session, owner_id)
     since = utcnow() - timedelta(days=1)
     stored, recent = session.execute(
         select(func.count(World.id), func.count(World.id).filter(World.created_at > since)).where(
@@ -84,7 +100,7 @@ def time_limit_s(params: Mapping[str, Any] | None) -> float:
         return DEFAULT_TIME_LIMIT_S
 
 
-def _lock_owner(session: Session, user_id: int) -> None:
+def lock_owner(session: Session, user_id: int) -> None:
     """Take the owner's row until the transaction ends, so two requests of one owner at the
     same time cannot both pass on the same count."""
     if session.get_bind().dialect.name == "sqlite":

@@ -165,9 +165,12 @@ def create_job(
     params: dict[str, Any],
     seeds: Sequence[int],
     idempotency_key: str | None = None,
+    broker_epoch: str | None = None,
 ) -> Job:
     """A queued job with one queued run per seed; every call makes new runs, never reuses old
-    (except a repeated `idempotency_key` of the same owner, which returns the first job)."""
+    (except a repeated `idempotency_key` of the same owner, which returns the first job).
+    `broker_epoch`: the epoch of the broker the runs are about to be sent to (see
+    `backend.queue`), stamped as they are made."""
     if not seeds:
         raise ValueError("a job needs at least one seed")
     if idempotency_key is not None:
@@ -187,7 +190,14 @@ def create_job(
     # Runs built through the relationship: one flush inserts the job, then all runs in one
     # batched statement, and job.runs needs no second query afterwards.
     job.runs = [
-        Run(owner_id=owner_id, world_id=world_id, seed=int(seed), slam=slam, params=params)
+        Run(
+            owner_id=owner_id,
+            world_id=world_id,
+            seed=int(seed),
+            slam=slam,
+            params=params,
+            broker_epoch=broker_epoch,
+        )  # fmt: skip
         for seed in seeds
     ]
     session.add(job)

@@ -24,9 +24,9 @@ from backend.api.deps import (
     owned,
 )
 from backend.core.config import Settings
-from backend.db.models import Job, Run, World
+from backend.db.models import Job, Run, User, World
 from backend.lifecycle import cancel_run
-from backend.queue import enqueue_runs
+from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
 
@@ -46,6 +46,20 @@ def _run_params(overrides_json: str) -> tuple[str, str]:
 
 
 _WORLD_OWNER = select(World.owner_id, World.status).where(World.id == bindparam("world_id"))
+# The same, taking the submitting user's row as the quota check needs (PostgreSQL: FOR NO KEY
+# UPDATE OF users, see `quotas.lock_owner`): one statement where the check would add another.
+_WORLD_OWNER_LOCKING_USER = (
+    select(World.owner_id, World.status)
+    .join(User, User.id == bindparam("user_id"))
+    .where(World.id == bindparam("world_id"))
+    .with_for_update(of=User, key_share=True)
+)
+
+
+def _queue_down() -> HTTPException:
+    return HTTPException(
+        status.HTTP_503_SERVICE_UNAVAILABLE, "the job queue is unreachable; try again later"
+    )
 
 
 def submit(
@@ -57,7 +71,14 @@ def submit(
 ) -> JobOut:
     """Store a job of one queued run per seed and queue its runs (the work of POST /jobs, also
     used by the dashboard's form)."""
-    world = session.connection().execute(_WORLD_OWNER, {"world_id": body.world_id}).first()
+    # on PostgreSQL the user's row is locked with the first read (held to the commit), so the
+    # quota check below counts with no other submit of this user in between; SQLite has no row
+    # locks, and the check takes the database's write lock itself
+    locked = session.get_bind().dialect.name == "postgresql"
+    stmt = _WORLD_OWNER_LOCKING_USER if locked else _WORLD_OWNER
+    world = (
+        session.connection().execute(stmt, {"world_id": body.world_id, "user_id": user.id}).first()
+    )
     owned(user, world, "world", body.world_id)
     if world.status != "ready":  # pending (being analysed) or invalid: no geometry to run on
         raise HTTPException(
@@ -74,7 +95,13 @@ def submit(
         ).first()
         if found is not None:
             return JobOut.of(found)
-    quotas.check_runs(session, user.id, settings, len(body.seed_list()), json.loads(params_json))
+    try:
+        # asked before anything is stored: a broker that cannot be reached leaves no job behind
+        epoch = broker_epoch(settings.redis_url, max_age_s=EPOCH_MAX_AGE_S)
+    except Exception:
+        raise _queue_down() from None
+    n_new, run_params = len(body.seed_list()), json.loads(params_json)
+    quotas.check_runs(session, user.id, settings, n_new, run_params, locked=locked)
     job = create_job(
         session,
         owner_id=user.id,
@@ -83,18 +110,17 @@ def submit(
         params=json.loads(params_json),
         seeds=body.seed_list(),
         idempotency_key=idempotency_key,
+        broker_epoch=epoch,
     )
     session.commit()  # the runs must exist before a worker can pick them up
     try:
-        enqueue_runs(session, settings.redis_url, [run.id for run in job.runs])
+        send_runs(settings.redis_url, [run.id for run in job.runs])
     except Exception as exc:
         for run in job.runs:
             if run.status == "queued":
                 mark_run_failed(session, run.id, f"could not enqueue: {type(exc).__name__}")
         session.commit()
-        raise HTTPException(
-            status.HTTP_503_SERVICE_UNAVAILABLE, "the job queue is unreachable; try again later"
-        ) from None
+        raise _queue_down() from None
     return JobOut.of(job)
 
 

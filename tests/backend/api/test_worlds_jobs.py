@@ -227,7 +227,7 @@ def test_results_of_an_unfinished_run_are_404(api):
         assert r.status_code == 404 and r.json()["detail"]
 
 
-def test_unreachable_broker_is_503_and_the_runs_say_why(api):
+def test_unreachable_broker_is_503_and_stores_no_job(api):
     from fastapi.testclient import TestClient
 
     from backend.core.config import Settings
@@ -239,10 +239,9 @@ def test_unreachable_broker_is_503_and_the_runs_say_why(api):
         headers = {"Authorization": f"Bearer {api.keys['alice']}"}
         r = client.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1}, headers=headers)
     assert r.status_code == 503 and "unreachable" in r.json()["detail"]
-    job = api.get("/api/v1/jobs").json()["items"][0]
-    assert job["status"] == "failed"
-    run = api.get(f"/api/v1/runs/{job['runs'][0]['id']}").json()
-    assert run["status"] == "failed" and "could not enqueue" in run["error"]
+    # the broker is asked for its epoch before anything is stored: nothing to clean up, and
+    # the same request sent again later makes the job
+    assert api.get("/api/v1/jobs").json()["items"] == []
 
 
 def test_a_finished_run_without_its_report_folder_serves_its_map_from_the_database(api):
