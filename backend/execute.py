@@ -38,8 +38,7 @@ class Outcome:
 
 def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None) -> Outcome:
     """Claim, run, and store run `run_id` (see the module's docstring)."""
-    from worker.pipeline import RunCancelled, RunParams, RunSuperseded, run_one
-    from worker.report.folder import SIM_LOG, write_report
+    from worker.pipeline import RunCancelled, RunParams, RunSuperseded
 
     url, attempt = settings.database_url, new_attempt()
     with session_scope(url) as s:
@@ -53,16 +52,7 @@ def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None
     folder = attempt_dir(final, attempt)
     reporter = ProgressReporter(url, run_id, redis_client, attempt=attempt)
     try:
-        result = run_one(world, params, seed, reporter, sim_log=folder / SIM_LOG)
-        write_report(result, folder)
-        ex = result.exploration
-        with session_scope(url) as s:
-            store_run_result(
-                s, run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
-                pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
-                map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
-                report_dir=str(final), attempt=attempt, folder=folder,
-            )  # fmt: skip
+        result = run_and_store(url, run_id, attempt, (world, params, seed), reporter, folder, final)
     except RunSuperseded as exc:
         return _lost(folder, "lost", f"run {run_id}: {exc}")
     except RunCancelled:
@@ -74,6 +64,37 @@ def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None
         return _failed(url, run_id, attempt, folder, final, f"{type(exc).__name__}: {exc}")
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
     return Outcome("done", f"run {run_id}: {result.summary['outcome']}")
+
+
+def run_and_store(
+    url: str,
+    run_id: int,
+    attempt: str,
+    job: tuple[Any, Any, int],
+    on_progress: Any,
+    folder: Path,
+    final: Path,
+    rename: bool = True,
+) -> Any:
+    """Run the pipeline on `job` = (world, RunParams, seed) writing into `folder`, write the
+    report there, and store the result as `attempt`'s in one transaction, `folder` renamed to
+    `final` inside it (`rename=False`: the report stays where it was written, as `final`).
+    The `RunResult`; TransitionRefused when the attempt no longer holds the run."""
+    from worker.pipeline import run_one
+    from worker.report.folder import SIM_LOG, write_report
+
+    world, params, seed = job
+    result = run_one(world, params, seed, on_progress, sim_log=folder / SIM_LOG)
+    write_report(result, folder)
+    ex = result.exploration
+    with session_scope(url) as s:
+        store_run_result(
+            s, run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
+            pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
+            map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
+            report_dir=str(final), attempt=attempt, folder=folder if rename else None,
+        )  # fmt: skip
+    return result
 
 
 def _lost(folder: Path, kind: Kind, message: str) -> Outcome:

@@ -121,6 +121,7 @@ def run(
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
     from backend.db.session import session_scope
+    from backend.execute import run_and_store
     from backend.lifecycle import attempt_dir, new_attempt
     from backend.store import (
         create_job,
@@ -128,11 +129,9 @@ def run(
         mark_run_failed,
         mark_run_started,
         save_world,
-        store_run_result,
         world_fingerprint,
     )  # fmt: skip
-    from worker.pipeline import ALGORITHMS, run_one
-    from worker.report.folder import SIM_LOG, write_report
+    from worker.pipeline import ALGORITHMS
     from worker.world.loader import load_world
 
     if slam is not None and slam not in ALGORITHMS:
@@ -169,16 +168,9 @@ def run(
     folder = out_dir if out is not None else attempt_dir(out_dir, attempt)
     try:
         with _Progress(params.explore.time_limit, quiet=as_json) as progress:
-            result = run_one(world, params, seed, progress, sim_log=folder / SIM_LOG)
-        write_report(result, folder)
-        ex = result.exploration
-        with session_scope(url) as s:
-            store_run_result(
-                s, run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
-                pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
-                map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
-                report_dir=str(out_dir), attempt=attempt,
-                folder=None if out is not None else folder,
+            result = run_and_store(
+                url, run_id, attempt, (world, params, seed), progress, folder, out_dir,
+                rename=out is None,
             )  # fmt: skip
     except BaseException as exc:
         with session_scope(url) as s:

@@ -12,7 +12,6 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-import numpy as np
 import pytest
 from celery.exceptions import SoftTimeLimitExceeded
 from sqlalchemy import func, select
@@ -24,6 +23,7 @@ from backend.db.session import session_scope
 from backend.execute import execute_run
 from backend.lifecycle import cancel_run, history, history_faults
 from backend.store import create_job, local_user, save_world
+from tests.backend.plans import rooms_occupancy
 from tests.services import scratch_database
 from worker.pipeline import RunParams
 from worker.world.world import World
@@ -38,13 +38,7 @@ def pg_url() -> Iterator[str]:
 
 def _rooms(nx: int, ny: int, room_px: int = 120) -> World:
     """nx x ny rooms of 6 m with 1 m doors."""
-    occ = np.zeros((ny * room_px + 1, nx * room_px + 1), bool)
-    occ[:, ::room_px] = True
-    occ[::room_px, :] = True
-    for i in range(1, nx):
-        occ[50:-50, i * room_px] = np.arange(ny * room_px - 99) % room_px >= 20
-    for j in range(1, ny):
-        occ[j * room_px, 50:-50] = np.arange(nx * room_px - 99) % room_px >= 20
+    occ = rooms_occupancy(nx, ny, room_px)
     return World.from_array(occ, 0.05, name=f"rooms_{nx}x{ny}")
 
 

@@ -34,6 +34,7 @@ from backend.lifecycle import history, history_faults
 from backend.main import create_app
 from backend.queue import EPOCH_KEY
 from backend.store import add_user
+from tests.backend.plans import rooms_occupancy
 from tests.services import ensure_redis, scratch_database
 
 # apart from the batch (12), API (13, flushed by its fixtures), queue (14) and page (15) tests
@@ -44,13 +45,7 @@ VISIBILITY_S = 6
 
 def _rooms_png(nx: int, ny: int, room_px: int = 120) -> bytes:
     """nx x ny rooms of 6 m with 1 m doors, as an upload."""
-    occ = np.zeros((ny * room_px + 1, nx * room_px + 1), bool)
-    occ[:, ::room_px] = True
-    occ[::room_px, :] = True
-    for i in range(1, nx):
-        occ[50:-50, i * room_px] = np.arange(ny * room_px - 99) % room_px >= 20
-    for j in range(1, ny):
-        occ[j * room_px, 50:-50] = np.arange(nx * room_px - 99) % room_px >= 20
+    occ = rooms_occupancy(nx, ny, room_px)
     buf = io.BytesIO()
     Image.fromarray(np.where(occ, 0, 255).astype(np.uint8)).save(buf, format="PNG")
     return buf.getvalue()
