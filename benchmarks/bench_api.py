@@ -289,9 +289,20 @@ def _upload(base: str, hdr: dict, name: str, png: bytes) -> dict:
     return r.json()
 
 
-def _latencies(base: str, keys: list[str], args) -> dict[str, tuple]:
-    """POST /jobs and GET /jobs/{id}: (sequential, open loop, saturation rate) of each. The
-    POSTs go round the owners, each on a world of its own; the GETs read the first owner's."""
+def _cpu_s(pid: int) -> float:
+    """CPU time [s] (user + system) of a process and its children so far, from /proc."""
+    pids = [pid] + [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    ticks = 0
+    for p in pids:
+        fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
+        ticks += int(fields[11]) + int(fields[12])
+    return ticks / os.sysconf("SC_CLK_TCK")
+
+
+def _latencies(base: str, keys: list[str], args, pid: int | None = None) -> dict[str, tuple]:
+    """POST /jobs and GET /jobs/{id}: (sequential, open loop, saturation rate, server CPU ms
+    per request) of each. The POSTs go round the owners, each on a world of its own; the GETs
+    read the first owner's. CPU time drifts with the machine less than latency does."""
     auth = [{"Authorization": f"Bearer {key}"} for key in keys]
     # 10 simulated minutes a run: 86 queued runs an owner (4,300 POSTs over 50 owners) ask for
     # 14 h, within the default quota of 100 simulated hours
@@ -306,7 +317,10 @@ def _latencies(base: str, keys: list[str], args) -> dict[str, tuple]:
         k = i % len(keys)
         return await client.post("/api/v1/jobs", json=bodies[k], headers=auth[k])
 
+    n_requests = min(args.requests, 300) + 2 * args.requests  # what _measure sends
+    c0 = _cpu_s(pid) if pid else 0.0
     post = asyncio.run(_measure(base, keys[0], args, post_job))
+    c1 = _cpu_s(pid) if pid else 0.0
     page = httpx.get(f"{base}/api/v1/jobs", headers=auth[0], params={"limit": 200}).json()
     job_ids = [j["id"] for j in page["items"]]
 
@@ -314,7 +328,12 @@ def _latencies(base: str, keys: list[str], args) -> dict[str, tuple]:
         return await client.get(f"/api/v1/jobs/{job_ids[i % len(job_ids)]}")
 
     get = asyncio.run(_measure(base, keys[0], args, get_job))
-    return {"POST /jobs": post, "GET /jobs/{id}": get}
+    c2 = _cpu_s(pid) if pid else 0.0
+    per = 1000.0 / n_requests
+    return {
+        "POST /jobs": (*post, (c1 - c0) * per),
+        "GET /jobs/{id}": (*get, (c2 - c1) * per),
+    }
 
 
 def _side_by_side(args, other: Path) -> None:
@@ -333,17 +352,18 @@ def _side_by_side(args, other: Path) -> None:
                 redis.Redis.from_url(redis_url).flushdb()
                 server, base, keys = _start(python, tree, env, args)
                 try:
-                    got = _latencies(base, keys, args)
+                    got = _latencies(base, keys, args, server.pid)
                 finally:
                     server.terminate()
                     server.wait(timeout=10)
                     redis.Redis.from_url(redis_url).flushdb()
             line = []
-            for label, (_, opn, _) in got.items():
+            for label, (_, opn, _, cpu) in got.items():
                 p50, p99 = np.percentile(opn, [50, 99])
                 figures[name].setdefault(f"{label} p50", []).append(float(p50))
                 figures[name].setdefault(f"{label} p99", []).append(float(p99))
-                line.append(f"{label} p50 {p50:5.1f} p99 {p99:5.1f} ms")
+                figures[name].setdefault(f"{label} CPU/req", []).append(float(cpu))
+                line.append(f"{label} p50 {p50:5.1f} p99 {p99:5.1f} ms, CPU {cpu:4.2f} ms/req")
             print(f"  round {r + 1} {name:5s}: " + "; ".join(line), flush=True)
     print(
         f"{args.clients} clients every {args.period:g} s (open loop), {args.owners} owner(s); "
@@ -366,7 +386,7 @@ def _bench(args, db_url: str) -> None:
     server, base, keys = _start(sys.executable, ROOT, env, args)
     try:
         hdr = {"Authorization": f"Bearer {keys[0]}"}
-        got = _latencies(base, keys, args)
+        got = _latencies(base, keys, args, server.pid)
         offered = args.clients / args.period
         print(
             f"PostgreSQL + Redis on loopback, {args.server_workers} uvicorn process(es), "
@@ -374,7 +394,7 @@ def _bench(args, db_url: str) -> None:
             f"{args.clients} clients every {args.period:g} s; load average "
             f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
         )
-        for (label, (seq, opn, rate)), target in zip(got.items(), (50, 20), strict=True):
+        for (label, (seq, opn, rate, cpu)), target in zip(got.items(), (50, 20), strict=True):
             s50, s99 = np.percentile(seq, [50, 99])
             o50, o99 = np.percentile(opn, [50, 99])
             verdict = "ok" if o99 < target else "MISSED"
@@ -385,6 +405,7 @@ def _bench(args, db_url: str) -> None:
                 f"p99 {o99:6.1f} ms  (target p99 < {target} ms: {verdict})"
             )
             print(f"  {args.clients} clients back to back saturate at {rate:6.0f} req/s")
+            print(f"  server CPU {cpu:.2f} ms per request (all three phases)")
         if args.queue_runs:
             import redis
 
