@@ -93,18 +93,34 @@ def get_or_create_world(
         sha256=sha256,
         source_format=source_format,
         source_path=source_path,
-        resolution=float(resolution),
-        origin_x=float(origin[0]),
-        origin_y=float(origin[1]),
-        width_px=int(occ.shape[1]),
-        height_px=int(occ.shape[0]),
-        start_pose=[float(v) for v in start_pose],
         facts=facts,
-        occupancy=pack_array(np.asarray(occ, dtype=bool)),
+        **_geometry(resolution, origin, occ, start_pose),
     )
     session.add(world)
     session.flush()
     return world
+
+
+def _geometry(
+    resolution: float, origin: Sequence[float], occ: np.ndarray, start_pose: Sequence[float]
+) -> dict[str, Any]:
+    """The geometry columns of an analysed world (`occ (H, W) bool`, bottom row first)."""
+    return {
+        "resolution": float(resolution),
+        "origin_x": float(origin[0]),
+        "origin_y": float(origin[1]),
+        "width_px": int(occ.shape[1]),
+        "height_px": int(occ.shape[0]),
+        "start_pose": [float(v) for v in start_pose],
+        "occupancy": pack_array(np.asarray(occ, dtype=bool)),
+    }
+
+
+def _facts(world: WorldModel) -> dict[str, Any]:
+    """A loaded world's facts as stored, with the loader's warnings."""
+    facts = dataclasses.asdict(world.facts)
+    facts["warnings"] = list(world.warnings)
+    return facts
 
 
 def save_world(
@@ -116,8 +132,6 @@ def save_world(
     source_format: str,
 ) -> World:
     """Store a loaded floorplan (once per owner and content hash)."""
-    facts = dataclasses.asdict(world.facts)
-    facts["warnings"] = list(world.warnings)
     return get_or_create_world(
         session,
         owner_id=owner_id,
@@ -129,7 +143,7 @@ def save_world(
         origin=world.origin,
         occ=world.occ,
         start_pose=world.start_pose,
-        facts=facts,
+        facts=_facts(world),
     )
 
 
@@ -446,20 +460,12 @@ def create_pending_world(
 def mark_world_ready(session: Session, world_id: int, world: WorldModel) -> bool:
     """Fill a pending world's geometry and facts from its analysis, drop its upload; False if
     it is no longer pending (another process finished it first: the first result stays)."""
-    facts = dataclasses.asdict(world.facts)
-    facts["warnings"] = list(world.warnings)
     values = {
         "status": "ready",
         "error": None,
         "upload": None,
-        "resolution": float(world.resolution),
-        "origin_x": float(world.origin[0]),
-        "origin_y": float(world.origin[1]),
-        "width_px": int(world.occ.shape[1]),
-        "height_px": int(world.occ.shape[0]),
-        "start_pose": [float(v) for v in world.start_pose],
-        "facts": facts,
-        "occupancy": pack_array(np.asarray(world.occ, dtype=bool)),
+        "facts": _facts(world),
+        **_geometry(world.resolution, world.origin, world.occ, world.start_pose),
     }
     return _finish_world(session, world_id, values)
 
