@@ -9,6 +9,7 @@ from typing import Literal
 import numpy as np
 
 from worker.errors import InputError
+from worker.evaluate.se2_scalar import wrap_fold
 from worker.sim import odometry
 from worker.sim.collision import advance, footprint_collides
 from worker.sim.laser import LaserSpec
@@ -90,7 +91,7 @@ class Simulator:
             clearance = clearance_map(world.occ, self._res)
         self._jump = jump_map(world.occ, clearance, self._res)
         pose = np.asarray(world.start_pose if start_pose is None else start_pose, dtype=float)
-        self._x, self._y, self._th = float(pose[0]), float(pose[1]), odometry.wrap_angle(pose[2])
+        self._x, self._y, self._th = float(pose[0]), float(pose[1]), wrap_fold(pose[2])
         if self._collides(self._x, self._y, self._th):
             raise InputError(
                 f"{world.name}: the robot's {self.params.footprint:.2f} m footprint at the start "
@@ -161,7 +162,7 @@ class Simulator:
         x, y, th, blocked, t_hit = advance(
             self._occ, self._res, self._ox, self._oy, x0, y0, th0, v, w, dt, self._half
         )
-        self._x, self._y, self._th = float(x), float(y), odometry.wrap_angle(float(th))
+        self._x, self._y, self._th = float(x), float(y), wrap_fold(float(th))
         if blocked:
             self._v = 0.0
             self._w = 0.0
