@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from worker.errors import InputError
+from worker.sim.params import FOOTPRINT_M
 from worker.world.image_io import MAX_PIXELS, read_grey
 from worker.world.refs import (
     check_resolution,
@@ -15,7 +16,7 @@ from worker.world.refs import (
     stage_references,
     yaml_references,
 )
-from worker.world.world import FOOTPRINT_M, World
+from worker.world.world import World
 
 FREE_GREY_MIN = 250  # default rule: grey >= 250 is free, anything else is an obstacle
 IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".pbm", ".bmp", ".gif", ".tif", ".tiff", ".jpg", ".jpeg"}

@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from worker.errors import InputError
+from worker.sim.params import FOOTPRINT_M
 from worker.world import analysis
 
 RESOLUTION_MIN = 0.005  # [m/cell] exclusive
 RESOLUTION_MAX = 1.0  # [m/cell] inclusive
-FOOTPRINT_M = 0.4  # [m] side of the square robot footprint (Pioneer 3-AT class)
 
 
 @dataclass(frozen=True)
