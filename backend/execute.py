@@ -38,7 +38,8 @@ class Outcome:
 
 def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None) -> Outcome:
     """Claim, run, and store run `run_id` (see the module's docstring)."""
-    from worker.pipeline import RunCancelled, RunParams, RunSuperseded
+    from worker.pipeline import RunCancelled, RunSuperseded
+    from worker.run_params import RunParams
 
     url, attempt = settings.database_url, new_attempt()
     with session_scope(url) as s:

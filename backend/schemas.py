@@ -6,9 +6,11 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import AfterValidator, BaseModel, Field, model_validator
 
 from backend.db.models import Job, Run, World
+from worker.run_params import run_params_schema
+from worker.slam import registry
 
 MAX_RUNS_PER_JOB = 1000
 # Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
@@ -61,6 +63,24 @@ class WorldOut(BaseModel):
         return out
 
 
+def _run_params_schema(schema: dict[str, Any]) -> None:
+    """The field's schema becomes RunParams' (the field keeps its own description)."""
+    params = run_params_schema()
+    params.pop("title")
+    params.pop("description")
+    schema.update(params)
+
+
+# A registered SLAM algorithm (worker.slam.registry): an enum in OpenAPI, checked on input.
+SlamName = Annotated[
+    str, AfterValidator(registry.check_name), Field(json_schema_extra=registry.add_enum)
+]
+# A job's parameter overrides: documented by RunParams' own JSON Schema (every key optional),
+# made when OpenAPI is; validated with the defaults merged in, by RunParams itself (InputError
+# -> 400 naming the key).
+RunParamsOverrides = Annotated[dict[str, Any], Field(json_schema_extra=_run_params_schema)]
+
+
 class JobIn(BaseModel):
     """A job: `runs` (a count, seeds 1..runs) or `seeds` (a list), and optional overrides."""
 
@@ -71,10 +91,11 @@ class JobIn(BaseModel):
     seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] | None = Field(
         default=None, min_length=1, max_length=MAX_RUNS_PER_JOB
     )
-    slam: Literal["rbpf", "odometry", "oracle"] | None = None
-    params: dict[str, Any] = Field(
+    slam: SlamName | None = None
+    params: RunParamsOverrides = Field(
         default_factory=dict,
-        description="Overrides by section: sim, slam, explore, eval (see RunParams).",
+        description="Overrides by section: sim, slam, explore, eval (see RunParams); keys left "
+        "out keep their defaults.",
     )
 
     @model_validator(mode="after")

@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from worker.slam import registry
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -51,14 +53,15 @@ def _batch(specs, workers: int) -> tuple[float, float, float, list[dict]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="odometry", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="odometry", choices=registry.names())
     ap.add_argument("--runs", type=int, default=8)
     ap.add_argument("--time-limit", type=float, default=600.0, help="[s] simulated, per run")
     ap.add_argument("--repeats", type=int, default=2)
     args = ap.parse_args()
 
     from worker.batch.experiment import build_groups, expand
-    from worker.pipeline import RunParams, run_one
+    from worker.pipeline import run_one
+    from worker.run_params import RunParams
 
     over = {"worlds": [args.world], "runs": args.runs, "slam": args.slam}
     params = {"explore": {"time_limit": args.time_limit}}

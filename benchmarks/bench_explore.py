@@ -26,7 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.explore.loop import ExploreParams, explore  # noqa: E402
-from worker.sim.simulator import SimParams, Simulator  # noqa: E402
+from worker.sim.params import SimParams  # noqa: E402
+from worker.sim.simulator import Simulator  # noqa: E402
+from worker.slam import registry  # noqa: E402
 from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
@@ -119,7 +121,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--proof", action="store_true", help="whole explorations, outcomes")
     ap.add_argument("--worlds", default="", help="comma-separated list for --proof")
-    ap.add_argument("--slam", default="oracle", choices=("oracle", "rbpf", "odometry"))
+    ap.add_argument("--slam", default="oracle", choices=registry.names())
     ap.add_argument("--time-limit", type=float, default=3600.0, help="per run in --proof [s]")
     ap.add_argument("--png", default="", help="folder for one PNG per --proof run")
     args = ap.parse_args()

@@ -17,13 +17,15 @@ import tempfile
 import time
 from pathlib import Path
 
+from worker.slam import registry
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="rbpf", choices=registry.names())
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
     ap.add_argument("--slam-threads", type=int, default=1, help="scan-matching threads")
@@ -31,8 +33,9 @@ def main() -> None:
     if args.slam_threads < 1:
         ap.error("--slam-threads must be >= 1")
 
-    from worker.pipeline import RunParams, run_one
+    from worker.pipeline import run_one
     from worker.report.folder import SIM_LOG, write_report
+    from worker.run_params import RunParams
     from worker.world.loader import load_world
 
     world = load_world(args.world)

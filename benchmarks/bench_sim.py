@@ -50,7 +50,8 @@ def bench_raycast(world_path: Path, n: int) -> None:
     )
     # Poses along a wandering path: what the simulator actually asks for.
     from worker.sim.drivers import Wanderer
-    from worker.sim.simulator import SimParams, Simulator
+    from worker.sim.params import SimParams
+    from worker.sim.simulator import Simulator
 
     sim = Simulator(world, SimParams(), np.random.default_rng(1))
     wanderer = Wanderer(laser, np.random.default_rng(2))

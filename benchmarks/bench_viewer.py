@@ -25,6 +25,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from worker.slam import registry  # noqa: E402
+
 
 def listen(redis_url: str, run_id: int) -> None:
     """The viewer's side: subscribe and fold every message in; prints counts on SIGTERM."""
@@ -100,7 +102,7 @@ def _timed(world, params, seed, reporter) -> tuple[tuple[float, ...], dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="rbpf", choices=registry.names())
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=120.0, help="[s] simulated")
     ap.add_argument("--repeats", type=int, default=3)
@@ -121,7 +123,8 @@ def main() -> None:
     import redis
 
     from backend.progress import ProgressReporter
-    from worker.pipeline import RunParams, run_one
+    from worker.pipeline import run_one
+    from worker.run_params import RunParams
     from worker.world.loader import load_world
 
     world = load_world(args.world)

@@ -1,100 +1,116 @@
-"""Frozen parameter dataclasses to and from JSON/YAML, strictly: unknown keys and wrong types
-are errors that say which key and what was expected (the API and the CLI show them as is)."""
+"""Frozen parameter dataclasses to and from JSON/YAML through pydantic's TypeAdapter, strictly:
+unknown keys, wrong types and bad values are errors that say which key and what was expected
+(the API and the CLI show them as is)."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import types
-import typing
+from functools import cache
 from pathlib import Path
-from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
+from typing import Any, TypeVar, get_args, get_type_hints
 
 import yaml
+from pydantic import ConfigDict, TypeAdapter, ValidationError
 
 from worker.errors import InputError
 
 T = TypeVar("T")
 
+# Strict: no str -> number or int -> bool coercion, no unknown keys, no nan/inf. Input is read
+# in pydantic's JSON mode (lists for tuples, objects for dataclasses), as it is stored.
+PARAMS_CONFIG = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False)
+
+
+def _configure(cls: type) -> None:
+    """Give `cls` and every dataclass among its fields the strict config (the parameter modules
+    stay free of pydantic; a class that sets its own `__pydantic_config__` keeps it)."""
+    if "__pydantic_config__" not in cls.__dict__:
+        cls.__pydantic_config__ = PARAMS_CONFIG  # type: ignore[attr-defined]
+    for tp in get_type_hints(cls).values():
+        for arg in (tp, *get_args(tp)):
+            if dataclasses.is_dataclass(arg) and isinstance(arg, type):
+                _configure(arg)
+
+
+@cache
+def adapter(cls: type[T]) -> TypeAdapter[T]:
+    """The strict TypeAdapter of the parameter dataclass `cls` (built once)."""
+    _configure(cls)
+    return TypeAdapter(cls)
+
 
 def to_dict(obj: Any) -> dict[str, Any]:
     """A parameter dataclass as plain JSON-serialisable data (tuples become lists)."""
-    return json.loads(json.dumps(dataclasses.asdict(obj)))
+    return adapter(type(obj)).dump_python(obj, mode="json")
 
 
 def from_dict(cls: type[T], data: Any, where: str = "") -> T:
     """Build the dataclass `cls` from `data`, keeping defaults for keys that are absent.
 
     Raises `InputError` naming the dotted key (`slam.particles`) on an unknown key, a wrong type,
-    a value outside a `Literal`'s choices, or a non-finite number.
+    a value outside a `Literal`'s choices, a non-finite number, or a value its class refuses.
     """
-    prefix = f"{where}." if where else ""
     if not isinstance(data, dict):
         raise InputError(f"{where or 'parameters'} must be a mapping, not {type(data).__name__}")
-    hints = get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise InputError(
-            f"unknown parameter {prefix}{unknown[0]} (valid: {', '.join(sorted(fields))})"
-        )
-    kwargs = {k: _convert(hints[k], v, f"{prefix}{k}") for k, v in data.items()}
     try:
-        return cls(**kwargs)
-    except (ValueError, TypeError) as exc:  # __post_init__ validation
-        raise InputError(f"{where or 'parameters'}: {exc}") from None
+        text = json.dumps(data, allow_nan=True)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{where or 'parameters'}: not JSON data ({exc})") from None
+    try:
+        return adapter(cls).validate_json(text)
+    except ValidationError as exc:
+        raise InputError(_message(cls, exc.errors()[0], where)) from None
 
 
-def _convert(tp: Any, value: Any, key: str) -> Any:
-    origin = get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        return from_dict(tp, value, key)
-    if origin is Literal:
-        choices = get_args(tp)
-        if value not in choices:
-            raise InputError(f"{key} must be one of {', '.join(map(repr, choices))}, not {value!r}")
-        return value
-    if origin in (typing.Union, types.UnionType):
-        args = get_args(tp)
-        if value is None and type(None) in args:
+def _hint_at(cls: type, loc: tuple) -> Any:
+    """The type hint reached from `cls` by the field names of `loc` (None where it stops)."""
+    hint: Any = cls
+    for name in loc:
+        if not (isinstance(name, str) and dataclasses.is_dataclass(hint)):
             return None
-        errors = []
-        for arg in (a for a in args if a is not type(None)):
-            try:
-                return _convert(arg, value, key)
-            except InputError as exc:
-                errors.append(str(exc))
-        raise InputError(errors[0])
-    if origin is tuple:
-        args = get_args(tp)
-        if not isinstance(value, list | tuple):
-            raise InputError(f"{key} must be a list, not {type(value).__name__}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{key}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise InputError(f"{key} must have {len(args)} elements, not {len(value)}")
-        pairs = enumerate(zip(args, value, strict=True))
-        return tuple(_convert(a, v, f"{key}[{i}]") for i, (a, v) in pairs)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise InputError(f"{key} must be true or false, not {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise InputError(f"{key} must be an integer, not {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise InputError(f"{key} must be a number, not {value!r}")
-        if not math.isfinite(value):
-            raise InputError(f"{key} must be a finite number, not {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise InputError(f"{key} must be a string, not {value!r}")
-        return value
-    raise InputError(f"{key}: unsupported parameter type {tp!r}")
+        hint = get_type_hints(hint).get(name)
+    return hint
+
+
+def _message(cls: type, err: Any, where: str) -> str:
+    """One line for pydantic's error `err`, in the words the CLI and the API have always used."""
+    loc = tuple(err["loc"])
+    key = ".".join([where] * bool(where) + [f"[{p}]" if isinstance(p, int) else p for p in loc])
+    key = key.replace(".[", "[")
+    kind, value = err["type"], err.get("input")
+    if kind == "unexpected_keyword_argument":
+        owner = _hint_at(cls, loc[:-1])
+        valid = f" (valid: {', '.join(sorted(_fields(owner)))})" if owner is not None else ""
+        return f"unknown parameter {key}{valid}"
+    if kind == "value_error":  # __post_init__ refused the values
+        error = err.get("ctx", {}).get("error")
+        return f"{key or 'parameters'}: {error if error is not None else err['msg']}"
+    if kind == "literal_error":
+        choices = get_args(_hint_at(cls, loc)) or (err["ctx"]["expected"],)
+        return f"{key} must be one of {', '.join(map(repr, choices))}, not {value!r}"
+    if kind in ("missing", "too_long") and loc:
+        tuple_loc = loc[:-1] if kind == "missing" else loc
+        n = len(get_args(_hint_at(cls, tuple_loc)))
+        tuple_key = key.rsplit("[", 1)[0] if kind == "missing" else key
+        return f"{tuple_key} must have {n} elements"
+    words = {
+        "int_type": "must be an integer",
+        "int_from_float": "must be an integer",
+        "float_type": "must be a number",
+        "finite_number": "must be a finite number",
+        "bool_type": "must be true or false",
+        "string_type": "must be a string",
+        "dataclass_type": "must be a mapping",
+        "tuple_type": "must be a list",
+    }
+    if kind in words:
+        return f"{key} {words[kind]}, not {value!r}"
+    return f"{key}: {err['msg']}"
+
+
+def _fields(cls: type) -> list[str]:
+    return [f.name for f in dataclasses.fields(cls) if f.init]
 
 
 def load_params_file(path: str | Path) -> dict[str, Any]:

@@ -9,66 +9,30 @@ import time
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
 from worker.evaluate.ate import AteResult, absolute_trajectory_error
 from worker.evaluate.metric import RelationErrors, evaluate_relations
 from worker.evaluate.relations import (
-    AParams,
-    BParams,
     Relations,
     RelationsCapWarning,
-    SMParams,
     relations_A,
     relations_B,
     relations_SM,
 )
 from worker.evaluate.trajectory import Trajectory
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
-from worker.explore.params import ExploreParams
-from worker.params import from_dict, to_dict
+from worker.run_params import EvalParams, RunParams
 from worker.sim.carmen import CarmenWriter
-from worker.sim.simulator import SimParams, Simulator
-from worker.slam.base import make_slam
-from worker.slam.params import SlamParams
+from worker.sim.simulator import Simulator
+from worker.slam import registry
 from worker.world.world import World
 
-Algorithm = Literal["rbpf", "odometry", "oracle"]
-ALGORITHMS: tuple[str, ...] = ("rbpf", "odometry", "oracle")
-
-
-@dataclass(frozen=True)
-class EvalParams:
-    """Evaluation: B relations are the score (thesis); A and SM are reported beside them."""
-
-    b: BParams = field(default_factory=BParams)
-    a: AParams = field(default_factory=AParams)
-    sm: SMParams = field(default_factory=SMParams)
-    max_gap: float = 0.1  # [s] estimate lookup: interpolate only between samples this close
-
-
-@dataclass(frozen=True)
-class RunParams:
-    """Everything that determines a run besides the world and the seed; stored with each run."""
-
-    algorithm: Algorithm = "rbpf"  # oracle = map and localise with the ground truth
-    sim: SimParams = field(default_factory=SimParams)
-    slam: SlamParams = field(default_factory=SlamParams)
-    explore: ExploreParams = field(default_factory=ExploreParams)
-    eval: EvalParams = field(default_factory=EvalParams)
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain JSON data (`from_json` reads it back to an equal object)."""
-        return to_dict(self)
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> RunParams:
-        """Strictly validated: unknown keys, wrong types and bad values raise InputError."""
-        return from_dict(cls, data)
+__all__ = ["EvalParams", "RunParams", "RunCancelled", "RunSuperseded", "RunResult", "run_one"]
 
 
 class RunCancelled(Exception):
@@ -190,40 +154,18 @@ def run_one(
     """
     wall0 = time.perf_counter()
     rng_sim, rng_slam, rng_eval = np.random.default_rng(seed).spawn(3)
-    oracle = params.algorithm == "oracle"
-    algorithm = "odometry" if oracle else params.algorithm
-    slam = _TimedSlam(make_slam(algorithm, params.sim.laser, params.slam, rng_slam))
-    angles = params.sim.laser.angles
-
-    def progress(p: ExploreProgress) -> None:
-        wall = time.perf_counter() - wall0
-        on_progress(
-            RunProgress(
-                p.t,
-                p.coverage,
-                p.pose_gt,
-                p.pose_est,
-                p.status,
-                p.goals_reached,
-                wall,
-                p.t / wall if wall > 0 else 0.0,
-                p.goal_xy,
-                p.plan,
-                p.ranges,
-                p.occupancy,
-                angles,
-                params.sim.laser.range_max,
-            )
-        )
-
-    callback = progress if on_progress is not None else None
+    entry = registry.get(params.algorithm)
+    slam = _TimedSlam(entry.factory(params.sim.laser, params.slam, rng_slam))
+    callback = None if on_progress is None else _progress_relay(on_progress, params, wall0)
     with _open_log(sim_log) as stream:
         writer = None
         if stream is not None:
             header = f"mapqual run: world {world.name}, seed {seed}, {params.algorithm}"
             writer = CarmenWriter(stream, params.sim.laser, comment=header)
         sim = _TimedSimulator(Simulator(world, params.sim, rng_sim), writer)
-        exploration = explore(world, sim, slam, params.explore, oracle=oracle, on_progress=callback)
+        exploration = explore(
+            world, sim, slam, params.explore, oracle=entry.ground_truth, on_progress=callback
+        )
     stage_wall = {"simulation_wall_s": sim.wall_s, "slam_wall_s": slam.wall_s}
     wall_explore = time.perf_counter() - wall0
     gt = Trajectory(exploration.t, exploration.pose_gt)
@@ -234,6 +176,39 @@ def run_one(
     summary = _summary(world, seed, params, exploration, errors, ate, wall_explore, wall)
     summary["timings"].update(stage_wall)
     return RunResult(world, seed, params, exploration, gt, est, relations, errors, ate, summary)
+
+
+def _progress_relay(
+    on_progress: Callable[[RunProgress], None], params: RunParams, wall0: float
+) -> Callable[[ExploreProgress], None]:
+    """The exploration's progress callback: each ExploreProgress passed on as a RunProgress
+    with the wall time since `wall0` and the laser's geometry."""
+    angles = params.sim.laser.angles
+    range_max = params.sim.laser.range_max
+
+    def progress(p: ExploreProgress) -> None:
+        wall = time.perf_counter() - wall0
+        rtf = p.t / wall if wall > 0 else 0.0
+        on_progress(
+            RunProgress(
+                p.t,
+                p.coverage,
+                p.pose_gt,
+                p.pose_est,
+                p.status,
+                p.goals_reached,
+                wall,
+                rtf,
+                p.goal_xy,
+                p.plan,
+                p.ranges,
+                p.occupancy,
+                angles,
+                range_max,
+            )  # fmt: skip
+        )
+
+    return progress
 
 
 @contextmanager

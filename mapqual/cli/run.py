@@ -13,6 +13,7 @@ import typer
 from mapqual.cli import app
 from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
+from worker.slam import registry
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -31,7 +32,7 @@ def build_params(
 ):
     """RunParams from SPEC defaults, then the --params file, then the options."""
     from worker.params import load_params_file
-    from worker.pipeline import RunParams
+    from worker.run_params import RunParams
 
     data = load_params_file(params_file) if params_file is not None else {}
     over: dict[str, Any] = {}
@@ -96,7 +97,7 @@ def run(
     ],
     seed: Annotated[int, typer.Option(min=0, help="Random seed: same seed, same run.")] = 1,
     slam: Annotated[
-        str | None, typer.Option(help="rbpf | odometry | oracle (default rbpf).")
+        str | None, typer.Option(help=f"{' | '.join(registry.names())} (default rbpf).")
     ] = None,
     laser_noise: Annotated[
         float | None, typer.Option(min=0.0, help="Laser range noise sigma [m].")
@@ -131,11 +132,10 @@ def run(
         save_world,
         world_fingerprint,
     )  # fmt: skip
-    from worker.pipeline import ALGORITHMS
     from worker.world.loader import load_world
 
-    if slam is not None and slam not in ALGORITHMS:
-        raise InputError(f"--slam must be one of {', '.join(ALGORITHMS)}, not {slam!r}")
+    if slam is not None and slam not in registry.names():
+        raise InputError(f"--slam must be one of {', '.join(registry.names())}, not {slam!r}")
     params = build_params(params_file, slam, laser_noise, time_limit)
     world = load_world(world_path, resolution, allow_outside=allow_outside)
     settings = get_settings()

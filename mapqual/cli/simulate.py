@@ -59,8 +59,8 @@ def simulate(
     ROBOTLASER1, TRUEPOS), DIR/gt.tum, DIR/odom.tum and DIR/sim.json."""
     from worker.errors import InputError
     from worker.sim.drivers import read_waypoints
+    from worker.sim.params import SimParams
     from worker.sim.run import run_simulation
-    from worker.sim.simulator import SimParams
     from worker.world import load_world
 
     if drive == Drive.path and path is None:

@@ -11,11 +11,10 @@ from typing import Annotated, Any
 import typer
 
 from mapqual.cli import app
+from worker.slam import registry
 
-
-class Algorithm(StrEnum):
-    rbpf = "rbpf"
-    odometry = "odometry"
+# the registered algorithms that can replay a recorded log (the oracle needs ground truth)
+Algorithm = StrEnum("Algorithm", {name: name for name in registry.names(offline=True)})
 
 
 def _opt(help_text: str):

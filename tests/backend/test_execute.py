@@ -25,7 +25,7 @@ from backend.lifecycle import cancel_run, history, history_faults
 from backend.store import create_job, local_user, save_world
 from tests.backend.plans import rooms_occupancy
 from tests.services import scratch_database
-from worker.pipeline import RunParams
+from worker.run_params import RunParams
 from worker.world.world import World
 
 

@@ -21,8 +21,9 @@ from backend.store import add_user, create_job, mark_run_started, save_world, st
 from backend.viewer_tokens import signing_key, verify
 from frontend.viewer import run_link
 from tests.services import ensure_redis
-from worker.pipeline import RunParams, run_one
+from worker.pipeline import run_one
 from worker.report.folder import write_report
+from worker.run_params import RunParams
 from worker.world.world import World
 
 VIEWER = "http://viewer.example:8080"

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from worker.errors import InputError
-from worker.pipeline import RunCancelled, RunParams, run_one
+from worker.pipeline import RunCancelled, run_one
+from worker.run_params import RunParams
 from worker.world.world import World
 
 

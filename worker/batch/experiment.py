@@ -14,7 +14,8 @@ import yaml
 
 from worker.errors import InputError
 from worker.params import load_params_file
-from worker.pipeline import ALGORITHMS, RunParams
+from worker.run_params import RunParams
+from worker.slam import registry
 from worker.world.catalogue import CATALOGUE_SUFFIXES, default_worlds_dir, find_worlds
 from worker.world.loader import load_world
 from worker.world.world import World
@@ -91,7 +92,7 @@ def parse_list(text: str | Sequence[Any], what: str, conv: Callable[[Any], Any])
 
 
 def _slam(name: Any) -> str:
-    if name not in ALGORITHMS:
+    if name not in registry.names():
         raise ValueError(name)
     return str(name)
 
@@ -235,7 +236,7 @@ def _group(spec: dict[str, Any], base_dir: Path | None, base_params: dict) -> Gr
     return Group(
         worlds=tuple(resolve_worlds(worlds, base_dir)),
         seeds=spec["seeds"],
-        slam=parse_list(slam, "slam (rbpf, odometry, oracle)", _slam),
+        slam=parse_list(slam, f"slam ({', '.join(registry.names())})", _slam),
         laser_noise=parse_list(noise, "laser noise [m] (>= 0)", _noise),
         params=params,
     )

@@ -88,8 +88,9 @@ def _world(path: str, allow_outside: bool = False):
 
 def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
     """One run in a worker process: `run_one`, then its report folder."""
-    from worker.pipeline import RunParams, run_one
+    from worker.pipeline import run_one
     from worker.report.folder import write_report
+    from worker.run_params import RunParams
 
     spec = task.spec
     last = [0.0]

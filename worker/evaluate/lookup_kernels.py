@@ -7,21 +7,11 @@ import math
 import numpy as np
 from numba import njit
 
+from worker.evaluate.se2_scalar import wrap as _wrap
+
 # Two timestamps closer than this [s] are the same sample: relation files carry 6 decimals
 # (CARMEN's microseconds), so a written-and-read time differs from the original by <= 5e-7 s.
 TIME_TOL_S = 1e-5
-
-
-@njit(cache=True, inline="always")
-def _wrap(a: float) -> float:
-    """Scalar wrap to [-pi, pi), the same fold as `se2.wrap_angle`; angles already inside
-    (nearly all, in the metric) skip the division."""
-    if -math.pi <= a < math.pi:
-        return a
-    w = (a + math.pi) % (2.0 * math.pi) - math.pi
-    if w >= math.pi:
-        w -= 2.0 * math.pi
-    return w
 
 
 @njit(cache=True)

@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from worker.errors import InputError
 from worker.evaluate.lookup_kernels import TIME_TOL_S, relation_errors
+from worker.evaluate.params import AParams, BParams, LParams, MParams, SMParams, SParams
 from worker.evaluate.relation_kernels import (
     distance_anchors,
     far_pair_counts,
@@ -58,59 +59,6 @@ class Relations:
 
 class RelationsCapWarning(UserWarning):
     """B asked for more relations than the cap allows; the cap was used."""
-
-
-@dataclass(frozen=True)
-class AParams:
-    """A: consecutive poses (local consistency), thesis section 3.1."""
-
-    dt: float = 0.5  # [s] time between the two poses of a relation
-
-
-@dataclass(frozen=True)
-class SParams:
-    """S: a pose every dt seconds, relations between consecutive ones (thesis 6.1)."""
-
-    dt: float = 10.0  # [s]
-
-
-@dataclass(frozen=True)
-class MParams:
-    """M: a new anchor once the robot is `distance` from the last one (thesis 6.1)."""
-
-    distance: float = 2.0  # [m] Euclidean, from the previous anchor
-
-
-@dataclass(frozen=True)
-class SMParams:
-    """SM ("smart"): all pairs of poses sampled every dt that lie more than min_distance
-    apart (thesis 6.1, t = 2..10 s, m = 2..5 m)."""
-
-    dt: float = 2.0  # [s] sampling of the poses considered
-    min_distance: float = 5.0  # [m] pairs strictly farther apart than this
-    max_relations: int = 20_000_000  # refuse beyond this (memory: 40 bytes a relation)
-
-
-@dataclass(frozen=True)
-class LParams:
-    """L: loop closures, a return within `radius` of an earlier pose after having been more
-    than `away` from it (thesis 6.1)."""
-
-    radius: float = 0.2  # [m]
-    away: float = 0.5  # [m]
-
-
-@dataclass(frozen=True)
-class BParams:
-    """B: random pairs anywhere in the run; N = (z s / E)^2 from the std s of the
-    translational errors of `pilot` random relations on the estimate (thesis eq. 4.1)."""
-
-    z: float = 1.96  # critical value, 95 % confidence
-    margin: float = 0.05  # [m] E, the margin of error on the mean
-    pilot: int = 500  # relations drawn to estimate s
-    max_relations: int = 1_000_000  # hard cap on N (warns when it applies)
-    min_relations: int = 0  # floor on N; 0 keeps the thesis rule (a perfect estimate gives 0)
-    max_gap: float = 0.1  # [s] estimate lookup, as in evaluation
 
 
 def _positive(name: str, value: float) -> None:

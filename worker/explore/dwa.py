@@ -7,14 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
 from worker.explore.params import ExploreParams
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int):

@@ -7,10 +7,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
-from worker.explore.dwa import Command, DwaPlanner, drive, wrap_angle
+from worker.explore.dwa import Command, DwaPlanner, drive
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, path_length

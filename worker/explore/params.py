@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+import dataclasses
+from dataclasses import dataclass, field, fields
 
 from worker.errors import InputError
+from worker.sim.params import FOOTPRINT_M
 
 
 @dataclass(frozen=True)
@@ -15,7 +17,9 @@ class ExploreParams:
     """
 
     # --- robot and costmaps (costmap_2d; thesis pioneer3at_costmap_common_params) ---
-    footprint_half_m: float = 0.2  # [m] half side of the 0.4 m x 0.4 m square footprint
+    # [m] half side of the square footprint: derived from the robot's one size setting,
+    # SimParams.footprint, by RunParams (`with_footprint`); not a parameter of its own
+    footprint_half_m: float = field(default=0.5 * FOOTPRINT_M, init=False)
     # [m] added to the half side in the local planner's collision test (ROS footprint_padding;
     # the thesis had 0: ours covers the 2.5 cm between trajectory samples)
     footprint_padding: float = 0.02
@@ -119,3 +123,9 @@ class ExploreParams:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")
+
+    def with_footprint(self, side_m: float) -> ExploreParams:
+        """These settings for a square robot footprint of side `side_m` [m]."""
+        out = dataclasses.replace(self)
+        object.__setattr__(out, "footprint_half_m", 0.5 * side_m)
+        return out

@@ -6,9 +6,10 @@ import math
 
 import numpy as np
 
+from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
-from worker.explore.dwa import drive, wrap_angle
+from worker.explore.dwa import drive
 from worker.explore.params import ExploreParams
 
 

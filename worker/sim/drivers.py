@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from worker.errors import InputError
+from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.sim.laser import LaserSpec
-from worker.sim.odometry import wrap_angle
 
 
 @dataclass(frozen=True)

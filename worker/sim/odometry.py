@@ -4,23 +4,20 @@ from __future__ import annotations
 
 import math
 
-
-def wrap_angle(a: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+from worker.evaluate.se2_scalar import wrap_fold
 
 
 def relative_motion(x0, y0, t0, x1, y1, t1) -> tuple[float, float, float]:
     """Motion from pose 0 to pose 1 in pose 0's frame: (dx, dy, dtheta), i.e. inv(X0) X1."""
     c, s = math.cos(t0), math.sin(t0)
     ex, ey = x1 - x0, y1 - y0
-    return c * ex + s * ey, -s * ex + c * ey, wrap_angle(t1 - t0)
+    return c * ex + s * ey, -s * ex + c * ey, wrap_fold(t1 - t0)
 
 
 def compose(x, y, t, dx, dy, dt) -> tuple[float, float, float]:
     """Apply a motion (dx, dy, dtheta) given in the frame of pose (x, y, t): X (+) d."""
     c, s = math.cos(t), math.sin(t)
-    return x + c * dx - s * dy, y + s * dx + c * dy, wrap_angle(t + dt)
+    return x + c * dx - s * dy, y + s * dx + c * dy, wrap_fold(t + dt)
 
 
 def stage_increment(d: tuple[float, float, float], factors) -> tuple[float, float, float]:

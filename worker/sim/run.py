@@ -18,7 +18,8 @@ from worker.evaluate.trajectory import Trajectory
 from worker.evaluate.trajio import write_tum
 from worker.sim.carmen import CarmenWriter
 from worker.sim.drivers import FollowParams, Wanderer, WanderParams, WaypointFollower
-from worker.sim.simulator import Collision, SimParams, Simulator
+from worker.sim.params import SimParams
+from worker.sim.simulator import Collision, Simulator
 from worker.world.world import World
 
 DriveMode = Literal["wander", "path"]

@@ -3,52 +3,18 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass
 
 import numpy as np
 
 from worker.errors import InputError
+from worker.evaluate.se2_scalar import wrap_fold
 from worker.sim import odometry
 from worker.sim.collision import advance, footprint_collides
-from worker.sim.laser import LaserSpec
+from worker.sim.params import SimParams
 from worker.sim.raycast import cast_scan_skip, jump_map
 from worker.world.analysis import clearance_map
 from worker.world.world import World
-
-
-@dataclass(frozen=True)
-class SimParams:
-    """Simulator parameters (Pioneer 3-AT class robot, Hokuyo UTM-30LX laser, Stage odometry)."""
-
-    dt: float = 0.1  # [s] public step; ground truth, odometry and laser at 1/dt = 10 Hz
-    v_max: float = 1.0  # [m/s] forward speed limit (above the DWA's max_vel_x 0.85)
-    v_min: float = -0.5  # [m/s] reverse speed limit (the safety controller backs off)
-    w_max: float = 2.0  # [rad/s] turn rate limit (above the DWA's max_vel_theta 0.7)
-    acc_lin: float = 1.5  # [m/s^2] the DWA's acc_lim_x
-    acc_ang: float = 2.5  # [rad/s^2] the DWA's acc_lim_theta
-    footprint: float = 0.4  # [m] side of the square footprint
-    laser: LaserSpec = field(default_factory=LaserSpec)
-    laser_noise_sigma: float = 0.0  # [m] Gaussian range noise (thesis: 0, 0.1, 0.3)
-    odom_model: Literal["stage", "gaussian"] = "stage"
-    odom_error: tuple[float, float, float] = (0.01, 0.01, 0.02)  # Stage E for x, y, theta [-]
-    # Gaussian model: [m/m] x/y error per metre, [rad/rad] theta per radian, [rad/m] theta per m
-    odom_sigmas: tuple[float, float, float] = (0.02, 0.02, 0.01)
-
-    def __post_init__(self) -> None:
-        checks = [
-            (self.dt > 0, "dt must be > 0"),
-            (self.v_max > 0 and self.w_max > 0, "v_max and w_max must be > 0"),
-            (self.v_min <= 0, "v_min must be <= 0"),
-            (self.acc_lin > 0 and self.acc_ang > 0, "acceleration limits must be > 0"),
-            (self.footprint > 0, "footprint must be > 0"),
-            (self.laser_noise_sigma >= 0, "laser noise sigma must be >= 0"),
-            (self.odom_model in ("stage", "gaussian"), "odom_model must be stage or gaussian"),
-            (min(self.odom_error) >= 0 and min(self.odom_sigmas) >= 0, "odometry errors >= 0"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise InputError(f"simulator parameters: {message}")
 
 
 @dataclass(frozen=True)
@@ -90,7 +56,7 @@ class Simulator:
             clearance = clearance_map(world.occ, self._res)
         self._jump = jump_map(world.occ, clearance, self._res)
         pose = np.asarray(world.start_pose if start_pose is None else start_pose, dtype=float)
-        self._x, self._y, self._th = float(pose[0]), float(pose[1]), odometry.wrap_angle(pose[2])
+        self._x, self._y, self._th = float(pose[0]), float(pose[1]), wrap_fold(pose[2])
         if self._collides(self._x, self._y, self._th):
             raise InputError(
                 f"{world.name}: the robot's {self.params.footprint:.2f} m footprint at the start "
@@ -161,7 +127,7 @@ class Simulator:
         x, y, th, blocked, t_hit = advance(
             self._occ, self._res, self._ox, self._oy, x0, y0, th0, v, w, dt, self._half
         )
-        self._x, self._y, self._th = float(x), float(y), odometry.wrap_angle(float(th))
+        self._x, self._y, self._th = float(x), float(y), wrap_fold(float(th))
         if blocked:
             self._v = 0.0
             self._w = 0.0

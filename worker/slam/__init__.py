@@ -1,1 +1,1 @@
-"""SLAM behind one interface: `make_slam("rbpf" | "odometry", laser, params, rng)`."""
+"""SLAM behind one interface: `make_slam(name, laser, params, rng)`, names in `registry`."""

@@ -1,17 +1,18 @@
-"""The SLAM interface every algorithm implements, and `make_slam` to choose one by name."""
+"""The SLAM interface every algorithm implements, and `make_slam` to make one by its name in
+`worker.slam.registry`."""
 
 from __future__ import annotations
 
-from typing import Literal, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from worker.errors import InputError
+from worker.slam import registry
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams
 
-SlamName = Literal["rbpf", "odometry"]
-SLAM_NAMES: tuple[str, ...] = ("rbpf", "odometry")
+SlamName = str  # a name in worker.slam.registry ("rbpf", "odometry", ...)
 
 
 class LaserGeometry(Protocol):
@@ -75,18 +76,11 @@ def make_slam(
     params: SlamParams | None = None,
     rng: np.random.Generator | None = None,
 ) -> SlamAlgorithm:
-    """The SLAM algorithm `name` ("rbpf" or "odometry") for this laser.
+    """The SLAM algorithm `name` (one of `registry.names()`) for this laser.
 
     params: None = the thesis defaults; rng: the run's generator (None = seed 0).
     """
+    entry = registry.get(name)  # InputError naming the choices
     params = SlamParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
-    if name == "odometry":
-        from worker.slam.odometry import OdometrySlam
-
-        return OdometrySlam(laser, params)
-    if name == "rbpf":
-        from worker.slam.rbpf import RbpfSlam
-
-        return RbpfSlam(laser, params, rng)
-    raise InputError(f"unknown SLAM algorithm {name!r}; choose one of: {', '.join(SLAM_NAMES)}")
+    return entry.factory(laser, params, rng)

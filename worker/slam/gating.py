@@ -7,16 +7,7 @@ import math
 import numpy as np
 
 from worker.errors import InputError
-
-TWO_PI = 2.0 * math.pi
-
-
-def wrap_scalar(a: float) -> float:
-    """Angle [rad] wrapped to [-pi, pi), as worker.evaluate.se2.wrap_angle, for one float."""
-    if -math.pi <= a < math.pi:
-        return a
-    w = (a + math.pi) % TWO_PI - math.pi
-    return w - TWO_PI if w >= math.pi else w
+from worker.evaluate.se2_scalar import wrap
 
 
 def check_scan(t: float, pose_odom: np.ndarray, ranges_m: np.ndarray, n_beams: int):
@@ -60,7 +51,7 @@ class UpdateGate:
         if self.last_pose is not None:
             x0, y0, theta0 = self.last_pose.tolist()
             self.linear_m += math.hypot(x - x0, y - y0)
-            self.angular_rad += abs(wrap_scalar(theta - theta0))
+            self.angular_rad += abs(wrap(theta - theta0))
         self.last_pose = pose_odom.copy()
         update = (
             self.last_update_t is None

@@ -84,18 +84,9 @@ class OccupancyGrid:
         """Write `stem.pgm` and `stem.yaml` as ROS map_server's map_saver does; return both."""
         stem = Path(stem)
         pgm, yml = stem.with_suffix(".pgm"), stem.with_suffix(".yaml")
-        img = self.to_image()
-        header = f"P5\n# CREATOR: mapqual {self.resolution:.3f} m/pix\n"
-        header += f"{img.shape[1]} {img.shape[0]}\n255\n"
-        pgm.write_bytes(header.encode("ascii") + img.tobytes())
-        yml.write_text(
-            f"image: {pgm.name}\n"
-            f"resolution: {self.resolution:.6f}\n"
-            f"origin: [{self.origin[0]:.6f}, {self.origin[1]:.6f}, 0.000000]\n"
-            "negate: 0\n"
-            f"occupied_thresh: {YAML_OCCUPIED_THRESH}\n"
-            f"free_thresh: {YAML_FREE_THRESH}\n\n"
-        )
+        data, text = map_server_files(self.to_ros(), self.resolution, self.origin, pgm.name)
+        pgm.write_bytes(data)
+        yml.write_text(text)
         return pgm, yml
 
     def save_png(self, path: str | Path) -> Path:
@@ -105,6 +96,26 @@ class OccupancyGrid:
         path = Path(path)
         Image.fromarray(self.to_image()).save(path)
         return path
+
+
+def map_server_files(
+    grid_ros: np.ndarray, resolution: float, origin: np.ndarray, image_name: str = "map.pgm"
+) -> tuple[bytes, str]:
+    """(PGM bytes, YAML text) as ROS map_server's map_saver writes them, for a `(H, W) int8`
+    ROS grid (bottom row first) of `resolution` [m] with its lower-left corner at `origin`
+    (2,) [m]; the YAML names the image `image_name`. The one writer of map files."""
+    img = ros_to_image(grid_ros)
+    header = f"P5\n# CREATOR: mapqual {resolution:.3f} m/pix\n"
+    header += f"{img.shape[1]} {img.shape[0]}\n255\n"
+    yaml_text = (
+        f"image: {image_name}\n"
+        f"resolution: {resolution:.6f}\n"
+        f"origin: [{origin[0]:.6f}, {origin[1]:.6f}, 0.000000]\n"
+        "negate: 0\n"
+        f"occupied_thresh: {YAML_OCCUPIED_THRESH}\n"
+        f"free_thresh: {YAML_FREE_THRESH}\n\n"
+    )
+    return header.encode("ascii") + img.tobytes(), yaml_text
 
 
 def ros_to_image(grid_ros: np.ndarray) -> np.ndarray:

@@ -8,17 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-TWO_PI = 2.0 * math.pi
-
-
-@njit(cache=True)
-def wrap(a: float) -> float:
-    """Angle [rad] wrapped to [-pi, pi); angles already inside are returned bit for bit (as
-    worker.evaluate.se2.wrap_angle)."""
-    if -math.pi <= a < math.pi:
-        return a
-    w = (a + math.pi) % TWO_PI - math.pi
-    return w - TWO_PI if w >= math.pi else w
+from worker.evaluate.se2_scalar import wrap
 
 
 @njit(cache=True)

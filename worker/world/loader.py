@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from worker.errors import InputError
+from worker.sim.params import FOOTPRINT_M
 from worker.world.image_io import MAX_PIXELS, read_grey
 from worker.world.refs import (
     check_resolution,
@@ -15,7 +16,7 @@ from worker.world.refs import (
     stage_references,
     yaml_references,
 )
-from worker.world.world import FOOTPRINT_M, World
+from worker.world.world import World
 
 FREE_GREY_MIN = 250  # default rule: grey >= 250 is free, anything else is an obstacle
 IMAGE_SUFFIXES = {".png", ".pgm", ".ppm", ".pbm", ".bmp", ".gif", ".tif", ".tiff", ".jpg", ".jpeg"}
@@ -123,6 +124,36 @@ def _load_yaml(
             raise InputError("no `resolution:` key (or give --resolution)", path=path)
         resolution = meta["resolution"]
     check_resolution(resolution, path)
+    origin, negate, free_thresh = _yaml_thresholds(meta, path)
+    notes = []
+    mode = str(meta.get("mode", "trinary"))
+    if mode != "trinary":
+        notes.append(f"map_server mode {mode!r} is read as trinary (free / obstacle)")
+    if len(origin) > 2 and origin[2] != 0.0:
+        notes.append("the YAML origin's yaw is ignored (as most map_server users do)")
+    grey, alpha = read_grey(refs["image"], max_pixels)
+    free = _map_server_free(grey, negate, free_thresh)
+    if alpha is not None:
+        free &= alpha >= 128
+        notes.append("transparent pixels count as obstacles")
+    if segmentation is None and "segmentation" in refs:
+        segmentation = refs["segmentation"]
+    return _build(
+        path.stem,
+        free,
+        resolution,
+        (origin[0], origin[1]),
+        start_pose,
+        segmentation,
+        path,
+        max_pixels,
+        footprint_m,
+        notes,
+    )
+
+
+def _yaml_thresholds(meta: dict, path: Path) -> tuple[list[float], int, float]:
+    """(origin [x, y(, yaw)], negate, free_thresh) of a map_server YAML, checked."""
     origin = meta.get("origin", [0.0, 0.0, 0.0])
     try:
         origin = [float(v) for v in origin]
@@ -141,13 +172,11 @@ def _load_yaml(
         )
     if len(origin) < 2 or not all(math.isfinite(v) for v in origin):
         raise InputError("origin must be [x, y, yaw]", path=path)
-    notes = []
-    mode = str(meta.get("mode", "trinary"))
-    if mode != "trinary":
-        notes.append(f"map_server mode {mode!r} is read as trinary (free / obstacle)")
-    if len(origin) > 2 and origin[2] != 0.0:
-        notes.append("the YAML origin's yaw is ignored (as most map_server users do)")
-    grey, alpha = read_grey(refs["image"], max_pixels)
+    return origin, negate, free_thresh
+
+
+def _map_server_free(grey: np.ndarray, negate: int, free_thresh: float) -> np.ndarray:
+    """(H, W) bool free pixels of a uint8 image by map_server's trinary rule."""
     # map_server: p = (255 - grey) / 255 is the occupancy probability (grey inverted if negate);
     # free if p < free_thresh, occupied if p > occupied_thresh, unknown between. Unknown is not
     # free space for the robot, so it counts as an obstacle here. Grey is uint8, so the rule is
@@ -155,24 +184,7 @@ def _load_yaml(
     levels = np.arange(256, dtype=np.float64)
     if negate:
         levels = 255.0 - levels
-    free = ((255.0 - levels) / 255.0 < free_thresh)[grey]
-    if alpha is not None:
-        free &= alpha >= 128
-        notes.append("transparent pixels count as obstacles")
-    if segmentation is None and "segmentation" in refs:
-        segmentation = refs["segmentation"]
-    return _build(
-        path.stem,
-        free,
-        resolution,
-        (origin[0], origin[1]),
-        start_pose,
-        segmentation,
-        path,
-        max_pixels,
-        footprint_m,
-        notes,
-    )
+    return ((255.0 - levels) / 255.0 < free_thresh)[grey]
 
 
 def _load_stage(

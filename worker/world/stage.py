@@ -63,66 +63,79 @@ def _strip_comment(raw: str) -> str:
 
 def parse_entities(text: str, path: Path) -> list[StageEntity]:
     """Top-level entity blocks of a world file (`define` blocks are skipped)."""
-    toks = _tokens(text)
-    pos = 0
+    return _Parser(_tokens(text), path).entities()
 
-    def block(kind: str, line: int) -> StageEntity:
-        nonlocal pos
+
+class _Parser:
+    """Recursive descent over the tokens of one world file; `pos` is the next token."""
+
+    def __init__(self, toks: list, path: Path):
+        self.toks = toks
+        self.path = path
+        self.pos = 0
+
+    def _opens(self, sym: str) -> bool:
+        return self.pos < len(self.toks) and self.toks[self.pos][:2] == ("sym", sym)
+
+    def entities(self) -> list[StageEntity]:
+        toks, path = self.toks, self.path
+        entities = []
+        while self.pos < len(toks):
+            k, v, ln = toks[self.pos]
+            self.pos += 1
+            if k != "word":
+                raise InputError(f"unexpected {v!r}", path=path, line=ln)
+            if v == "define":
+                # `define name parent ( ... )`: a type definition, not an instance; skip it.
+                self.pos += 2
+                if not self._opens("("):
+                    raise InputError("malformed define", path=path, line=ln)
+                self.pos += 1
+                self.block("define", ln)
+            elif self._opens("("):
+                self.pos += 1
+                entities.append(self.block(v, ln))
+            else:
+                self.value(ln)  # a global setting such as `resolution 0.02`
+        return entities
+
+    def block(self, kind: str, line: int) -> StageEntity:
+        toks, path = self.toks, self.path
         props: dict = {}
         children = []
-        while pos < len(toks):
-            k, v, ln = toks[pos]
+        while self.pos < len(toks):
+            k, v, ln = toks[self.pos]
             if k == "sym" and v == ")":
-                pos += 1
+                self.pos += 1
                 return StageEntity(kind, line, props, tuple(children))
             if k != "word":
                 raise InputError(f"unexpected {v!r}", path=path, line=ln)
-            pos += 1
-            if pos < len(toks) and toks[pos][:2] == ("sym", "("):
-                pos += 1
-                children.append(block(v, ln))
+            self.pos += 1
+            if self._opens("("):
+                self.pos += 1
+                children.append(self.block(v, ln))
             else:
-                props[v] = value(ln)
+                props[v] = self.value(ln)
         raise InputError(f"block {kind!r} is never closed", path=path, line=line)
 
-    def value(line: int):
-        nonlocal pos
-        if pos >= len(toks):
+    def value(self, line: int):
+        toks, path = self.toks, self.path
+        if self.pos >= len(toks):
             raise InputError("missing value at end of file", path=path, line=line)
-        k, v, ln = toks[pos]
-        pos += 1
+        k, v, ln = toks[self.pos]
+        self.pos += 1
         if k == "sym" and v == "[":
             items = []
-            while pos < len(toks) and toks[pos][:2] != ("sym", "]"):
-                items.append(toks[pos][1])
-                pos += 1
-            if pos >= len(toks):
+            while self.pos < len(toks) and toks[self.pos][:2] != ("sym", "]"):
+                items.append(toks[self.pos][1])
+                self.pos += 1
+            if self.pos >= len(toks):
                 raise InputError("'[' is never closed", path=path, line=ln)
-            pos += 1
+            self.pos += 1
             return items
         if k == "sym":
             raise InputError(f"unexpected {v!r}", path=path, line=ln)
         return v
-
-    entities = []
-    while pos < len(toks):
-        k, v, ln = toks[pos]
-        pos += 1
-        if k != "word":
-            raise InputError(f"unexpected {v!r}", path=path, line=ln)
-        if v == "define":
-            # `define name parent ( ... )`: a type definition, not an instance; skip it.
-            pos += 2
-            if pos >= len(toks) or toks[pos][:2] != ("sym", "("):
-                raise InputError("malformed define", path=path, line=ln)
-            pos += 1
-            block("define", ln)
-        elif pos < len(toks) and toks[pos][:2] == ("sym", "("):
-            pos += 1
-            entities.append(block(v, ln))
-        else:
-            value(ln)  # a global setting such as `resolution 0.02`
-    return entities
 
 
 def _floats(values, n_min: int, what: str, path: Path, line: int) -> list[float]:

@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from worker.errors import InputError
+from worker.sim.params import FOOTPRINT_M
 from worker.world import analysis
 
 RESOLUTION_MIN = 0.005  # [m/cell] exclusive
 RESOLUTION_MAX = 1.0  # [m/cell] inclusive
-FOOTPRINT_M = 0.4  # [m] side of the square robot footprint (Pioneer 3-AT class)
 
 
 @dataclass(frozen=True)
@@ -117,32 +117,12 @@ class World:
         Raises InputError when the resolution is out of range, there is no free space wide
         enough for the robot's footprint, or a given start pose is not on a free cell.
         """
-        occ = np.ascontiguousarray(np.asarray(occ, dtype=bool))
-        if occ.ndim != 2 or occ.size == 0:
-            raise InputError(f"occupancy grid must be a non-empty 2D array, got shape {occ.shape}")
-        resolution = float(resolution)
-        if not (RESOLUTION_MIN < resolution <= RESOLUTION_MAX):
-            raise InputError(
-                f"resolution {resolution:g} m/pixel is outside ({RESOLUTION_MIN:g}, "
-                f"{RESOLUTION_MAX:g}] m"
-            )
-        origin_arr = np.asarray(origin, dtype=np.float64).reshape(-1)
-        if origin_arr.shape != (2,) or not np.all(np.isfinite(origin_arr)):
-            raise InputError(f"origin must be two finite numbers [x, y], got {origin!r}")
+        occ, resolution, origin_arr = _checked_grid(occ, resolution, origin)
         notes = list(warnings)
         clearance = analysis.clearance_map(occ, resolution)
         labels, n_regions = analysis.free_regions(occ)
         region, enclosed = analysis.main_region(labels, n_regions)
-        if region == 0:
-            raise InputError(f"{name}: the floorplan has no free cell")
-        radius = analysis.footprint_radius(footprint_m)
-        widest = float(clearance[labels == region].max())
-        if widest < radius:
-            raise InputError(
-                f"{name}: no free space wide enough for the {footprint_m:.2f} m robot footprint "
-                f"(largest clearance {widest:.2f} m, needs {radius:.2f} m); "
-                "is the resolution right?"
-            )
+        _check_room_for_robot(name, clearance, labels, region, footprint_m)
         if _border_free(occ):
             notes.append("free space touches the image border; the border counts as a wall")
         if not enclosed:
@@ -165,6 +145,41 @@ class World:
             warnings=tuple(notes),
             source=source,
             clearance=clearance,
+        )
+
+
+def _checked_grid(
+    occ: np.ndarray, resolution: float, origin: tuple[float, float] | np.ndarray
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """(occ (H, W) contiguous bool, resolution [m/cell], origin (2,) [m]) once checked."""
+    occ = np.ascontiguousarray(np.asarray(occ, dtype=bool))
+    if occ.ndim != 2 or occ.size == 0:
+        raise InputError(f"occupancy grid must be a non-empty 2D array, got shape {occ.shape}")
+    resolution = float(resolution)
+    if not (RESOLUTION_MIN < resolution <= RESOLUTION_MAX):
+        raise InputError(
+            f"resolution {resolution:g} m/pixel is outside ({RESOLUTION_MIN:g}, "
+            f"{RESOLUTION_MAX:g}] m"
+        )
+    origin_arr = np.asarray(origin, dtype=np.float64).reshape(-1)
+    if origin_arr.shape != (2,) or not np.all(np.isfinite(origin_arr)):
+        raise InputError(f"origin must be two finite numbers [x, y], got {origin!r}")
+    return occ, resolution, origin_arr
+
+
+def _check_room_for_robot(
+    name: str, clearance: np.ndarray, labels: np.ndarray, region: int, footprint_m: float
+) -> None:
+    """InputError unless the main free region (label `region`) is wide enough for the robot."""
+    if region == 0:
+        raise InputError(f"{name}: the floorplan has no free cell")
+    radius = analysis.footprint_radius(footprint_m)
+    widest = float(clearance[labels == region].max())
+    if widest < radius:
+        raise InputError(
+            f"{name}: no free space wide enough for the {footprint_m:.2f} m robot footprint "
+            f"(largest clearance {widest:.2f} m, needs {radius:.2f} m); "
+            "is the resolution right?"
         )
 
 

@@ -29,6 +29,7 @@ from backend.lifecycle import cancel_run
 from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
+from worker.run_params import RunParams  # light: no numba in the API process
 
 router = APIRouter(tags=["jobs"])
 JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
@@ -38,9 +39,6 @@ JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
 def _run_params(overrides_json: str) -> tuple[str, str]:
     """(algorithm, RunParams JSON) for the overrides: validated by the pipeline's own rules
     (InputError -> 400), once per distinct set of overrides."""
-    # imported here, not with the app: worker.pipeline brings the numeric stack (numba)
-    from worker.pipeline import RunParams
-
     params = RunParams.from_json(json.loads(overrides_json))
     return params.algorithm, json.dumps(params.to_json())
 

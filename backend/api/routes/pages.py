@@ -45,9 +45,11 @@ from backend.schemas import JobIn, WorldOut
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from backend.world_analysis import world_pool
 from worker.errors import InputError
+from worker.slam import registry
 
 FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
 templates = Jinja2Templates(directory=FRONTEND / "templates")
+templates.env.globals["slam_algorithms"] = registry.entries  # the job form's choices
 router = APIRouter(include_in_schema=False)
 ACTIVE = ("queued", "running")
 # Where the API key lived in the cookie before sessions: no longer read, deleted on sign-in.

@@ -71,19 +71,13 @@ def get_trajectory(
 def _map_files(run: Run, session) -> dict[str, bytes]:
     from worker.report.folder import error_lines
     from worker.report.plots import map_png
-    from worker.slam.grid import ros_to_image
+    from worker.slam.grid import map_server_files
 
     grid, res, origin = load_map(session, run.id)
-    grey = ros_to_image(grid)
-    h, w = grey.shape
-    pgm = f"P5\n# mapqual run {run.id}\n{w} {h}\n255\n".encode() + grey.tobytes()
-    yaml = (
-        f"image: map.pgm\nresolution: {res}\norigin: [{origin[0]}, {origin[1]}, 0.0]\n"
-        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
-    ).encode()
+    pgm, yaml = map_server_files(grid, res, origin, "map.pgm")
     buf = io.BytesIO()
     map_png(buf, grid, error_lines(run.summary) if run.summary.get("relations") else [])
-    return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
+    return {"pgm": pgm, "yaml": yaml.encode(), "png": buf.getvalue()}
 
 
 @router.get("/runs/{run_id}/map.{ext}")

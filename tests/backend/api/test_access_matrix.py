@@ -23,8 +23,9 @@ from backend.main import create_app
 from backend.store import add_user, create_job, save_world
 from tests.backend.finished_runs import store_finished_run
 from tests.services import ensure_redis, scratch_database
-from worker.pipeline import RunParams, run_one
+from worker.pipeline import run_one
 from worker.report.folder import write_report
+from worker.run_params import RunParams
 from worker.world.world import World
 
 OWNERS = ("alice", "bob")

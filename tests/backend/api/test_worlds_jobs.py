@@ -275,7 +275,9 @@ def test_a_finished_run_without_its_report_folder_serves_its_map_from_the_databa
     assert header.endswith(b"60 40")
     img = np.frombuffer(pixels, np.uint8).reshape(40, 60)  # top row first, as map_saver writes
     assert (img[-1] == 0).all() and (img[-2] == 254).all() and (img[0] == 205).all()
-    assert "origin: [1.0, 2.0, 0.0]" in api.get(f"/api/v1/runs/{run_id}/map.yaml").text
+    # the report folder's writer (worker.slam.grid.map_server_files), at its precision
+    yaml_text = api.get(f"/api/v1/runs/{run_id}/map.yaml").text
+    assert "resolution: 0.050000\norigin: [1.000000, 2.000000, 0.000000]\n" in yaml_text
     png = api.get(f"/api/v1/runs/{run_id}/map.png")
     assert png.status_code == 200 and png.headers["content-type"] == "image/png"
     rgb = np.asarray(Image.open(io.BytesIO(png.content)).convert("RGB"))

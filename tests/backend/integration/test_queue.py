@@ -28,7 +28,8 @@ from backend.db.session import get_engine, session_scope
 from backend.main import create_app
 from backend.store import add_user, world_model
 from tests.services import ensure_postgres, ensure_redis
-from worker.pipeline import RunParams, run_one
+from worker.pipeline import run_one
+from worker.run_params import RunParams
 
 VISIBILITY_S = 12
 OFFICE_A = Path(__file__).parents[3] / "worlds/bormann/no_furniture/office_a.png"

@@ -15,7 +15,7 @@ from worker.batch.experiment import (
     variant_of,
 )
 from worker.errors import InputError
-from worker.pipeline import RunParams
+from worker.run_params import RunParams
 
 
 def _world(folder, name, door=True):

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from worker.explore.loop import ExploreParams, explore
-from worker.sim.simulator import SimParams, Simulator
+from worker.sim.params import SimParams
+from worker.sim.simulator import Simulator
 from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
 from worker.world.loader import load_world

@@ -8,8 +8,8 @@ import pytest
 from worker.errors import InputError
 from worker.evaluate.trajio import read_trajectory
 from worker.sim.carmen import read_laser_log
+from worker.sim.params import SimParams
 from worker.sim.run import run_simulation
-from worker.sim.simulator import SimParams
 from worker.world import World
 
 RES = 0.05

@@ -9,7 +9,8 @@ import pytest
 
 from worker.errors import InputError
 from worker.sim.collision import footprint_collides
-from worker.sim.simulator import SimParams, Simulator
+from worker.sim.params import SimParams
+from worker.sim.simulator import Simulator
 from worker.world import World
 
 RES = 0.05

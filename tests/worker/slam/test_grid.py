@@ -6,7 +6,7 @@ import numpy as np
 import yaml
 from PIL import Image
 
-from worker.slam.grid import OccupancyGrid
+from worker.slam.grid import OccupancyGrid, map_server_files
 
 
 def _grid() -> OccupancyGrid:
@@ -52,3 +52,14 @@ def test_world_to_cell_and_readonly():
     assert cells.tolist() == [[0, 0], [0, 0], [-1, 2]]
     assert not g.prob.flags.writeable and not g.origin.flags.writeable
     assert g.known.sum() == 5 and g.occupied.sum() == 3 and g.free.sum() == 2
+
+
+def test_the_one_map_writer_is_byte_exact():
+    # map_saver's layout at the precision every report folder has had (hand-written)
+    pgm, text = map_server_files(_grid().to_ros(), 0.05, np.array([-1.0, 2.5]), "m.pgm")
+    header = b"P5\n# CREATOR: mapqual 0.050 m/pix\n3 2\n255\n"
+    assert pgm == header + bytes([254, 0, 0, 205, 254, 0])
+    assert text == (
+        "image: m.pgm\nresolution: 0.050000\norigin: [-1.000000, 2.500000, 0.000000]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n\n"
+    )

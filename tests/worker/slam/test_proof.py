@@ -15,8 +15,8 @@ from worker.evaluate.metric import evaluate_relations
 from worker.evaluate.relations import BParams, relations_B
 from worker.evaluate.trajectory import Trajectory
 from worker.sim.carmen import read_laser_log
+from worker.sim.params import SimParams
 from worker.sim.run import run_simulation
-from worker.sim.simulator import SimParams
 from worker.slam.overlap import wall_overlap
 from worker.slam.params import SlamParams
 from worker.slam.run import run_slam

@@ -1,0 +1,80 @@
+"""The SLAM registry: one call adds an algorithm everywhere the choices are read."""
+
+from __future__ import annotations
+
+import pytest
+
+from worker.errors import InputError
+from worker.slam import registry
+from worker.slam.base import make_slam
+from worker.slam.odometry import OdometrySlam
+
+
+@pytest.fixture
+def scratch_registry(monkeypatch):
+    """The registry as it is, restored after the test (registrations are process-wide)."""
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+
+
+def test_the_built_in_algorithms_and_their_kinds():
+    assert registry.names() == ("rbpf", "odometry", "oracle")
+    assert registry.names(offline=True) == ("rbpf", "odometry")
+    kinds = {e.name: (e.kind, e.ground_truth) for e in registry.entries()}
+    assert kinds == {
+        "rbpf": ("slam", False),
+        "odometry": ("baseline", False),
+        "oracle": ("oracle", True),
+    }
+    with pytest.raises(InputError, match="unknown SLAM algorithm 'ekf'; choose one of: rbpf"):
+        registry.get("ekf")
+
+
+def test_one_register_call_reaches_params_schema_batch_and_factory(scratch_registry):
+    from mapqual.cli.run import build_params
+    from worker.batch.experiment import _slam
+    from worker.run_params import RunParams, run_params_schema
+    from worker.sim.laser import LaserSpec
+
+    made = []
+
+    def factory(laser, params, rng):
+        made.append((laser, params))
+        return OdometrySlam(laser, params)
+
+    with pytest.raises(InputError, match="algorithm"):
+        RunParams.from_json({"algorithm": "plugin"})
+    registry.register("plugin", factory, "a plugin SLAM", "slam")
+    assert "plugin" in registry.names() and "plugin" in registry.names(offline=True)
+    assert RunParams.from_json({"algorithm": "plugin"}).algorithm == "plugin"
+    assert build_params(None, "plugin", None, None).algorithm == "plugin"
+    assert _slam("plugin") == "plugin"
+    assert "plugin" in run_params_schema()["properties"]["algorithm"]["enum"]
+    slam = make_slam("plugin", LaserSpec())
+    assert isinstance(slam, OdometrySlam) and len(made) == 1
+    with pytest.raises(ValueError, match="already registered"):
+        registry.register("plugin", factory, "again")
+
+
+def test_the_dashboard_form_lists_the_registry(scratch_registry):
+    from backend.api.routes.pages import templates
+
+    registry.register("plugin", lambda laser, p, rng: None, "a plugin SLAM")
+    html = templates.get_template("jobs.html").render(
+        worlds=[{"id": 1, "name": "w"}], jobs=[], total=0, user=None, csrf_token="x",
+        world_names={}, refresh=False, error=None,
+    )  # fmt: skip
+    for e in registry.entries():
+        assert f'<option value="{e.name}">{e.description}</option>' in html
+    assert '<option value="plugin">a plugin SLAM</option>' in html
+
+
+def test_the_api_schema_lists_the_registry_when_it_is_made(scratch_registry, tmp_path):
+    from backend.core.config import Settings
+    from backend.main import create_app
+
+    registry.register("plugin", lambda laser, p, rng: None, "a plugin SLAM")
+    settings = Settings(DATABASE_URL=f"sqlite:///{tmp_path / 'x.db'}", MAPQUAL_AUTH="on")
+    job_in = create_app(settings).openapi()["components"]["schemas"]["JobIn"]["properties"]
+    assert job_in["slam"]["anyOf"][0]["enum"] == [*registry.names()]
+    assert job_in["params"]["properties"]["algorithm"]["enum"][-1] == "plugin"
+    assert job_in["params"]["description"].startswith("Overrides by section")

@@ -1,0 +1,95 @@
+"""RunParams: stored JSON unchanged, old runs' params readable, the footprint set once, light."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from worker.errors import InputError
+from worker.run_params import RunParams, run_params_schema
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "examples" / "office_a" / "summary.json"
+
+
+def test_stored_params_of_the_old_code_round_trip_byte_for_byte():
+    # examples/office_a/summary.json was written by the hand-written converter (before
+    # pydantic): its params (rbpf, time limit 300 s, footprint 0.4 m and its half 0.2 m,
+    # GMapping's defaults) come back as the same keys, order and number formatting
+    text = EXAMPLE.read_text()
+    stored = json.loads(text)["params"]
+    assert stored["explore"]["time_limit"] == 300.0 and stored["explore"]["footprint_half_m"] == 0.2
+    params = RunParams.from_json(stored)
+    assert params.explore.time_limit == 300.0 and params.sim.footprint == 0.4
+    again = params.to_json()
+    assert json.dumps(again) == json.dumps(stored)
+    # and as summary.json holds them, one level down
+    assert '"params": ' + json.dumps(again, indent=2).replace("\n", "\n  ") in text
+    defaults = RunParams().to_json()
+    assert list(defaults) == ["algorithm", "sim", "slam", "explore", "eval"]
+    assert list(defaults["explore"])[:2] == ["footprint_half_m", "footprint_padding"]
+    assert json.dumps(defaults["sim"]["laser"]) == (
+        '{"n_beams": 541, "angle_min": -2.356194490192345, '
+        '"angle_increment": 0.008726646259971648, "range_max": 30.0, "range_min": 0.0}'
+    )
+
+
+def test_the_footprint_is_set_once_and_the_exploration_follows():
+    p = RunParams.from_json({"sim": {"footprint": 0.5}})
+    assert p.sim.footprint == 0.5 and p.explore.footprint_half_m == 0.25
+    assert p.to_json()["explore"]["footprint_half_m"] == 0.25
+    assert RunParams.from_json(p.to_json()) == p  # a stored run of it reads back
+    assert RunParams().explore.footprint_half_m == 0.2
+    with pytest.raises(InputError, match="set the robot's size with sim.footprint"):
+        RunParams.from_json({"explore": {"footprint_half_m": 0.3}})
+    with pytest.raises(InputError, match="footprint must be > 0"):
+        RunParams.from_json({"sim": {"footprint": 0.0}})
+    with pytest.raises(TypeError):  # not a parameter of its own
+        from worker.explore.params import ExploreParams
+
+        ExploreParams(footprint_half_m=0.3)
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"algorithm": "ekf"}, "algorithm: must be one of 'rbpf', 'odometry', 'oracle'"),
+        ({"slam": {"particles": "40"}}, "slam.particles must be an integer"),
+        ({"sim": {"odom_error": [0.1, 0.1]}}, "sim.odom_error must have 3 elements"),
+        ({"sim": {"laser": {"n_beams": 0}}}, "sim.laser: LaserSpec.n_beams must be >= 1"),
+        ({"eval": {"b": {"z": float("inf")}}}, "eval.b.z must be a finite number"),
+        ({"explore": {"time_limit": -5}}, "explore: exploration parameters must be positive"),
+        ({"eval": {"bb": {}}}, "unknown parameter eval.bb (valid: a, b, max_gap, sm)"),
+        ([1, 2], "parameters must be a mapping"),
+    ],
+)
+def test_bad_params_are_one_line_input_errors_naming_the_key(data, message):
+    with pytest.raises(InputError) as err:
+        RunParams.from_json(data)
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+
+
+def test_the_schema_is_inline_and_every_key_optional():
+    schema = run_params_schema()
+    assert "$defs" not in json.dumps(schema) and "$ref" not in json.dumps(schema)
+    assert schema["properties"]["algorithm"]["enum"] == ["rbpf", "odometry", "oracle"]
+    assert schema["properties"]["sim"]["properties"]["odom_model"]["enum"] == ["stage", "gaussian"]
+    assert "required" not in json.dumps(schema)
+
+
+def test_params_import_no_numba():
+    code = (
+        "import sys, worker.run_params, worker.params, worker.slam.registry;"
+        "worker.run_params.RunParams.from_json({'slam': {'particles': 3}});"
+        "worker.run_params.run_params_schema();"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'llvmlite')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

@@ -1,0 +1,110 @@
+"""RunParams and EvalParams: everything that sets a run up besides the world and the seed.
+
+Light on purpose: these modules import no numba kernel, so the API validates a job's params
+(and publishes their JSON Schema) without loading the numeric stack.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, Field
+
+from worker.errors import InputError
+from worker.evaluate.params import AParams, BParams, SMParams
+from worker.explore.params import ExploreParams
+from worker.params import adapter, from_dict, to_dict
+from worker.sim.params import FOOTPRINT_M, SimParams
+from worker.slam import registry
+from worker.slam.params import SlamParams
+
+# A registered SLAM algorithm's name: checked against the registry when it is read, listed as
+# an enum in the JSON Schema.
+Algorithm = Annotated[
+    str, AfterValidator(registry.check_name), Field(json_schema_extra=registry.add_enum)
+]
+
+
+@dataclass(frozen=True)
+class EvalParams:
+    """Evaluation: B relations are the score (thesis); A and SM are reported beside them."""
+
+    b: BParams = field(default_factory=BParams)
+    a: AParams = field(default_factory=AParams)
+    sm: SMParams = field(default_factory=SMParams)
+    max_gap: float = 0.1  # [s] estimate lookup: interpolate only between samples this close
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """Everything that determines a run besides the world and the seed; stored with each run.
+
+    The robot's size is set once, by `sim.footprint` [m]; the exploration's footprint_half_m
+    is derived from it here (it is stored, for the record, but cannot be set on its own).
+    """
+
+    algorithm: Algorithm = "rbpf"  # a name in worker.slam.registry (oracle = ground truth)
+    sim: SimParams = field(default_factory=SimParams)
+    slam: SlamParams = field(default_factory=SlamParams)
+    explore: ExploreParams = field(default_factory=ExploreParams)
+    eval: EvalParams = field(default_factory=EvalParams)
+
+    def __post_init__(self) -> None:
+        if not self.sim.footprint > 0:  # SimParams refuses it too; RunParams relies on it
+            raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
+        if self.explore.footprint_half_m != 0.5 * self.sim.footprint:
+            object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON data (`from_json` reads it back to an equal object)."""
+        return to_dict(self)
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> RunParams:
+        """Strictly validated: unknown keys, wrong types and bad values raise InputError.
+
+        A stored `explore.footprint_half_m` (every stored run has one) is accepted when it is
+        half of `sim.footprint`, the value it is derived from.
+        """
+        return from_dict(cls, _without_derived(data))
+
+
+def _without_derived(data: Any) -> Any:
+    """`data` without `explore.footprint_half_m`, once checked against `sim.footprint`."""
+    explore = data.get("explore") if isinstance(data, dict) else None
+    if not (isinstance(explore, dict) and "footprint_half_m" in explore):
+        return data
+    sim = data.get("sim")
+    side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else FOOTPRINT_M
+    half = explore["footprint_half_m"]
+    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (side, half))
+    if numbers and half != 0.5 * side or not numbers and isinstance(side, int | float):
+        raise InputError(
+            f"explore.footprint_half_m ({half!r}) follows from sim.footprint ({side!r}): "
+            "set the robot's size with sim.footprint [m] alone"
+        )
+    data = copy.copy(data)
+    data["explore"] = {k: v for k, v in explore.items() if k != "footprint_half_m"}
+    return data
+
+
+def run_params_schema() -> dict[str, Any]:
+    """JSON Schema of RunParams with every key optional (absent keys keep their defaults), its
+    sub-objects written in place (no `$ref`), and the derived keys left out."""
+    schema = adapter(RunParams).json_schema()
+    defs = schema.pop("$defs", {})
+
+    def inline(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return inline(defs[node["$ref"].rsplit("/", 1)[1]])
+            return {k: inline(v) for k, v in node.items()}
+        if isinstance(node, list):
+            return [inline(v) for v in node]
+        return node
+
+    out = inline(schema)
+    out["properties"]["explore"]["properties"].pop("footprint_half_m", None)
+    return out

@@ -1,0 +1,106 @@
+"""The one list of SLAM algorithms a run may use: name -> factory, description and kind.
+
+Light on purpose (no kernels are imported until a factory is called): the CLI's choices, the
+API's enum, the dashboard's form and the batch's validation are all read from here. Adding an
+algorithm is one `register(...)` call; the factory imports its own module when it is called.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+from worker.errors import InputError
+from worker.slam.params import SlamParams
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from worker.slam.base import LaserGeometry, SlamAlgorithm
+
+SlamKind = Literal["slam", "baseline", "oracle"]
+SlamFactory = Callable[["LaserGeometry", SlamParams, "np.random.Generator"], "SlamAlgorithm"]
+
+
+@dataclass(frozen=True)
+class SlamEntry:
+    """One algorithm: how to make it and what it is."""
+
+    name: str
+    factory: SlamFactory  # (laser, params, rng) -> a fresh SlamAlgorithm
+    description: str  # one line, shown in the dashboard's form and the CLI's help
+    kind: SlamKind  # slam: a real SLAM; baseline: a reference to beat; oracle: ground truth
+    # whether the run maps and localises with the ground-truth pose (the exploration then
+    # ignores the estimate); an oracle has no log to replay, so `mapqual slam` leaves it out
+    ground_truth: bool = False
+
+
+_REGISTRY: dict[str, SlamEntry] = {}
+
+
+def register(
+    name: str,
+    factory: SlamFactory,
+    description: str,
+    kind: SlamKind = "slam",
+    *,
+    ground_truth: bool = False,
+) -> SlamEntry:
+    """Add an algorithm under `name` (unique); returns its entry."""
+    if not name or not name.isidentifier():
+        raise ValueError(f"SLAM algorithm name {name!r} must be a Python identifier")
+    if name in _REGISTRY:
+        raise ValueError(f"SLAM algorithm {name!r} is already registered")
+    entry = SlamEntry(name, factory, description, kind, ground_truth)
+    _REGISTRY[name] = entry
+    return entry
+
+
+def entries() -> tuple[SlamEntry, ...]:
+    """Every registered algorithm, in registration order."""
+    return tuple(_REGISTRY.values())
+
+
+def names(*, offline: bool = False) -> tuple[str, ...]:
+    """Registered names; `offline`: only those that can replay a recorded log (no oracle)."""
+    return tuple(e.name for e in _REGISTRY.values() if not (offline and e.ground_truth))
+
+
+def get(name: str) -> SlamEntry:
+    """The entry of `name`, or InputError naming the choices."""
+    entry = _REGISTRY.get(name)
+    if entry is None:
+        raise InputError(f"unknown SLAM algorithm {name!r}; choose one of: {', '.join(names())}")
+    return entry
+
+
+def check_name(name: str) -> str:
+    """`name` if it is registered (for validators: raises ValueError, one line, otherwise)."""
+    if name not in _REGISTRY:
+        choices = ", ".join(map(repr, names()))
+        raise ValueError(f"must be one of {choices}, not {name!r}")
+    return name
+
+
+def add_enum(schema: dict) -> None:
+    """JSON Schema hook (pydantic's json_schema_extra): the names registered when the schema
+    is made, as the string's `enum` (plugins registered after import included)."""
+    schema["enum"] = list(names())
+
+
+def _rbpf(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.rbpf import RbpfSlam
+
+    return RbpfSlam(laser, params, rng)
+
+
+def _odometry(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.odometry import OdometrySlam
+
+    return OdometrySlam(laser, params)
+
+
+register("rbpf", _rbpf, "rbpf (GMapping)", "slam")
+register("odometry", _odometry, "odometry only", "baseline")
+register("oracle", _odometry, "oracle (ground truth)", "oracle", ground_truth=True)
