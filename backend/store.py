@@ -26,6 +26,7 @@ from backend.lifecycle import (
     requeue,
 )
 from backend.lifecycle import refresh_job_status as _refresh_job_status
+from worker.status import JobStatus, RunStatus, WorldStatus
 from worker.world.world import World as WorldModel
 
 TRAJECTORY_KINDS = ("gt", "est")
@@ -198,7 +199,7 @@ def create_job(
         world_id=world_id,
         slam=slam,
         params=params,
-        status="queued",
+        status=JobStatus.QUEUED,
         idempotency_key=idempotency_key,
     )
     # Runs built through the relationship: one flush inserts the job, then all runs in one
@@ -226,7 +227,7 @@ def mark_run_started(
     whose holder gave no sign of life for `lease_s`; raises `TransitionRefused` otherwise."""
     answer, run = claim_run(session, run_id, attempt or new_attempt(), lease_s)
     if run is None:
-        raise TransitionRefused(run_id, "running", answer)
+        raise TransitionRefused(run_id, RunStatus.RUNNING, answer)
     return run
 
 
@@ -447,7 +448,7 @@ def create_pending_world(
         sha256=sha256,
         source_format=source_format,
         source_path=source_path,
-        status="pending",
+        status=WorldStatus.PENDING,
         upload=upload,
         upload_resolution=resolution,
         facts={},
@@ -461,7 +462,7 @@ def mark_world_ready(session: Session, world_id: int, world: WorldModel) -> bool
     """Fill a pending world's geometry and facts from its analysis, drop its upload; False if
     it is no longer pending (another process finished it first: the first result stays)."""
     values = {
-        "status": "ready",
+        "status": WorldStatus.READY,
         "error": None,
         "upload": None,
         "facts": _facts(world),
@@ -473,14 +474,16 @@ def mark_world_ready(session: Session, world_id: int, world: WorldModel) -> bool
 def mark_world_invalid(session: Session, world_id: int, error: str) -> bool:
     """A pending world whose files the loader refused: `invalid`, with its one-line reason
     (the upload is dropped); False if it is no longer pending."""
-    return _finish_world(session, world_id, {"status": "invalid", "error": error, "upload": None})
+    return _finish_world(
+        session, world_id, {"status": WorldStatus.INVALID, "error": error, "upload": None}
+    )
 
 
 def _finish_world(session: Session, world_id: int, values: dict[str, Any]) -> bool:
     """Compare-and-set on `status = pending`: two analyses of one world store one result."""
     result = session.execute(
         update(World)
-        .where(World.id == world_id, World.status == "pending")
+        .where(World.id == world_id, World.status == WorldStatus.PENDING)
         .values(**values)
         .execution_options(synchronize_session=False)
     )
@@ -489,7 +492,7 @@ def _finish_world(session: Session, world_id: int, values: dict[str, Any]) -> bo
 
 def pending_world_ids(session: Session) -> list[int]:
     """Worlds still waiting for their analysis (e.g. left by a process that died), oldest first."""
-    stmt = select(World.id).where(World.status == "pending").order_by(World.id)
+    stmt = select(World.id).where(World.status == WorldStatus.PENDING).order_by(World.id)
     return list(session.scalars(stmt))
 
 
@@ -497,7 +500,7 @@ def world_upload(session: Session, world_id: int) -> tuple[bytes, float | None, 
     """(packed upload, resolution given with it, main file name) of a pending world, or None."""
     row = session.execute(
         select(World.upload, World.upload_resolution, World.source_path).where(
-            World.id == world_id, World.status == "pending"
+            World.id == world_id, World.status == WorldStatus.PENDING
         )
     ).first()
     if row is None or row[0] is None:

@@ -35,6 +35,7 @@ from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import SimParams, Simulator
 from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
+from worker.status import RunOutcome
 from worker.world.world import World
 
 Algorithm = Literal["rbpf", "odometry", "oracle"]
@@ -270,7 +271,7 @@ def _evaluate(
 def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[str, Any]:
     """summary.json: outcome and coverage at the top level, each relation kind's figures in
     exactly the shape `mapqual evaluate --json` prints."""
-    failed = ex.outcome != "completed"
+    failed = ex.outcome != RunOutcome.COMPLETED
     sim_time = float(ex.t[-1]) if len(ex.t) else 0.0
     return {
         "outcome": ex.outcome,

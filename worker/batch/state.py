@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from worker.batch.experiment import RunSpec
+from worker.status import RecordStatus
 
 RECORD = "record.json"
 BATCH = "batch.json"
@@ -45,7 +46,7 @@ def record_of(
     """
     return {
         **asdict(spec),
-        "status": "done" if summary is not None else "error",
+        "status": RecordStatus.DONE if summary is not None else RecordStatus.ERROR,
         "error": error,
         "summary": summary,
         "run_id": run_id,
