@@ -27,7 +27,7 @@ from sqlalchemy import ColumnElement, or_, select, update
 from sqlalchemy.orm import Session
 
 from backend.db.models import Job, Run, RunEvent, utcnow
-from worker.status import JobStatus, RunStatus
+from worker.status import ACTIVE_RUN, JobStatus, RunStatus
 
 # (from, to): claim, take over a silent attempt, finish, fail, cancel, and the explicit
 # requeue of a failed or interrupted run (batch resume, --retry-failed). queued -> failed is a
@@ -212,7 +212,7 @@ def cancel_run(session: Session, run_id: int, detail: str = RunStatus.CANCELLED.
     """queued | running -> cancelled (a running attempt notices at its next progress write);
     False for a run already finished."""
     cur = _begin(session, run_id)
-    if cur is None or cur.status not in (RunStatus.QUEUED, RunStatus.RUNNING):
+    if cur is None or cur.status not in ACTIVE_RUN:
         return False
     values = {"finished_at": utcnow()}
     _apply(session, cur, RunStatus.CANCELLED, values=values, detail=detail, attempt=cur.attempt)

@@ -12,7 +12,8 @@ from enum import StrEnum
 
 
 class RunStatus(StrEnum):
-    """Where a run is in its life (`backend.lifecycle.LEGAL` says how it moves)."""
+    """Where a run is in its life: queued, running (an attempt holds it), done (see its
+    outcome), failed (an internal error) or cancelled."""
 
     QUEUED = "queued"  # waiting for a worker
     RUNNING = "running"  # an attempt holds it
@@ -22,7 +23,8 @@ class RunStatus(StrEnum):
 
 
 class JobStatus(StrEnum):
-    """A job's status, which follows its runs' (`backend.lifecycle.refresh_job_status`)."""
+    """A job's status, which follows its runs': running while any runs (or some are finished
+    and some queued), failed when nothing is left to run and some run failed, else done."""
 
     QUEUED = "queued"  # every run queued
     RUNNING = "running"  # some run running, or some finished and some still queued

@@ -13,7 +13,7 @@ from typing import Any
 from worker.batch.experiment import RunSpec
 from worker.batch.local import Event, RunOutput
 from worker.batch.state import BatchDir, record_of
-from worker.status import RecordStatus, RunStatus
+from worker.status import ACTIVE_RUN, RecordStatus, RunStatus
 from worker.world.world import World
 
 log = logging.getLogger("mapqual.batch")
@@ -157,7 +157,7 @@ def run_celery(
     with session_scope(db.url) as s:
         status = {r.id: r.status for r in get_runs(s, list(by_id))}
     for run_id, spec in by_id.items():
-        fresh = status.get(run_id) in (RunStatus.QUEUED, RunStatus.RUNNING) and run_id not in sent
+        fresh = status.get(run_id) in ACTIVE_RUN and run_id not in sent
         retry = retry_failed and status.get(run_id) == RunStatus.FAILED
         if fresh or retry:
             with session_scope(db.url) as s:

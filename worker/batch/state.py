@@ -41,8 +41,9 @@ def record_of(
 ) -> dict[str, Any]:
     """A finished run's record: its labels, and its summary or the error that stopped it.
 
-    `status` is "done" when the pipeline finished the run (whatever the exploration's
-    outcome), "error" when it raised: the tables count such a run as failed, reason "error".
+    `status` is `RecordStatus.DONE` when the pipeline finished the run (whatever the
+    exploration's outcome), `ERROR` when it raised: the tables count such a run as failed,
+    reason "error".
     """
     return {
         **asdict(spec),
