@@ -80,9 +80,7 @@ def submit(
         session.connection().execute(stmt, {"world_id": body.world_id, "user_id": user.id}).first()
     )
     owned(user, world, "world", body.world_id)
-    if (
-        world.status != WorldStatus.READY
-    ):  # pending (being analysed) or invalid: no geometry to run on
+    if world.status != WorldStatus.READY:  # pending (being analysed) or invalid: nothing to run on
         raise HTTPException(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
