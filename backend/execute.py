@@ -22,9 +22,11 @@ from backend.lifecycle import (
 )
 from backend.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
+from worker.status import RunStatus
 
 log = logging.getLogger("mapqual.execute")
-Kind = Literal["busy", "skipped", "done", "lost", "cancelled", "failed"]
+# besides the run's status when the delivery ended it: done | cancelled | failed
+Kind = Literal["busy", "skipped", "lost"] | RunStatus
 
 
 @dataclass(frozen=True)
@@ -57,14 +59,14 @@ def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None
     except RunSuperseded as exc:
         return _lost(folder, "lost", f"run {run_id}: {exc}")
     except RunCancelled:
-        return _lost(folder, "cancelled", f"run {run_id}: cancelled")
+        return _lost(folder, RunStatus.CANCELLED, f"run {run_id}: cancelled")
     except TransitionRefused as exc:
         return _lost(folder, "lost", f"run {run_id}: result not stored ({exc})")
     except Exception as exc:  # SoftTimeLimitExceeded included: the run failed, not the worker
         log.exception("run %s failed", run_id)
         return _failed(url, run_id, attempt, folder, final, f"{type(exc).__name__}: {exc}")
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
-    return Outcome("done", f"run {run_id}: {result.summary['outcome']}")
+    return Outcome(RunStatus.DONE, f"run {run_id}: {result.summary['outcome']}")
 
 
 def run_and_store(
@@ -112,6 +114,6 @@ def _failed(url: str, run_id: int, attempt: str, folder: Path, final: Path, erro
         if not mark_run_failed(s, run_id, error, attempt):
             return Outcome("lost", f"run {run_id}: failed, but no longer this attempt's ({error})")
         # a run folder there now is the leftover of an interrupted rename-and-commit
-        if s.get_one(Run, run_id).status != "done":
+        if s.get_one(Run, run_id).status != RunStatus.DONE:
             shutil.rmtree(final, ignore_errors=True)
-    return Outcome("failed", f"run {run_id}: failed ({error})")
+    return Outcome(RunStatus.FAILED, f"run {run_id}: failed ({error})")

@@ -27,34 +27,36 @@ from sqlalchemy import ColumnElement, or_, select, update
 from sqlalchemy.orm import Session
 
 from backend.db.models import Job, Run, RunEvent, utcnow
+from worker.status import ACTIVE_RUN, JobStatus, RunStatus
 
 # (from, to): claim, take over a silent attempt, finish, fail, cancel, and the explicit
 # requeue of a failed or interrupted run (batch resume, --retry-failed). queued -> failed is a
 # run the API could not send to the queue at all. done and cancelled are final.
-LEGAL: frozenset[tuple[str, str]] = frozenset(
+LEGAL: frozenset[tuple[RunStatus, RunStatus]] = frozenset(
     {
-        ("queued", "running"),
-        ("running", "running"),
-        ("running", "done"),
-        ("running", "failed"),
-        ("queued", "cancelled"),
-        ("running", "cancelled"),
-        ("failed", "queued"),
-        ("running", "queued"),
-        ("queued", "failed"),
+        (RunStatus.QUEUED, RunStatus.RUNNING),
+        (RunStatus.RUNNING, RunStatus.RUNNING),
+        (RunStatus.RUNNING, RunStatus.DONE),
+        (RunStatus.RUNNING, RunStatus.FAILED),
+        (RunStatus.QUEUED, RunStatus.CANCELLED),
+        (RunStatus.RUNNING, RunStatus.CANCELLED),
+        (RunStatus.FAILED, RunStatus.QUEUED),
+        (RunStatus.RUNNING, RunStatus.QUEUED),
+        (RunStatus.QUEUED, RunStatus.FAILED),
     }
 )
-FINAL = frozenset({"done", "cancelled"})
+FINAL = frozenset({RunStatus.DONE, RunStatus.CANCELLED})
 RETRIES = 5  # compare-and-sets lost to a race before giving up (SQLite only; see _Stale)
 P = ParamSpec("P")
 T = TypeVar("T")
-ClaimAnswer = Literal["claimed", "busy", "done", "cancelled", "failed", "missing"]
+# besides the run's own status when it is final or failed (done | cancelled | failed)
+ClaimAnswer = Literal["claimed", "busy", "missing"] | RunStatus
 
 
 class TransitionRefused(RuntimeError):
     """A status change whose compare-and-set found the run in another state (or attempt)."""
 
-    def __init__(self, run_id: int, to: str, found: str | None):
+    def __init__(self, run_id: int, to: RunStatus, found: str | None):
         super().__init__(f"run {run_id}: cannot go to {to} from {found or 'nowhere'}")
         self.run_id, self.to, self.found = run_id, to, found
 
@@ -85,7 +87,7 @@ class RunState:
 
     run_id: int
     job_id: int
-    status: str
+    status: RunStatus
     attempt: str | None
     heartbeat_at: datetime | None
 
@@ -111,7 +113,7 @@ def _begin(session: Session, run_id: int) -> RunState | None:
 def _apply(
     session: Session,
     cur: RunState,
-    to: str,
+    to: RunStatus,
     *,
     values: dict[str, Any],
     detail: str | None,
@@ -154,27 +156,29 @@ def claim_run(
     now = utcnow()
     cutoff = now - timedelta(seconds=lease_s)
     where: list[ColumnElement[bool]] = []
-    if cur.status == "running":
+    if cur.status == RunStatus.RUNNING:
         if cur.heartbeat_at is not None and cur.heartbeat_at > cutoff:
             return "busy", None
         where.append(or_(Run.heartbeat_at.is_(None), Run.heartbeat_at <= cutoff))
         detail = f"took over from attempt {cur.attempt}: no sign of life for {lease_s:g} s"
-    elif cur.status == "queued":
+    elif cur.status == RunStatus.QUEUED:
         detail = "claimed"
     else:
-        return cur.status, None  # type: ignore[return-value]  # done | cancelled | failed
+        return cur.status, None  # done | cancelled | failed
     values = {
         "attempt": attempt, "attempts": Run.attempts + 1, "heartbeat_at": now, "started_at": now,
         "finished_at": None, "error": None, "progress": {},
     }  # fmt: skip
     return "claimed", _apply(
-        session, cur, "running", values=values, detail=detail, attempt=attempt, where=where
+        session, cur, RunStatus.RUNNING, values=values, detail=detail, attempt=attempt, where=where
     )
 
 
-def _holder_check(cur: RunState | None, run_id: int, to: str, attempt: str | None) -> RunState:
+def _holder_check(
+    cur: RunState | None, run_id: int, to: RunStatus, attempt: str | None
+) -> RunState:
     """The state, if `attempt` (None: whichever attempt) holds the running run."""
-    if cur is None or cur.status != "running":
+    if cur is None or cur.status != RunStatus.RUNNING:
         raise TransitionRefused(run_id, to, None if cur is None else cur.status)
     if attempt is not None and cur.attempt != attempt:
         raise TransitionRefused(run_id, to, f"running under another attempt ({cur.attempt})")
@@ -184,9 +188,9 @@ def _holder_check(cur: RunState | None, run_id: int, to: str, attempt: str | Non
 @_retried
 def finish_run(session: Session, run_id: int, attempt: str | None, values: dict[str, Any]) -> Run:
     """running -> done by its holder (None: by whichever attempt holds it), with `values`."""
-    cur = _holder_check(_begin(session, run_id), run_id, "done", attempt)
+    cur = _holder_check(_begin(session, run_id), run_id, RunStatus.DONE, attempt)
     values = {**values, "finished_at": utcnow(), "error": None}
-    return _apply(session, cur, "done", values=values, detail=None, attempt=cur.attempt)
+    return _apply(session, cur, RunStatus.DONE, values=values, detail=None, attempt=cur.attempt)
 
 
 @_retried
@@ -195,23 +199,23 @@ def fail_run(session: Session, run_id: int, error: str, attempt: str | None) -> 
     could not be sent to the queue; False when the run is not the caller's to fail (a
     cancelled run stays cancelled, a run another attempt holds is left to it)."""
     cur = _begin(session, run_id)
-    expected = "queued" if attempt is None else "running"
+    expected = RunStatus.QUEUED if attempt is None else RunStatus.RUNNING
     if cur is None or cur.status != expected or (attempt is not None and cur.attempt != attempt):
         return False
     values = {"error": error, "finished_at": utcnow()}
-    _apply(session, cur, "failed", values=values, detail=error[:500], attempt=cur.attempt)
+    _apply(session, cur, RunStatus.FAILED, values=values, detail=error[:500], attempt=cur.attempt)
     return True
 
 
 @_retried
-def cancel_run(session: Session, run_id: int, detail: str = "cancelled") -> bool:
+def cancel_run(session: Session, run_id: int, detail: str = RunStatus.CANCELLED.value) -> bool:
     """queued | running -> cancelled (a running attempt notices at its next progress write);
     False for a run already finished."""
     cur = _begin(session, run_id)
-    if cur is None or cur.status not in ("queued", "running"):
+    if cur is None or cur.status not in ACTIVE_RUN:
         return False
     values = {"finished_at": utcnow()}
-    _apply(session, cur, "cancelled", values=values, detail=detail, attempt=cur.attempt)
+    _apply(session, cur, RunStatus.CANCELLED, values=values, detail=detail, attempt=cur.attempt)
     return True
 
 
@@ -220,31 +224,31 @@ def requeue(session: Session, run_id: int, detail: str) -> bool:
     """failed | running -> queued, explicitly (a batch resumes or retries it): the attempt
     that held it, if alive, is superseded at its next progress write. False otherwise."""
     cur = _begin(session, run_id)
-    if cur is None or cur.status not in ("failed", "running"):
+    if cur is None or cur.status not in (RunStatus.FAILED, RunStatus.RUNNING):
         return False
     values = {
         "attempt": None, "heartbeat_at": None, "started_at": None, "finished_at": None,
         "error": None, "progress": {},
     }  # fmt: skip
-    _apply(session, cur, "queued", values=values, detail=detail, attempt=cur.attempt)
+    _apply(session, cur, RunStatus.QUEUED, values=values, detail=detail, attempt=cur.attempt)
     return True
 
 
 def refresh_job_status(session: Session, job: Job) -> None:
     """A job's status follows its runs: cancelled, running, queued, failed, or done."""
     session.flush()
-    if job.status == "cancelled":
+    if job.status == JobStatus.CANCELLED:
         return
     # from the database, not job.runs: a compare-and-set updates rows the ORM has not seen
     states = set(session.scalars(select(Run.status).where(Run.job_id == job.id).distinct()))
-    if "running" in states or ("queued" in states and len(states) > 1):
-        job.status = "running"
-    elif states == {"queued"}:
-        job.status = "queued"
-    elif "failed" in states:
-        job.status = "failed"
+    if RunStatus.RUNNING in states or (RunStatus.QUEUED in states and len(states) > 1):
+        job.status = JobStatus.RUNNING
+    elif states == {RunStatus.QUEUED}:
+        job.status = JobStatus.QUEUED
+    elif RunStatus.FAILED in states:
+        job.status = JobStatus.FAILED
     else:
-        job.status = "done"
+        job.status = JobStatus.DONE
     job.updated_at = utcnow()
 
 
@@ -259,15 +263,19 @@ def history_faults(events: Iterable[RunEvent]) -> list[str]:
     starting where the previous one ended, nothing after a final status, and a result or
     failure stored only by the attempt that held the run."""
     faults: list[str] = []
-    status, holder = "queued", None
+    status, holder = RunStatus.QUEUED, None
     for i, e in enumerate(events):
         if e.from_status != status:
             faults.append(f"event {i}: from {e.from_status}, but the run was {status}")
         if (e.from_status, e.to_status) not in LEGAL:
             faults.append(f"event {i}: {e.from_status} -> {e.to_status} is not legal")
-        if e.to_status in ("done", "failed") and e.from_status == "running" and e.attempt != holder:
+        if (
+            e.to_status in (RunStatus.DONE, RunStatus.FAILED)
+            and e.from_status == RunStatus.RUNNING
+            and e.attempt != holder
+        ):
             faults.append(f"event {i}: {e.to_status} by {e.attempt}, not the holder {holder}")
-        if e.to_status == "running":
+        if e.to_status == RunStatus.RUNNING:
             holder = e.attempt
         status = e.to_status
     return faults

@@ -13,9 +13,10 @@ from sqlalchemy.exc import SQLAlchemyError
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.limits import BodyLimit
-from backend.api.routes import health, jobs, pages, runs, stats, worlds
+from backend.api.routes import health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from backend.world_analysis import recover_pending, world_pool
+from frontend.dashboard import install as install_dashboard
 from worker.errors import InputError
 
 API_PREFIX = "/api/v1"
@@ -74,7 +75,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     for module in (worlds, jobs, runs, stats):
         app.include_router(module.router, prefix=API_PREFIX)
-    pages.install(app)  # the dashboard at /
+    install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them
     app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes)
     return app

@@ -18,8 +18,9 @@ from sqlalchemy.orm import Session
 from backend.core.config import Settings
 from backend.db.models import Run, User, World, utcnow
 from worker.explore.params import ExploreParams
+from worker.status import RunStatus
 
-ACTIVE = ("queued", "running")
+ACTIVE = (RunStatus.QUEUED, RunStatus.RUNNING)
 DEFAULT_TIME_LIMIT_S = ExploreParams.time_limit  # [s] what a run without the parameter gets
 
 

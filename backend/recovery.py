@@ -21,6 +21,7 @@ from sqlalchemy import and_, or_, select, update
 from backend.db.models import Run, utcnow
 from backend.db.session import session_scope
 from backend.queue import broker_epoch, enqueue_run
+from worker.status import RunStatus
 
 log = logging.getLogger("mapqual.recovery")
 SWEEP_EVERY_S = 3.0  # [s]
@@ -34,9 +35,9 @@ def sweep(database_url: str, broker_url: str, lease_s: float) -> list[int]:
         Run.broker_epoch.is_not(None),
         Run.broker_epoch != epoch,
         or_(
-            Run.status == "queued",
+            Run.status == RunStatus.QUEUED,
             and_(
-                Run.status == "running",
+                Run.status == RunStatus.RUNNING,
                 or_(Run.heartbeat_at.is_(None), Run.heartbeat_at <= cutoff),
             ),
         ),

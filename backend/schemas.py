@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 
 from backend.db.models import Job, Run, World
 from worker.run_params import run_params_schema
 from worker.slam import registry
+from worker.status import JobStatus, RunOutcome, RunStatus, WorldStatus
 
 MAX_RUNS_PER_JOB = 1000
 # Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
@@ -25,7 +26,7 @@ class WorldOut(BaseModel):
 
     id: int
     name: str
-    status: Literal["pending", "ready", "invalid"] = Field(
+    status: WorldStatus = Field(
         description="pending: being analysed; ready: usable; invalid: refused (see error)"
     )
     error: str | None = Field(default=None, description="why the world is invalid")
@@ -53,7 +54,7 @@ class WorldOut(BaseModel):
             facts=w.facts or {},
             created_at=w.created_at,
         )
-        if w.status == "ready":
+        if w.status == WorldStatus.READY:
             out.resolution = w.resolution
             out.origin = [w.origin_x, w.origin_y]
             out.width_px, out.height_px = w.width_px, w.height_px
@@ -115,8 +116,8 @@ class RunBrief(BaseModel):
 
     id: int
     seed: int
-    status: str
-    outcome: str | None
+    status: RunStatus
+    outcome: RunOutcome | None
     reason: str | None
     coverage: float | None
     b_mean_t: float | None
@@ -143,7 +144,7 @@ class JobOut(BaseModel):
 
     id: int
     world_id: int
-    status: str
+    status: JobStatus
     slam: str
     params: dict[str, Any]
     created_at: datetime

@@ -1,21 +1,19 @@
-"""Persistence of worlds, jobs and runs: the only module that writes mapqual's tables."""
+"""Persistence of jobs and runs, and the one place to import the store from: users and
+sessions live in `store_users`, worlds in `store_worlds`, re-exported here. The store modules
+are the only ones that write mapqual's tables (status changes go through `lifecycle`)."""
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import secrets
 from collections.abc import Sequence
-from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import delete, select, update
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
-from backend.db.models import Job, Run, RunMap, RunTrajectory, User, WebSession, World, utcnow
+from backend.db.models import Job, Run, RunMap, RunTrajectory
 from backend.lifecycle import (
     TransitionRefused,
     claim_run,
@@ -26,148 +24,71 @@ from backend.lifecycle import (
     requeue,
 )
 from backend.lifecycle import refresh_job_status as _refresh_job_status
-from worker.world.world import World as WorldModel
+from backend.store_users import (
+    LOCAL_USER,
+    add_user,
+    create_web_session,
+    delete_web_session,
+    find_user,
+    hash_key,
+    list_users,
+    local_user,
+    revoke_user,
+    rotate_user_key,
+    user_for_key,
+    web_session_user,
+)
+from backend.store_worlds import (
+    create_pending_world,
+    get_or_create_world,
+    mark_world_invalid,
+    mark_world_ready,
+    pending_world_ids,
+    save_world,
+    world_fingerprint,
+    world_model,
+    world_occupancy,
+    world_upload,
+)
+from worker.status import JobStatus, RunStatus
+
+__all__ = [
+    "LOCAL_USER",
+    "TRAJECTORY_KINDS",
+    "add_job_runs",
+    "add_user",
+    "create_job",
+    "create_pending_world",
+    "create_web_session",
+    "delete_web_session",
+    "find_user",
+    "get_or_create_world",
+    "get_runs",
+    "hash_key",
+    "list_runs",
+    "list_users",
+    "load_map",
+    "load_trajectory",
+    "local_user",
+    "mark_run_failed",
+    "mark_run_started",
+    "mark_world_invalid",
+    "mark_world_ready",
+    "pending_world_ids",
+    "requeue_run",
+    "revoke_user",
+    "rotate_user_key",
+    "save_world",
+    "store_run_result",
+    "user_for_key",
+    "web_session_user",
+    "world_fingerprint",
+    "world_model",
+    "world_occupancy",
+    "world_upload",
+]
 
 TRAJECTORY_KINDS = ("gt", "est")
-LOCAL_USER = "local"
-
-
-def hash_key(key: str) -> str:
-    """The stored form of an API key (keys are 256-bit random tokens: SHA-256 suffices)."""
-    return hashlib.sha256(key.encode("utf-8")).hexdigest()
-
-
-def add_user(session: Session, name: str, is_admin: bool = False) -> tuple[User, str]:
-    """A new user and their API key; the key itself is shown once and never stored."""
-    if not name or len(name) > 100:
-        raise ValueError("a user name is 1 to 100 characters")
-    if session.scalars(select(User).where(User.name == name)).first() is not None:
-        raise ValueError(f"a user named {name!r} exists already")
-    key = "mq_" + secrets.token_urlsafe(32)
-    user = User(name=name, is_admin=is_admin, key_hash=hash_key(key))
-    session.add(user)
-    session.flush()
-    return user, key
-
-
-def user_for_key(session: Session, key: str) -> User | None:
-    """The user holding `key`, or None (also for a revoked user)."""
-    stmt = select(User).where(User.key_hash == hash_key(key), User.revoked_at.is_(None))
-    return session.scalars(stmt).first()
-
-
-def local_user(session: Session) -> User:
-    """The owner of everything made with authentication switched off (embedded use).
-
-    Its key is random and discarded, so nobody can sign in as it over the API.
-    """
-    user = session.scalars(select(User).where(User.name == LOCAL_USER)).first()
-    if user is None:
-        user, _ = add_user(session, LOCAL_USER, is_admin=True)
-    return user
-
-
-def get_or_create_world(
-    session: Session,
-    *,
-    owner_id: int,
-    name: str,
-    sha256: str,
-    source_format: str,
-    source_path: str | None,
-    resolution: float,
-    origin: Sequence[float],
-    occ: np.ndarray,
-    start_pose: Sequence[float],
-    facts: dict[str, Any],
-) -> World:
-    """The owner's world with this content hash, or a new one: uploading twice is harmless."""
-    existing = session.scalars(
-        select(World).where(World.owner_id == owner_id, World.sha256 == sha256)
-    ).first()
-    if existing is not None:
-        return existing
-    world = World(
-        owner_id=owner_id,
-        name=name,
-        sha256=sha256,
-        source_format=source_format,
-        source_path=source_path,
-        facts=facts,
-        **_geometry(resolution, origin, occ, start_pose),
-    )
-    session.add(world)
-    session.flush()
-    return world
-
-
-def _geometry(
-    resolution: float, origin: Sequence[float], occ: np.ndarray, start_pose: Sequence[float]
-) -> dict[str, Any]:
-    """The geometry columns of an analysed world (`occ (H, W) bool`, bottom row first)."""
-    return {
-        "resolution": float(resolution),
-        "origin_x": float(origin[0]),
-        "origin_y": float(origin[1]),
-        "width_px": int(occ.shape[1]),
-        "height_px": int(occ.shape[0]),
-        "start_pose": [float(v) for v in start_pose],
-        "occupancy": pack_array(np.asarray(occ, dtype=bool)),
-    }
-
-
-def _facts(world: WorldModel) -> dict[str, Any]:
-    """A loaded world's facts as stored, with the loader's warnings."""
-    facts = dataclasses.asdict(world.facts)
-    facts["warnings"] = list(world.warnings)
-    return facts
-
-
-def save_world(
-    session: Session,
-    *,
-    owner_id: int,
-    world: WorldModel,
-    sha256: str,
-    source_format: str,
-) -> World:
-    """Store a loaded floorplan (once per owner and content hash)."""
-    return get_or_create_world(
-        session,
-        owner_id=owner_id,
-        name=world.name,
-        sha256=sha256,
-        source_format=source_format,
-        source_path=world.source,
-        resolution=world.resolution,
-        origin=world.origin,
-        occ=world.occ,
-        start_pose=world.start_pose,
-        facts=_facts(world),
-    )
-
-
-def world_fingerprint(world: WorldModel) -> str:
-    """A content hash of a loaded world (see `World.fingerprint`)."""
-    return world.fingerprint()
-
-
-def world_model(row: World) -> WorldModel:
-    """The pipeline's World for a stored world (grid, resolution, origin, start pose)."""
-    return WorldModel.from_array(
-        world_occupancy(row),
-        row.resolution,
-        origin=(row.origin_x, row.origin_y),
-        start_pose=tuple(row.start_pose),
-        name=row.name,
-        n_rooms=row.facts.get("n_rooms"),
-        source=row.source_path,
-    )
-
-
-def world_occupancy(world: World) -> np.ndarray:
-    """The stored occupancy grid `(H, W) bool`, `[iy, ix]` bottom row first."""
-    return unpack_array(world.occupancy)
 
 
 def create_job(
@@ -198,7 +119,7 @@ def create_job(
         world_id=world_id,
         slam=slam,
         params=params,
-        status="queued",
+        status=JobStatus.QUEUED,
         idempotency_key=idempotency_key,
     )
     # Runs built through the relationship: one flush inserts the job, then all runs in one
@@ -226,7 +147,7 @@ def mark_run_started(
     whose holder gave no sign of life for `lease_s`; raises `TransitionRefused` otherwise."""
     answer, run = claim_run(session, run_id, attempt or new_attempt(), lease_s)
     if run is None:
-        raise TransitionRefused(run_id, "running", answer)
+        raise TransitionRefused(run_id, RunStatus.RUNNING, answer)
     return run
 
 
@@ -349,157 +270,3 @@ def get_runs(session: Session, run_ids: Sequence[int]) -> list[Run]:
     if not run_ids:
         return []
     return list(session.scalars(select(Run).where(Run.id.in_([int(i) for i in run_ids]))))
-
-
-# --- users and dashboard sessions -----------------------------------------------------------
-def find_user(session: Session, name: str) -> User:
-    """The user called `name`; LookupError if there is none."""
-    user = session.scalars(select(User).where(User.name == name)).first()
-    if user is None:
-        raise LookupError(f"no user named {name!r}")
-    return user
-
-
-def list_users(session: Session) -> list[User]:
-    """Every user, oldest first (the local user of embedded use included)."""
-    return list(session.scalars(select(User).order_by(User.id)))
-
-
-def revoke_user(session: Session, name: str) -> User:
-    """Revoke a user's key and end their dashboard sessions at once (the API's key cache
-    may trust the key for its TTL more); revoking twice keeps the first time."""
-    user = find_user(session, name)
-    if user.revoked_at is None:
-        user.revoked_at = utcnow()
-    session.execute(delete(WebSession).where(WebSession.user_id == user.id))
-    session.flush()
-    return user
-
-
-def rotate_user_key(session: Session, name: str) -> tuple[User, str]:
-    """A new API key for a user (shown once, never stored); the old key dies and their
-    sessions end. A revoked user is reinstated: rotating is how a revoked user gets back in."""
-    user = find_user(session, name)
-    key = "mq_" + secrets.token_urlsafe(32)  # as add_user makes them
-    user.key_hash = hash_key(key)
-    user.revoked_at = None
-    session.execute(delete(WebSession).where(WebSession.user_id == user.id))
-    session.flush()
-    return user, key
-
-
-def create_web_session(session: Session, user_id: int, ttl_s: float) -> tuple[str, str]:
-    """A new dashboard session of `ttl_s` seconds: (its token, its CSRF token). Only the
-    token's hash is stored; expired sessions (anyone's: those never used again are found no
-    other way) are purged on the way, through the index on their expiry."""
-    now = utcnow()
-    session.execute(delete(WebSession).where(WebSession.expires_at <= now))
-    token, csrf = secrets.token_urlsafe(32), secrets.token_urlsafe(32)
-    session.add(
-        WebSession(
-            token_hash=hash_key(token), user_id=user_id, csrf_token=csrf, created_at=now,
-            expires_at=now + timedelta(seconds=ttl_s),
-        )
-    )  # fmt: skip
-    session.flush()
-    return token, csrf
-
-
-def web_session_user(session: Session, token: str) -> tuple[User, str] | None:
-    """(user, CSRF token) of a live session, or None: unknown, expired (the row is deleted
-    then) or of a revoked user."""
-    token_hash = hash_key(token)
-    row = session.execute(
-        select(User, WebSession.csrf_token, WebSession.expires_at)
-        .join(WebSession, WebSession.user_id == User.id)
-        .where(WebSession.token_hash == token_hash)
-    ).first()
-    if row is None:
-        return None
-    user, csrf, expires_at = row
-    if expires_at <= utcnow():
-        session.execute(delete(WebSession).where(WebSession.token_hash == token_hash))
-        return None
-    return None if user.revoked_at is not None else (user, csrf)
-
-
-def delete_web_session(session: Session, token: str) -> None:
-    """End a dashboard session (signing out); an unknown token is no error."""
-    session.execute(delete(WebSession).where(WebSession.token_hash == hash_key(token)))
-
-
-# --- worlds analysed off the request thread (pending -> ready | invalid) --------------------
-def create_pending_world(
-    session: Session,
-    *,
-    owner_id: int,
-    name: str,
-    sha256: str,
-    source_format: str,
-    source_path: str,
-    upload: bytes,
-    resolution: float | None,
-) -> World:
-    """A world whose files are stored (`upload`, packed) but not yet analysed: `pending`."""
-    world = World(
-        owner_id=owner_id,
-        name=name,
-        sha256=sha256,
-        source_format=source_format,
-        source_path=source_path,
-        status="pending",
-        upload=upload,
-        upload_resolution=resolution,
-        facts={},
-    )
-    session.add(world)
-    session.flush()
-    return world
-
-
-def mark_world_ready(session: Session, world_id: int, world: WorldModel) -> bool:
-    """Fill a pending world's geometry and facts from its analysis, drop its upload; False if
-    it is no longer pending (another process finished it first: the first result stays)."""
-    values = {
-        "status": "ready",
-        "error": None,
-        "upload": None,
-        "facts": _facts(world),
-        **_geometry(world.resolution, world.origin, world.occ, world.start_pose),
-    }
-    return _finish_world(session, world_id, values)
-
-
-def mark_world_invalid(session: Session, world_id: int, error: str) -> bool:
-    """A pending world whose files the loader refused: `invalid`, with its one-line reason
-    (the upload is dropped); False if it is no longer pending."""
-    return _finish_world(session, world_id, {"status": "invalid", "error": error, "upload": None})
-
-
-def _finish_world(session: Session, world_id: int, values: dict[str, Any]) -> bool:
-    """Compare-and-set on `status = pending`: two analyses of one world store one result."""
-    result = session.execute(
-        update(World)
-        .where(World.id == world_id, World.status == "pending")
-        .values(**values)
-        .execution_options(synchronize_session=False)
-    )
-    return result.rowcount == 1
-
-
-def pending_world_ids(session: Session) -> list[int]:
-    """Worlds still waiting for their analysis (e.g. left by a process that died), oldest first."""
-    stmt = select(World.id).where(World.status == "pending").order_by(World.id)
-    return list(session.scalars(stmt))
-
-
-def world_upload(session: Session, world_id: int) -> tuple[bytes, float | None, str] | None:
-    """(packed upload, resolution given with it, main file name) of a pending world, or None."""
-    row = session.execute(
-        select(World.upload, World.upload_resolution, World.source_path).where(
-            World.id == world_id, World.status == "pending"
-        )
-    ).first()
-    if row is None or row[0] is None:
-        return None
-    return bytes(row[0]), row[1], str(row[2])

@@ -19,6 +19,8 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+from worker.status import WorldStatus
+
 log = logging.getLogger("mapqual.worlds")
 
 CRASHED = (
@@ -50,9 +52,9 @@ def without_folder(message: str, folder: Path) -> str:
     return message
 
 
-def analyse_world(database_url: str, world_id: int, max_pixels: int) -> str:
+def analyse_world(database_url: str, world_id: int, max_pixels: int) -> WorldStatus | None:
     """In a pool process: load the pending world's upload as `load_world` does and store the
-    outcome; returns the world's status afterwards."""
+    outcome; returns the world's status afterwards (None: nothing was left to do)."""
     from backend.db.session import session_scope
     from backend.store import mark_world_invalid, mark_world_ready, world_upload
     from worker.errors import InputError
@@ -61,7 +63,7 @@ def analyse_world(database_url: str, world_id: int, max_pixels: int) -> str:
     with session_scope(database_url) as s:
         found = world_upload(s, world_id)
     if found is None:
-        return "done"  # finished meanwhile (or deleted): nothing to do
+        return None  # finished meanwhile (or deleted): nothing to do
     blob, resolution, main = found
     world, error = None, None
     with tempfile.TemporaryDirectory(prefix="mapqual-world-") as tmp:
@@ -77,9 +79,9 @@ def analyse_world(database_url: str, world_id: int, max_pixels: int) -> str:
     with session_scope(database_url) as s:
         if world is not None:
             mark_world_ready(s, world_id, world)
-            return "ready"
+            return WorldStatus.READY
         mark_world_invalid(s, world_id, error or "the floorplan could not be analysed")
-        return "invalid"
+        return WorldStatus.INVALID
 
 
 class WorldPool:
@@ -92,9 +94,9 @@ class WorldPool:
         self.max_pixels = max_pixels
         self._lock = threading.Lock()
         self._executor: cf.ProcessPoolExecutor | None = None
-        self._futures: dict[int, cf.Future[str]] = {}
+        self._futures: dict[int, cf.Future[WorldStatus | None]] = {}
 
-    def submit(self, world_id: int) -> cf.Future[str]:
+    def submit(self, world_id: int) -> cf.Future[WorldStatus | None]:
         """The analysis of `world_id` (the one already under way, if any)."""
         with self._lock:
             running = self._futures.get(world_id)
@@ -111,13 +113,13 @@ class WorldPool:
         future.add_done_callback(lambda f: self._done(world_id, f))
         return future
 
-    def running(self, world_id: int) -> cf.Future[str] | None:
+    def running(self, world_id: int) -> cf.Future[WorldStatus | None] | None:
         """The analysis of `world_id` in this process, if one was started and is not done."""
         with self._lock:
             future = self._futures.get(world_id)
         return None if future is None or future.done() else future
 
-    def _done(self, world_id: int, future: cf.Future[str]) -> None:
+    def _done(self, world_id: int, future: cf.Future[WorldStatus | None]) -> None:
         with self._lock:
             if self._futures.get(world_id) is future:
                 del self._futures[world_id]

@@ -34,8 +34,8 @@ def listen(redis_url: str, run_id: int) -> None:
 
     import redis
 
-    from backend.progress import channel
     from frontend.live import LiveRun
+    from worker.live_wire import channel
 
     live, n, nbytes = LiveRun(run_id), 0, 0
     sub = redis.Redis.from_url(redis_url).pubsub(ignore_subscribe_messages=True)

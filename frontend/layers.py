@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.progress import FREE, OCCUPIED
+from worker.live_wire import FREE, OCCUPIED
 
 TILE = 128  # [cells] side of a SLAM map tile: a patch re-sends only the tiles it touches
 MAX_CHUNKS = 40  # path chunks before they are merged into one node

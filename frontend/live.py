@@ -12,8 +12,9 @@ from sqlalchemy import select
 
 from backend.db.models import Run, World
 from backend.db.session import session_scope
-from backend.progress import FREE, OCCUPIED, UNKNOWN, decode_map_patch
 from backend.store import load_map, load_trajectory, world_occupancy
+from worker.live_wire import decode_map_patch, ros_codes
+from worker.status import RunOutcome, RunStatus
 
 
 @dataclass
@@ -21,12 +22,12 @@ class RunInfo:
     """A run as the metrics panel names it."""
 
     id: int
-    status: str
+    status: RunStatus
     world_id: int
     world: str
     seed: int
     slam: str
-    outcome: str | None
+    outcome: RunOutcome | None
 
 
 def run_info(url: str, run_id: int) -> RunInfo | None:
@@ -41,7 +42,7 @@ def run_info(url: str, run_id: int) -> RunInfo | None:
     return None if row is None else RunInfo(*row)
 
 
-def run_status(url: str, run_id: int) -> str | None:
+def run_status(url: str, run_id: int) -> RunStatus | None:
     """The run's status now, or None when it does not exist."""
     with session_scope(url) as s:
         return s.scalar(select(Run.status).where(Run.id == run_id))
@@ -69,7 +70,7 @@ def load_floorplan(url: str, run_id: int) -> Floorplan | None:
 
 @dataclass
 class MapState:
-    """A SLAM map as cell codes (backend.progress UNKNOWN / FREE / OCCUPIED)."""
+    """A SLAM map as cell codes (worker.live_wire UNKNOWN / FREE / OCCUPIED)."""
 
     codes: np.ndarray  # (H, W) uint8 [iy, ix]
     resolution: float  # [m]
@@ -95,7 +96,7 @@ def load_finished(url: str, run_id: int) -> FinishedRun | None:
     """A done run's trajectories, map and summary; None when it is not done."""
     with session_scope(url) as s:
         run = s.get(Run, run_id)
-        if run is None or run.status != "done":
+        if run is None or run.status != RunStatus.DONE:
             return None
         t, gt = load_trajectory(s, run_id, "gt")
         _, est = load_trajectory(s, run_id, "est")
@@ -188,9 +189,3 @@ class LiveRun:
             if self.map is not None:
                 m = MapState(self.map.codes.copy(), self.map.resolution, self.map.origin)
             return self.gt.copy(), self.est.copy(), m
-
-
-def ros_codes(grid_ros: np.ndarray) -> np.ndarray:
-    """A stored ROS grid (-1 unknown, 0..100) as cell codes; occupied from 65 (map_saver)."""
-    occupied = np.where(grid_ros >= 65, OCCUPIED, FREE)
-    return np.where(grid_ros < 0, UNKNOWN, occupied).astype(np.uint8)

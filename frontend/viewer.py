@@ -21,6 +21,7 @@ from backend.db.session import session_scope
 from backend.viewer_tokens import InvalidToken, authorise, check_access, signing_key
 from frontend.live import LiveRun, load_finished, load_floorplan, run_info, run_status
 from frontend.view import Note, RunView, refuse
+from worker.status import RunStatus
 
 log = logging.getLogger("mapqual.viewer")
 _RUN_PATH = re.compile(r"^/run/(\d{1,18})/([^/]*)/?$")
@@ -133,11 +134,11 @@ class ViewerApp:
             if old is not None and old != run_id:
                 self._unwatch(old)
         status = run_status(self.url, run_id)
-        if status == "done":
+        if status == RunStatus.DONE:
             fin = load_finished(self.url, run_id)
             if fin is not None:
                 view.show_finished(fin)
-        elif status == "running":
+        elif status == RunStatus.RUNNING:
             with self._lock:
                 live = self.live.get(run_id)
                 if live is None:
@@ -212,14 +213,14 @@ class ViewerApp:
         with self._lock:
             live_ids = list(self.live)
         for run_id in live_ids:
-            if run_status(self.url, run_id) != "running":
+            if run_status(self.url, run_id) != RunStatus.RUNNING:
                 with self._lock:
                     self.live.pop(run_id, None)
                     self._subs.put(("unsubscribe", run_id))
                 for view in [v for v in views if v.run_id == run_id and v.mode == "live"]:
                     self.show(view, run_id)  # done: the replay from the database
         for view in [v for v in views if v.mode == "none" and v.run_id is not None]:
-            if run_status(self.url, view.run_id) in ("running", "done"):
+            if run_status(self.url, view.run_id) in (RunStatus.RUNNING, RunStatus.DONE):
                 self.show(view, view.run_id)  # a queued run has started (or finished)
 
     def _recheck(self, views: list[RunView]) -> list[RunView]:

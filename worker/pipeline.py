@@ -30,6 +30,7 @@ from worker.run_params import EvalParams, RunParams
 from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
 from worker.slam import registry
+from worker.status import RunOutcome
 from worker.world.world import World
 
 __all__ = ["EvalParams", "RunParams", "RunCancelled", "RunSuperseded", "RunResult", "run_one"]
@@ -245,7 +246,7 @@ def _evaluate(
 def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[str, Any]:
     """summary.json: outcome and coverage at the top level, each relation kind's figures in
     exactly the shape `mapqual evaluate --json` prints."""
-    failed = ex.outcome != "completed"
+    failed = ex.outcome != RunOutcome.COMPLETED
     sim_time = float(ex.t[-1]) if len(ex.t) else 0.0
     return {
         "outcome": ex.outcome,

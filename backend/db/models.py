@@ -7,6 +7,7 @@ row per pose: a two-hour run has 72,000 poses per trajectory.
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from enum import StrEnum
 from typing import Any
 
 from sqlalchemy import (
@@ -24,6 +25,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 from sqlalchemy.types import TypeDecorator
+
+from worker.status import JobStatus, RunOutcome, RunStatus, WorldStatus
 
 
 def utcnow() -> datetime:
@@ -50,6 +53,24 @@ class UtcDateTime(TypeDecorator):
         if value is None:
             return None
         return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+
+
+class StatusText(TypeDecorator):
+    """A status: stored as its string (VARCHAR(20), as before the enums), read back as the
+    `StrEnum` member, so that rows and API answers carry the same type."""
+
+    impl = String(20)
+    cache_ok = True
+
+    def __init__(self, enum: type[StrEnum]):
+        super().__init__()
+        self.enum = enum
+
+    def process_bind_param(self, value: str | None, dialect: Any) -> str | None:
+        return None if value is None else str(self.enum(value))
+
+    def process_result_value(self, value: str | None, dialect: Any) -> StrEnum | None:
+        return None if value is None else self.enum(value)
 
 
 class Base(DeclarativeBase):
@@ -124,7 +145,9 @@ class World(Base):
     source_path: Mapped[str | None] = mapped_column(Text)
     # pending (uploaded, being analysed off the request thread) | ready | invalid (see error).
     # Until ready, the geometry columns below are empty.
-    status: Mapped[str] = mapped_column(String(20), default="ready", index=True)
+    status: Mapped[WorldStatus] = mapped_column(
+        StatusText(WorldStatus), default=WorldStatus.READY, index=True
+    )
     error: Mapped[str | None] = mapped_column(Text)
     # The uploaded files (packed by the API) and the resolution given with them, kept until
     # the analysis has read them.
@@ -156,8 +179,10 @@ class Job(Base):
     # The client's Idempotency-Key: the same key again returns this job instead of a new one.
     idempotency_key: Mapped[str | None] = mapped_column(String(200))
     world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
-    # queued | running | done | failed | cancelled; follows its runs.
-    status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
+    # follows its runs (backend.lifecycle.refresh_job_status)
+    status: Mapped[JobStatus] = mapped_column(
+        StatusText(JobStatus), default=JobStatus.QUEUED, index=True
+    )
     slam: Mapped[str] = mapped_column(String(40))
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
@@ -188,10 +213,12 @@ class Run(Base):
     seed: Mapped[int] = mapped_column(Integer)
     slam: Mapped[str] = mapped_column(String(40))
     params: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    # queued | running | done | failed (internal error) | cancelled
-    status: Mapped[str] = mapped_column(String(20), default="queued", index=True)
+    # failed: an internal error; a failed exploration is a done run with outcome failed
+    status: Mapped[RunStatus] = mapped_column(
+        StatusText(RunStatus), default=RunStatus.QUEUED, index=True
+    )
     # The run's own result once done: completed, or failed with a reason (collision, stuck, ...).
-    outcome: Mapped[str | None] = mapped_column(String(20))
+    outcome: Mapped[RunOutcome | None] = mapped_column(StatusText(RunOutcome))
     reason: Mapped[str | None] = mapped_column(String(40))
     coverage: Mapped[float | None] = mapped_column(Float)
     # Headline score (B relations), duplicated from `metrics` for cheap aggregate queries.
@@ -234,8 +261,8 @@ class RunEvent(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
     attempt: Mapped[str | None] = mapped_column(String(32))
-    from_status: Mapped[str | None] = mapped_column(String(20))
-    to_status: Mapped[str] = mapped_column(String(20))
+    from_status: Mapped[RunStatus | None] = mapped_column(StatusText(RunStatus))
+    to_status: Mapped[RunStatus] = mapped_column(StatusText(RunStatus))
     detail: Mapped[str | None] = mapped_column(Text)
     at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 

@@ -19,6 +19,7 @@ import typer
 from mapqual.cli import app
 from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
+from worker.status import RecordStatus
 
 
 def _cores() -> int:
@@ -97,7 +98,7 @@ def _line(rec: dict[str, Any]) -> str:
 
     outcome, reason = outcome_of(rec)
     text = outcome + (f" ({reason})" if reason else "")
-    if rec["status"] != "done":
+    if rec["status"] != RecordStatus.DONE:
         return f"{text}: {rec['error']}"
     b = relation_stats(rec)
     if b is not None:
@@ -193,13 +194,13 @@ def batch(
     specs, loaded = expand(groups, partial(load_world, allow_outside=allow_outside))
     bdir = BatchDir(out)
     records = bdir.load_records(s.key for s in specs)
-    redo = {k for k, r in records.items() if retry_failed and r["status"] != "done"}
+    redo = {k for k, r in records.items() if retry_failed and r["status"] != RecordStatus.DONE}
     todo = [s for s in specs if s.key not in records or s.key in redo]
     print(f"{len(specs)} runs, {len(specs) - len(todo)} finished, {len(todo)} to do -> {out}",
           file=sys.stderr)  # fmt: skip
     if dry_run:
         for s in specs:
-            print(f"{s.key}  {'todo' if s in todo else 'done'}  {s.label}")
+            print(f"{s.key}  {'todo' if s in todo else RecordStatus.DONE}  {s.label}")
         return
     command = "mapqual " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")

@@ -13,6 +13,7 @@ from typing import Any
 from worker.batch.experiment import RunSpec
 from worker.batch.local import Event, RunOutput
 from worker.batch.state import BatchDir, record_of
+from worker.status import ACTIVE_RUN, RecordStatus, RunStatus
 from worker.world.world import World
 
 log = logging.getLogger("mapqual.batch")
@@ -124,10 +125,10 @@ class DbBatch:
 
 def _record_from_run(spec: RunSpec, run: Any, ids: dict[str, Any]) -> dict[str, Any] | None:
     """The OUT record of a run the database holds as finished, or None while it is not."""
-    if run.status == "done":
+    if run.status == RunStatus.DONE:
         return record_of(spec, summary=run.summary, report_dir=run.report_dir, **ids)
-    if run.status in ("failed", "cancelled"):
-        error = run.error or "cancelled"
+    if run.status in (RunStatus.FAILED, RunStatus.CANCELLED):
+        error = run.error or RunStatus.CANCELLED.value
         return record_of(spec, summary=None, error=error, report_dir=run.report_dir, **ids)
     return None
 
@@ -156,8 +157,8 @@ def run_celery(
     with session_scope(db.url) as s:
         status = {r.id: r.status for r in get_runs(s, list(by_id))}
     for run_id, spec in by_id.items():
-        fresh = status.get(run_id) in ("queued", "running") and run_id not in sent
-        retry = retry_failed and status.get(run_id) == "failed"
+        fresh = status.get(run_id) in ACTIVE_RUN and run_id not in sent
+        retry = retry_failed and status.get(run_id) == RunStatus.FAILED
         if fresh or retry:
             with session_scope(db.url) as s:
                 if retry:  # failed -> queued, explicitly: the task runs queued runs only
@@ -174,10 +175,10 @@ def run_celery(
             record = _record_from_run(spec, run, db.ids(spec))
             if record is not None:
                 bdir.write_record(record)
-                bdir.journal("done" if record["status"] == "done" else "error", spec.key)
+                bdir.journal(RecordStatus(record["status"]), spec.key)
                 on_event(Event("finish", spec, record=record))
                 del waiting[run.id]
-            elif run.status == "running":
+            elif run.status == RunStatus.RUNNING:
                 if run.id not in started:
                     started.add(run.id)
                     on_event(Event("start", spec))

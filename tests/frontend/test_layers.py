@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from backend.progress import FREE, OCCUPIED, UNKNOWN
 from frontend.layers import (
     BACKGROUND,
     FLOOR_FREE,
@@ -20,6 +19,7 @@ from frontend.layers import (
     PathLayer,
 )
 from tests.frontend.conftest import free_port
+from worker.live_wire import FREE, OCCUPIED, UNKNOWN
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,7 @@
 """The worker's live feed on real Redis: light while nobody listens; a new listener gets the
 whole path and map, then only new points and changed map rectangles, and rebuilds both
-exactly; the viewer's LiveRun folds the messages into the same state."""
+exactly; the viewer's LiveRun folds the messages into the same state. (The wire format's
+pieces alone: tests/worker/test_live_wire.py.)"""
 
 from __future__ import annotations
 
@@ -13,61 +14,13 @@ import redis
 
 from backend.db.migrate import upgrade
 from backend.db.session import session_scope
-from backend.progress import (
-    FREE,
-    OCCUPIED,
-    UNKNOWN,
-    ProgressReporter,
-    changed_box,
-    channel,
-    decode_map_patch,
-    encode_map_patch,
-    map_codes,
-    scan_points,
-)
+from backend.progress import ProgressReporter
 from backend.store import add_user, create_job, mark_run_started, save_world
 from frontend.live import LiveRun
+from worker.live_wire import channel, map_codes
 from worker.pipeline import RunProgress
 from worker.slam.grid import OccupancyGrid
 from worker.world.world import World
-
-
-def test_map_codes_follow_the_grid_thresholds():
-    prob = np.array([[np.nan, 0.0, 0.25], [0.26, 1.0, np.nan]], dtype=np.float32)
-    codes = map_codes(OccupancyGrid(prob, 0.05, (0.0, 0.0)))
-    assert codes.tolist() == [[UNKNOWN, FREE, FREE], [OCCUPIED, OCCUPIED, UNKNOWN]]
-
-
-def test_changed_box_is_the_bounding_box_of_the_differences():
-    rng = np.random.default_rng(3)
-    for _ in range(50):
-        a = rng.integers(0, 3, (40, 60)).astype(np.uint8)
-        b = a.copy()
-        cells = rng.integers(0, [40, 60], (rng.integers(0, 5), 2))
-        for iy, ix in cells:
-            b[iy, ix] = (b[iy, ix] + 1) % 3
-        box = changed_box(a, b)
-        if len(cells) == 0:
-            assert box is None
-            continue
-        iy0, ix0, h, w = box
-        assert (iy0, ix0) == (cells[:, 0].min(), cells[:, 1].min())
-        assert (iy0 + h - 1, ix0 + w - 1) == (cells[:, 0].max(), cells[:, 1].max())
-
-
-def test_map_patch_round_trip():
-    codes = np.random.default_rng(0).integers(0, 3, (30, 50)).astype(np.uint8)
-    msg = json.loads(json.dumps(encode_map_patch(codes, (5, 7, 10, 20), 0.05, (1.0, -2.0), False)))
-    box, patch = decode_map_patch(msg)
-    assert box == (5, 7, 10, 20) and msg["shape"] == [30, 50] and msg["origin"] == [1.0, -2.0]
-    np.testing.assert_array_equal(patch, codes[5:15, 7:27])
-
-
-def test_scan_points_drop_no_return_beams_and_lie_at_the_range():
-    angles = np.array([-np.pi / 2, 0.0, np.pi / 2])
-    p = _progress(0.0, [1.0, 2.0, np.pi / 2], None, np.array([1.0, 30.0, 2.0]), angles)
-    # heading +90 deg: beam -90 points along +x, beam +90 along -x; the 30 m beam is dropped
-    np.testing.assert_allclose(scan_points(p), [[2.0, 2.0], [-1.0, 2.0]], atol=1e-12)
 
 
 def _progress(t, pose, grid, ranges=None, angles=None) -> RunProgress:

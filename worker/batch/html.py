@@ -11,6 +11,7 @@ from typing import Any
 
 from worker.batch.state import now_iso
 from worker.batch.tables import ERROR_COLUMNS, error_rows, is_good, outcome_of, success_rows
+from worker.status import RecordStatus, RunOutcome
 
 CAPTIONS = {
     "errors_by_world.png": (
@@ -125,9 +126,9 @@ def write_html(
     expected: int,
 ) -> Path:
     """report.html in `out`, readable offline: every image is embedded in the page."""
-    done = sum(outcome_of(r)[0] == "completed" for r in records)
+    done = sum(outcome_of(r)[0] == RunOutcome.COMPLETED for r in records)
     good = sum(is_good(r) for r in records)
-    errors = sum(r["status"] != "done" for r in records)
+    errors = sum(r["status"] != RecordStatus.DONE for r in records)
     head = (
         f"<h1>mapqual batch {_e(info.get('batch_id', ''))}</h1>"
         f"<p>{_e(info.get('command', ''))}</p>"

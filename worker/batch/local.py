@@ -15,6 +15,7 @@ import numpy as np
 from worker.batch.experiment import RunSpec
 from worker.batch.pool import PoolMessage, run_pool
 from worker.batch.state import BatchDir, record_of
+from worker.status import RecordStatus
 
 PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running run
 
@@ -174,5 +175,5 @@ def run_local(
 
 def _finish(bdir: BatchDir, spec: RunSpec, record: dict[str, Any], on_event) -> None:
     bdir.write_record(record)
-    bdir.journal("done" if record["status"] == "done" else "error", spec.key)
+    bdir.journal(RecordStatus(record["status"]), spec.key)
     on_event(Event("finish", spec, record=record))

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from worker.batch.tables import GOOD_R, GOOD_T, error_rows, is_good, outcome_of, relation_stats
+from worker.status import RunOutcome
 
 AXES = (("translation", "m", GOOD_T), ("rotation", "rad", GOOD_R))
 DPI = 110
@@ -59,7 +60,11 @@ def errors_by_world(records: Sequence[dict[str, Any]], path: Path) -> Path | Non
 
 def _mean_std(recs: Sequence[dict[str, Any]], axis: str) -> tuple[float, float, int]:
     """Average over completed runs of each run's mean and std B error, and how many runs."""
-    stats = [b[axis] for r in recs if outcome_of(r)[0] == "completed" and (b := relation_stats(r))]
+    stats = [
+        b[axis]
+        for r in recs
+        if outcome_of(r)[0] == RunOutcome.COMPLETED and (b := relation_stats(r))
+    ]
     if not stats:
         return float("nan"), float("nan"), 0
     return (
@@ -121,7 +126,9 @@ def noise(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     for (world, slam), by_noise in series.items():
         levels = sorted(by_noise)
         label = world if len(slams) == 1 else f"{world} ({slam})"
-        done = [np.mean([outcome_of(r)[0] == "completed" for r in by_noise[n]]) for n in levels]
+        done = [
+            np.mean([outcome_of(r)[0] == RunOutcome.COMPLETED for r in by_noise[n]]) for n in levels
+        ]
         axs[0].plot(levels, 100 * np.asarray(done), marker="o", label=label)
         for ax, (axis, _, _) in zip(axs[1:], AXES, strict=True):
             ms = [_mean_std(by_noise[n], axis) for n in levels]
@@ -156,7 +163,7 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     classes = (
         ("good map", "tab:green", lambda r: is_good(r)),
         ("bad map (B over the limit)", "tab:red", lambda r: _bad(r)),
-        ("not completed", "tab:grey", lambda r: outcome_of(r)[0] != "completed"),
+        ("not completed", "tab:grey", lambda r: outcome_of(r)[0] != RunOutcome.COMPLETED),
     )
     for ax, (axis, unit, good), floor in zip(axs, AXES, (1e-5, 1e-6), strict=True):
         for label, color, member in classes:
@@ -184,7 +191,7 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
 
 
 def _bad(rec: dict[str, Any]) -> bool:
-    return outcome_of(rec)[0] == "completed" and not is_good(rec)
+    return outcome_of(rec)[0] == RunOutcome.COMPLETED and not is_good(rec)
 
 
 FIGURES = {

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from worker.batch.experiment import RunSpec
+from worker.status import RecordStatus
 
 RECORD = "record.json"
 BATCH = "batch.json"
@@ -40,12 +41,13 @@ def record_of(
 ) -> dict[str, Any]:
     """A finished run's record: its labels, and its summary or the error that stopped it.
 
-    `status` is "done" when the pipeline finished the run (whatever the exploration's
-    outcome), "error" when it raised: the tables count such a run as failed, reason "error".
+    `status` is `RecordStatus.DONE` when the pipeline finished the run (whatever the
+    exploration's outcome), `ERROR` when it raised: the tables count such a run as failed,
+    reason "error".
     """
     return {
         **asdict(spec),
-        "status": "done" if summary is not None else "error",
+        "status": RecordStatus.DONE if summary is not None else RecordStatus.ERROR,
         "error": error,
         "summary": summary,
         "run_id": run_id,

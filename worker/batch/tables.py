@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from worker.status import RecordStatus, RunOutcome
+
 # Thesis 6.3.4: a map is visually bad above these mean B errors.
 GOOD_T = 1.0  # [m]
 GOOD_R = 0.03  # [rad]
@@ -22,14 +24,14 @@ RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
 
 def outcome_of(rec: dict[str, Any]) -> tuple[str, str | None]:
     """(outcome, reason): a run that raised counts as failed with reason "error"."""
-    if rec["status"] != "done":
-        return "failed", "error"
+    if rec["status"] != RecordStatus.DONE:
+        return RunOutcome.FAILED, "error"
     return rec["summary"]["outcome"], rec["summary"]["reason"]
 
 
 def relation_stats(rec: dict[str, Any], kind: str = "B") -> dict[str, Any] | None:
     """The run's {translation, rotation, skipped} figures of relation `kind`, if evaluated."""
-    if rec["status"] != "done":
+    if rec["status"] != RecordStatus.DONE:
         return None
     rel = rec["summary"]["relations"].get(kind)
     return rel if rel and rel["translation"]["n"] else None
@@ -39,7 +41,7 @@ def is_good(rec: dict[str, Any]) -> bool:
     """Completed, with mean B errors under the thesis's visually-good thresholds."""
     b = relation_stats(rec)
     return (
-        outcome_of(rec)[0] == "completed"
+        outcome_of(rec)[0] == RunOutcome.COMPLETED
         and b is not None
         and b["translation"]["mean"] <= GOOD_T
         and b["rotation"]["mean"] <= GOOD_R
@@ -96,11 +98,11 @@ def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         outcomes = [outcome_of(r) for r in recs]
         row = {"world": world, "variant": recs[0]["variant"], "noise": noise, "slam": slam}
         row["runs"] = len(recs)
-        row["completed"] = sum(o == "completed" for o, _ in outcomes)
+        row["completed"] = sum(o == RunOutcome.COMPLETED for o, _ in outcomes)
         row["good"] = sum(is_good(r) for r in recs)
         row["failed"] = row["runs"] - row["completed"]
         for reason in REASONS:
-            row[reason] = sum(o == "failed" and r == reason for o, r in outcomes)
+            row[reason] = sum(o == RunOutcome.FAILED and r == reason for o, r in outcomes)
         rows.append(row)
     return rows
 
@@ -111,7 +113,9 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
     rows = []
     for (world, slam, noise), recs in _conditions(records).items():
         stats = [
-            b[axis] for r in recs if outcome_of(r)[0] == "completed" and (b := relation_stats(r))
+            b[axis]
+            for r in recs
+            if outcome_of(r)[0] == RunOutcome.COMPLETED and (b := relation_stats(r))
         ]
         if not stats:
             continue

@@ -14,10 +14,10 @@ from worker.explore.coverage import align_map_to_world, coverage, reachable_free
 from worker.explore.navigator import GoalRecord, Navigator
 from worker.explore.params import ExploreParams
 from worker.explore.stop_rules import SnapshotRule
+from worker.status import RunOutcome
 
 __all__ = ["ExploreParams", "ExplorationResult", "ExploreProgress", "explore"]
 
-Outcome = Literal["completed", "failed"]
 # completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
 # "slam_diverged"
 Reason = Literal[
@@ -46,7 +46,7 @@ class ExploreProgress:
 class ExplorationResult:
     """One exploration run."""
 
-    outcome: Outcome
+    outcome: RunOutcome
     reason: Reason
     stop_detail: str  # one human-readable line
     t: np.ndarray  # (N,) [s] 10 Hz timestamps
@@ -69,7 +69,7 @@ class ExplorationResult:
 
     @property
     def completed(self) -> bool:
-        return self.outcome == "completed"
+        return self.outcome == RunOutcome.COMPLETED
 
 
 class _Recorder:
@@ -246,7 +246,9 @@ def _result(world, sim, slam, nav, rec, reach, reason, detail, n_col0, wall0):
     col = sim.collisions[n_col0] if len(sim.collisions) > n_col0 else None
     goals = tuple(nav.stats.goals)
     return ExplorationResult(
-        outcome="completed" if reason in ("no_frontier", "map_unchanged") else "failed",
+        outcome=RunOutcome.COMPLETED
+        if reason in ("no_frontier", "map_unchanged")
+        else RunOutcome.FAILED,
         reason=reason,
         stop_detail=detail,
         t=rec.buf[: rec.n, 0].copy(),

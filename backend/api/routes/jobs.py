@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from functools import lru_cache
-from typing import Annotated, Literal
+from typing import Annotated
 
 from fastapi import APIRouter, Header, HTTPException, Query, Response, status
 from pydantic import BaseModel
@@ -30,9 +30,9 @@ from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import create_job, mark_run_failed
 from worker.run_params import RunParams  # light: no numba in the API process
+from worker.status import JobStatus, RunStatus, WorldStatus
 
 router = APIRouter(tags=["jobs"])
-JobStatus = Literal["queued", "running", "done", "failed", "cancelled"]
 
 
 @lru_cache(maxsize=256)
@@ -78,7 +78,7 @@ def submit(
         session.connection().execute(stmt, {"world_id": body.world_id, "user_id": user.id}).first()
     )
     owned(user, world, "world", body.world_id)
-    if world.status != "ready":  # pending (being analysed) or invalid: no geometry to run on
+    if world.status != WorldStatus.READY:  # pending (being analysed) or invalid: nothing to run on
         raise HTTPException(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
@@ -115,7 +115,7 @@ def submit(
         send_runs(settings.redis_url, [run.id for run in job.runs])
     except Exception as exc:
         for run in job.runs:
-            if run.status == "queued":
+            if run.status == RunStatus.QUEUED:
                 mark_run_failed(session, run.id, f"could not enqueue: {type(exc).__name__}")
         session.commit()
         raise _queue_down() from None
@@ -196,10 +196,10 @@ def cancel_job(job_id: IdPath, session: SessionDep, user: CurrentUser) -> JobOut
     """Cancel what has not finished: queued runs never start, running ones stop at their next
     step. Finished runs keep their results."""
     job = owned(user, session.get(Job, job_id), "job", job_id)
-    if job.status in ("done", "failed", "cancelled"):
+    if job.status in (JobStatus.DONE, JobStatus.FAILED, JobStatus.CANCELLED):
         raise HTTPException(status.HTTP_409_CONFLICT, f"job {job_id} is already {job.status}")
     for run_id in [run.id for run in job.runs]:
         cancel_run(session, run_id, "job cancelled")  # by compare-and-set: races a claim
-    job.status = "cancelled"
+    job.status = JobStatus.CANCELLED
     session.flush()
     return JobOut.of(job)

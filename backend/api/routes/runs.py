@@ -15,6 +15,7 @@ from backend.api.deps import CurrentUser, IdPath, SessionDep, owned
 from backend.db.models import Run
 from backend.schemas import RunOut
 from backend.store import load_map, load_trajectory
+from worker.status import RunStatus
 
 router = APIRouter(tags=["runs"])
 
@@ -24,13 +25,13 @@ def _run(session, user, run_id: int) -> Run:
 
 
 def _report_dir(run: Run) -> Path:
-    if run.status != "done" or not run.report_dir or not Path(run.report_dir).is_dir():
+    if run.status != RunStatus.DONE or not run.report_dir or not Path(run.report_dir).is_dir():
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run.id} has no report (yet)")
     return Path(run.report_dir)
 
 
 def _require_done(run: Run) -> None:
-    if run.status != "done":
+    if run.status != RunStatus.DONE:
         raise HTTPException(
             status.HTTP_404_NOT_FOUND, f"run {run.id} is {run.status}: no results yet"
         )

@@ -9,6 +9,7 @@ from sqlalchemy import func, select
 
 from backend.api.deps import CurrentUser, SessionDep
 from backend.db.models import Run, World
+from worker.status import RunOutcome, RunStatus
 
 router = APIRouter(tags=["stats"])
 
@@ -20,8 +21,8 @@ def stats(
     group_by: Literal["world"] = Query("world", description="What to aggregate over."),
 ) -> list[dict]:
     """Per world: runs done, completed, and mean/std/min/max of the B errors of completed runs."""
-    done = Run.status == "done"
-    completed = Run.outcome == "completed"
+    done = Run.status == RunStatus.DONE
+    completed = Run.outcome == RunOutcome.COMPLETED
     stmt = (
         select(
             World.id,

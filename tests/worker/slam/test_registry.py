@@ -56,7 +56,7 @@ def test_one_register_call_reaches_params_schema_batch_and_factory(scratch_regis
 
 
 def test_the_dashboard_form_lists_the_registry(scratch_registry):
-    from backend.api.routes.pages import templates
+    from frontend.dashboard.pages import templates
 
     registry.register("plugin", lambda laser, p, rng: None, "a plugin SLAM")
     html = templates.get_template("jobs.html").render(

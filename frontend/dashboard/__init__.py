@@ -1,0 +1,21 @@
+"""The dashboard: server-rendered pages over the API's own handlers and access rules, with
+their templates, static files and charts; `backend.main` mounts it at /."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
+
+from frontend.dashboard import compare, pages, worlds
+
+STATIC = Path(__file__).resolve().parent / "static"
+
+
+def install(app: FastAPI) -> None:
+    """Add the pages, their static files and the sign-in redirect to `app`."""
+    for module in (pages, worlds, compare):
+        app.include_router(module.router)
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+    app.add_exception_handler(pages.SignInRequired, pages.sign_in_redirect)

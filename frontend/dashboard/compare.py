@@ -1,0 +1,81 @@
+"""The dashboard's comparison page: success and B errors per world (thesis Tables 6.4, 6.5)
+and their error-bar charts (Figs. 6.8, 6.9), drawn with matplotlib."""
+
+from __future__ import annotations
+
+import io
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import HTMLResponse, Response
+from sqlalchemy import select
+
+from backend.api.deps import Principal, SessionDep
+from backend.api.routes import stats as stats_api
+from backend.db.models import Run
+from frontend.dashboard.pages import PageUser, render
+from worker.status import RunOutcome, RunStatus
+
+router = APIRouter(include_in_schema=False)
+
+
+@router.get("/compare", response_class=HTMLResponse)
+def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
+    """Success and B errors per world (thesis Tables 6.4, 6.5) and error bars (Figs. 6.8, 6.9)."""
+    rows = stats_api.stats(session, user, "world")
+    counts = _relation_counts(session, user)
+    for row in rows:
+        row["relations"] = counts.get(row["world_id"], 0)
+    return render(request, "compare.html", user=user, rows=rows)
+
+
+def _relation_counts(session, user: Principal) -> dict[int, int]:
+    """Per world: B relations evaluated over its completed runs."""
+    stmt = select(Run.world_id, Run.summary).where(
+        Run.status == RunStatus.DONE, Run.outcome == RunOutcome.COMPLETED
+    )
+    if not user.is_admin:
+        stmt = stmt.where(Run.owner_id == user.id)
+    out: dict[int, int] = {}
+    for wid, summary in session.execute(stmt):
+        b = (summary or {}).get("relations", {}).get("B") or {}
+        out[wid] = out.get(wid, 0) + int(b.get("translation", {}).get("n", 0))
+    return out
+
+
+@router.get("/compare/{kind}.png")
+def compare_plot(kind: str, session: SessionDep, user: PageUser) -> Response:
+    """Mean B error per world with a 1-std error bar and the min-max range."""
+    if kind not in ("translation", "rotation"):
+        raise HTTPException(404, f"no chart {kind!r}")
+    rows = [r for r in stats_api.stats(session, user, "world") if r[kind]["mean"] is not None]
+    buf = io.BytesIO()
+    error_bar_chart(buf, rows, kind)
+    return Response(buf.getvalue(), media_type="image/png")
+
+
+def error_bar_chart(out, rows: list[dict], kind: str) -> None:
+    """Thesis Figs. 6.8/6.9: per world, mean +- std (bar) and min..max (thin line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    unit = "m" if kind == "translation" else "rad"
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.9 * len(rows) + 2), 3.6), dpi=100)
+    x = list(range(len(rows)))
+    mean = [r[kind]["mean"] for r in rows]
+    std = [r[kind]["std"] for r in rows]
+    lo = [r[kind]["mean"] - r[kind]["min"] for r in rows]
+    hi = [r[kind]["max"] - r[kind]["mean"] for r in rows]
+    ax.errorbar(x, mean, yerr=[lo, hi], fmt="none", ecolor="#999999", elinewidth=1, capsize=3)
+    ax.errorbar(x, mean, yerr=std, fmt="o", color="#1f5fbf", elinewidth=2.5, capsize=5)
+    ax.set_xticks(x, [r["world"] for r in rows], rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel(f"mean {kind} error [{unit}]")
+    ax.set_title(f"B relations, {kind}: mean ± std (blue), min–max (grey)", fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_ylim(bottom=0.0)
+    if not rows:
+        ax.text(0.5, 0.5, "no completed runs yet", ha="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(out, format="png")
+    plt.close(fig)

@@ -1,0 +1,104 @@
+"""The dashboard's worlds page: thumbnails with their facts, and the upload form."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
+from fastapi.responses import HTMLResponse, RedirectResponse, Response
+
+from backend.api.deps import SessionDep, SettingsDep
+from backend.api.routes import worlds as worlds_api
+from backend.db.models import World
+from backend.world_analysis import world_pool
+from frontend.dashboard.pages import PageUser, render, user_worlds
+from worker.errors import InputError
+from worker.status import WorldStatus
+
+router = APIRouter(include_in_schema=False)
+
+# the world facts as the worlds page labels them: (label, unit after the value; " %": a
+# fraction shown in per cent)
+FACT_LABELS = {
+    "free_area_m2": ("free area", " m²"),
+    "free_fraction": ("free share of the plan", " %"),
+    "n_free_regions": ("free regions", ""),
+    "largest_region_area_m2": ("largest region", " m²"),
+    "largest_region_share": ("its share of the free area", " %"),
+    "main_region_enclosed": ("largest region enclosed", ""),
+    "border_free": ("free space at the border", ""),
+    "clearance_mean_m": ("clearance, mean", " m"),
+    "clearance_median_m": ("clearance, median", " m"),
+    "clearance_p90_m": ("clearance, 90th percentile", " m"),
+    "clearance_max_m": ("clearance, max", " m"),
+    "n_rooms": ("rooms", ""),
+}
+
+
+def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
+    worlds = user_worlds(session, user)
+    # reload until every analysis is done; not an error page, which answers a POST (a reload
+    # would send the form again)
+    refresh = error is None and any(w.status == WorldStatus.PENDING for w in worlds)
+    return render(
+        request, "worlds.html", status_code, user=user, worlds=worlds,
+        error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
+    )  # fmt: skip
+
+
+_STATE = {
+    WorldStatus.PENDING: "is being analysed",
+    WorldStatus.READY: "is ready",
+    WorldStatus.INVALID: "is invalid",
+}
+
+
+@router.get("/worlds", response_class=HTMLResponse)
+def worlds_page(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    uploaded: int | None = None,
+    again: bool = False,
+) -> HTMLResponse:
+    """Worlds as thumbnails with their facts; an upload form. After an upload (`uploaded`),
+    a notice says where that world stands."""
+    notice = None
+    w = session.get(World, uploaded) if uploaded is not None else None
+    if w is not None and (user.is_admin or w.owner_id == user.id):
+        verb = "already stored" if again else "stored"
+        notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]}"
+    return _worlds_page(request, session, user, None, notice)
+
+
+@router.post("/worlds", response_class=HTMLResponse)
+def upload_world_form(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    settings: SettingsDep,
+    file: Annotated[list[UploadFile], File()],
+    resolution: Annotated[str, Form()] = "",
+) -> Response:
+    """Upload through the API's own handler; its answer (or its error) is shown on the page."""
+    try:
+        res = float(resolution) if resolution.strip() else None
+    except ValueError:
+        res = -1.0
+    if res is not None and not res > 0:
+        msg = f"the resolution must be a positive number of metres per pixel, not {resolution!r}"
+        return _worlds_page(request, session, user, msg, None, 400)
+    try:
+        names = worlds_api.checked_names(file)
+        files = {name: f.file.read() for name, f in zip(names, file, strict=True)}
+        row, fresh = worlds_api.accept_upload(session, user, settings, files, res)
+    except (HTTPException, InputError) as exc:
+        session.rollback()
+        msg = str(getattr(exc, "detail", exc))
+        return _worlds_page(request, session, user, msg, None, getattr(exc, "status_code", 400))
+    session.commit()  # the analysis runs in another process: it must see the row
+    if fresh:
+        world_pool(request.app).submit(row.id)
+    # POST, redirect, GET: the page then reloads itself while the world is pending
+    again = "" if fresh else "&again=1"
+    return RedirectResponse(f"/worlds?uploaded={row.id}{again}", status_code=303)

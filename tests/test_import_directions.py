@@ -1,0 +1,93 @@
+"""Dependencies point one way (HOUSE.md): read every module's imports with `ast` (those inside
+functions too) and check who imports whom; the light shared modules load no numba."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# (importer, imported) edges allowed against the rules below, each with its reason
+ALLOWED = {
+    ("backend.main", "frontend.dashboard"),  # the app mounts the dashboard at /
+}
+
+
+def _module(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports_of(source: str, module: str) -> set[str]:
+    """The absolute names of the modules `source` (the text of `module`) imports."""
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: resolve against the importing package
+                base = module.split(".")[: -node.level]
+                found.add(".".join([*base, node.module] if node.module else base))
+            else:
+                found.add(node.module or "")
+    return found
+
+
+def edges(package: str) -> set[tuple[str, str]]:
+    """(importer, imported) for every module of `package`."""
+    out = set()
+    for path in sorted((ROOT / package).rglob("*.py")):
+        module = _module(path)
+        out.update((module, name) for name in imports_of(path.read_text(), module))
+    return out
+
+
+def _top(name: str) -> str:
+    return name.split(".", 1)[0]
+
+
+def test_imports_of_finds_nested_and_relative_imports():
+    source = "import a.b\nfrom c import d\ndef f():\n    from .e import g\n    from . import h\n"
+    assert imports_of(source, "pkg.sub.mod") == {"a.b", "c", "pkg.sub.e", "pkg.sub"}
+
+
+def test_backend_does_not_import_frontend():
+    wrong = {(a, b) for a, b in edges("backend") if _top(b) == "frontend" and (a, b) not in ALLOWED}
+    assert wrong == set()
+
+
+def test_worker_imports_neither_backend_nor_frontend():
+    # tasks.py is the Celery shell over the backend's run service (HOUSE.md)
+    wrong = {
+        (a, b)
+        for a, b in edges("worker")
+        if _top(b) in ("backend", "frontend") and a != "worker.tasks"
+    }
+    assert wrong == set()
+
+
+def test_the_shared_vocabularies_import_only_the_standard_library_and_numpy():
+    for name in ("status", "live_wire"):
+        path = ROOT / "worker" / f"{name}.py"
+        tree = ast.parse(path.read_text())
+        runtime = set()
+        for node in tree.body:  # module level, outside `if TYPE_CHECKING:`
+            if isinstance(node, ast.Import):
+                runtime.update(_top(a.name) for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                runtime.add(_top(node.module or ""))
+        assert runtime <= {"__future__", "base64", "enum", "typing", "zlib", "numpy"}, name
+
+
+def test_the_shared_vocabularies_load_no_numba_nor_database():
+    heavy = ("numba", "sqlalchemy", "backend", "frontend")
+    code = (
+        "import sys, worker.status, worker.live_wire; "
+        f"print(sorted(m for m in {heavy!r} if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
