@@ -50,9 +50,10 @@ class Placement:
     """Where a run's report goes, and how the run treats its folder and its database row."""
 
     report_dir: Path | None = None  # the run's folder; None: <runs_dir>/<run id>/
-    # False: written in the attempt's own folder, renamed into place with the commit of the
-    # result (a worker's run). True: written straight into `report_dir`, a folder the caller
-    # owns and keeps whatever happens (`mapqual run -o`, a batch's OUT/runs/<key>/).
+    # False: written in the attempt's own folder with its report.zip, renamed into place with
+    # the commit of the result (a worker's run). True: written straight into `report_dir`, a
+    # folder the caller owns and keeps whatever happens (`mapqual run -o`, a batch's
+    # OUT/runs/<key>/), with no zip (the API makes one if it is asked for it).
     own_folder: bool = False
     sim_log: str | None = SIM_LOG  # file name of the CARMEN log in the folder; None: none
     lease_s: float | None = (
@@ -131,12 +132,14 @@ class _Job:
         folder renamed into place inside it. The `RunResult`; TransitionRefused when the
         attempt no longer holds the run."""
         from worker.pipeline import run_one
-        from worker.report.folder import write_report
+        from worker.report.folder import write_report, write_report_zip
 
         world, params, seed = job
         log_path = self.folder / self.place.sim_log if self.place.sim_log else None
         result = run_one(world, params, seed, on_progress, sim_log=log_path)
         write_report(result, self.folder)
+        if not self.place.own_folder:  # renamed into place with the rest, served as it is
+            write_report_zip(self.folder, f"run{self.run_id}")
         ex = result.exploration
         rename = None if self.place.own_folder else self.folder
         with session_scope(self.url) as s:

@@ -9,6 +9,7 @@ import os
 import signal
 import threading
 import time
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -97,6 +98,11 @@ def test_a_run_is_done_once_and_a_second_delivery_does_nothing(pg_url, tmp_path)
     assert _folders(tmp_path / "runs") == [str(run_id)]  # renamed into place, nothing beside
     folder = tmp_path / "runs" / str(run_id)
     assert (folder / "summary.json").exists()
+    with zipfile.ZipFile(folder / "report.zip") as zf:  # made before the rename, with the rest
+        on_disk = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
+        assert sorted(zf.namelist()) == sorted(f"run{run_id}/{n}" for n in on_disk - {"report.zip"})
+        assert {"summary.json", "sim.log", "relations_B.txt"} <= on_disk
+        assert zf.read(f"run{run_id}/sim.log") == (folder / "sim.log").read_bytes()
     again = execute_run(run_id, settings)
     assert (again.kind, again.message) == ("skipped", f"run {run_id}: not run (done)")
     with session_scope(pg_url) as s:
@@ -142,7 +148,7 @@ def test_an_exception_on_a_cancelled_run_leaves_it_cancelled(pg_url, tmp_path):
 
 def test_a_callers_own_folder_gets_the_same_files_as_a_workers_run(pg_url, tmp_path):
     """The placement of `mapqual run -o` and of a batch's runs: the report written straight
-    into the folder (no attempt folder, no sim.log unless named), progress to the
+    into the folder (no attempt folder, no zip, no sim.log unless named), progress to the
     caller only, the world passed in; the files are the worker's, byte for byte."""
     world = _rooms(2, 1)
     worker_run, own_run = (
@@ -163,7 +169,7 @@ def test_a_callers_own_folder_gets_the_same_files_as_a_workers_run(pg_url, tmp_p
         str(worker_run)
     ]
     worker_files = {p.name for p in (tmp_path / "runs" / str(worker_run)).iterdir()}
-    assert {p.name for p in own.iterdir()} == worker_files - {"sim.log"}
+    assert {p.name for p in own.iterdir()} == worker_files - {"report.zip", "sim.log"}
     for name in ("relations_B.txt", "T.errors", "gt.log", "est.tum", "map.pgm", "map.yaml"):
         assert (own / name).read_bytes() == (
             tmp_path / "runs" / str(worker_run) / name
