@@ -27,10 +27,10 @@ from backend.lifecycle import (
 )
 from backend.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
+from worker.report.folder import SIM_LOG
 
 log = logging.getLogger("mapqual.execute")
 Kind = Literal["busy", "skipped", "done", "lost", "cancelled", "failed"]
-SIM_LOG = "sim.log"  # = worker.report.folder.SIM_LOG (not imported: it pulls in matplotlib)
 
 
 @dataclass(frozen=True)
@@ -56,9 +56,8 @@ class Placement:
     # OUT/runs/<key>/), with no zip (the API makes one if it is asked for it).
     own_folder: bool = False
     sim_log: str | None = SIM_LOG  # file name of the CARMEN log in the folder; None: none
-    lease_s: float | None = (
-        None  # [s] a running run silent this long is taken over; None: settings'
-    )
+    # a running run silent this long [s] is taken over; None: the settings' run lease
+    lease_s: float | None = None
     # a KeyboardInterrupt or SystemExit marks the run failed (a command in the foreground);
     # a worker's leaves the run to its lease and the broker's redelivery
     fail_on_interrupt: bool = False
