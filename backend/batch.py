@@ -26,6 +26,7 @@ from backend.store import (
 from worker.batch.experiment import RunSpec, world_fingerprint
 from worker.batch.jobs import plan_cells, source_format
 from worker.batch.local import SIM_LOG_GZ, RunOutput, Task, execute, load_cached, throttled
+from worker.batch.pool import TaskFailed
 from worker.batch.remote import RunState
 from worker.world.world import World
 
@@ -122,10 +123,6 @@ class DbBatch:
             enqueue_runs(s, self.settings.redis_url, [run_id])
 
 
-class RunNotStored(RuntimeError):
-    """The run service did not finish the run (it failed, or was cancelled meanwhile)."""
-
-
 @dataclass(frozen=True)
 class PoolRun:
     """One run in a local pool's worker process, through the run service: claimed, run into
@@ -153,4 +150,5 @@ class PoolRun:
             # for this attempt, so write the report again (same seed, same files); the
             # database keeps the result it has
             return execute(task, progress)
-        raise RunNotStored(outcome.message)
+        # failed: the record's error is the one stored; cancelled or lost: why not stored
+        raise TaskFailed(outcome.error or outcome.message)

@@ -43,6 +43,7 @@ class Outcome:
     summary: dict[str, Any] | None = field(default=None, compare=False)  # done: the summary
     report_dir: str | None = None  # done: where its report folder is
     found: str | None = None  # skipped: the status the run had (done, cancelled, failed, missing)
+    error: str | None = None  # failed: the error stored with the run
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,7 @@ class _Job:
             # a run folder there now is the leftover of an interrupted rename-and-commit
             if not self.place.own_folder and s.get_one(Run, run_id).status != "done":
                 shutil.rmtree(self.final, ignore_errors=True)
-        return Outcome("failed", f"run {run_id}: failed ({error})")
+        return Outcome("failed", f"run {run_id}: failed ({error})", error=error)
 
     def _discard(self) -> None:
         if not self.place.own_folder:
