@@ -178,3 +178,27 @@ def test_a_callers_own_folder_gets_the_same_files_as_a_workers_run(pg_url, tmp_p
         run = s.get_one(Run, own_run)
         assert (run.status, run.report_dir, run.progress) == ("done", str(own.resolve()), {})
         assert run.summary["relations"] == outcome.summary["relations"]
+
+
+def _interrupt(_progress) -> None:
+    raise KeyboardInterrupt
+
+
+def test_an_interrupt_fails_a_foreground_run_and_leaves_a_workers_to_its_lease(pg_url, tmp_path):
+    settings = _settings(pg_url, tmp_path / "runs")
+    mine, workers = (
+        _run(pg_url, "odometry", 60.0, _rooms(2, 1)),
+        _run(pg_url, "odometry", 60.0, _rooms(2, 1)),
+    )
+    own = tmp_path / "mine"
+    place = Placement(report_dir=own, own_folder=True, fail_on_interrupt=True)  # mapqual run -o
+    with pytest.raises(KeyboardInterrupt):
+        execute_run(mine, settings, place=place, on_progress=_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        execute_run(workers, settings, on_progress=_interrupt)
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, mine)
+        assert (run.status, run.error) == ("failed", "KeyboardInterrupt: ")
+        assert [e.to_status for e in history(s, mine)] == ["running", "failed"]
+        assert s.get_one(Run, workers).status == "running"  # another delivery takes it over
+    assert own.is_dir()  # the user's folder is the user's
