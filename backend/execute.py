@@ -1,12 +1,17 @@
-"""One delivery of a queued run, executed exactly once: claim it under a new attempt, run the
-pipeline into the attempt's own folder, and keep the result (or the failure) only while the
-attempt still holds the run; an attempt that lost keeps nothing and deletes its folder."""
+"""The one run service: a stored run executed exactly once. Claim it under a new attempt, run
+the pipeline into the attempt's own folder, and keep the result (or the failure) only while
+the attempt still holds the run; an attempt that lost keeps nothing and deletes its folder.
+
+The Celery task, `mapqual run` and both modes of `mapqual batch` are shells around
+`execute_run`; they differ only in their `Placement` and in who hears of the progress.
+"""
 
 from __future__ import annotations
 
 import logging
 import shutil
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -22,6 +27,7 @@ from backend.lifecycle import (
 )
 from backend.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
+from worker.report.folder import SIM_LOG
 from worker.status import RunStatus
 
 log = logging.getLogger("mapqual.execute")
@@ -36,84 +42,138 @@ class Outcome:
 
     kind: Kind
     message: str
+    summary: dict[str, Any] | None = field(default=None, compare=False)  # done: the summary
+    report_dir: str | None = None  # done: where its report folder is
+    found: str | None = None  # skipped: the status the run had (done, cancelled, failed, missing)
+    error: str | None = None  # failed: the error stored with the run
 
 
-def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None) -> Outcome:
-    """Claim, run, and store run `run_id` (see the module's docstring)."""
+@dataclass(frozen=True)
+class Placement:
+    """Where a run's report goes, and how the run treats its folder and its database row."""
+
+    report_dir: Path | None = None  # the run's folder; None: <runs_dir>/<run id>/
+    # False: written in the attempt's own folder with its report.zip, renamed into place with
+    # the commit of the result (a worker's run). True: written straight into `report_dir`, a
+    # folder the caller owns and keeps whatever happens (`mapqual run -o`, a batch's
+    # OUT/runs/<key>/), with no zip (the API makes one if it is asked for it).
+    own_folder: bool = False
+    sim_log: str | None = SIM_LOG  # file name of the CARMEN log in the folder; None: none
+    # a running run silent this long [s] is taken over; None: the settings' run lease
+    lease_s: float | None = None
+    # a KeyboardInterrupt or SystemExit marks the run failed (a command in the foreground);
+    # a worker's leaves the run to its lease and the broker's redelivery
+    fail_on_interrupt: bool = False
+
+
+WORKER = Placement()
+
+
+def execute_run(
+    run_id: int,
+    settings: Settings,
+    redis_client: Any | None = None,
+    *,
+    place: Placement = WORKER,
+    on_progress: Callable[[Any], None] | None = None,
+    world: Any | None = None,
+) -> Outcome:
+    """Claim, run, and store run `run_id` (see the module's docstring). Progress goes to
+    `on_progress`, or (None) to the database and Redis, where cancellation is noticed;
+    `world` is the run's world already loaded (None: read from the database)."""
     from worker.pipeline import RunCancelled, RunSuperseded
     from worker.run_params import RunParams
 
     url, attempt = settings.database_url, new_attempt()
+    lease_s = settings.run_lease_s if place.lease_s is None else place.lease_s
     with session_scope(url) as s:
-        answer, run = claim_run(s, run_id, attempt, settings.run_lease_s)
+        answer, run = claim_run(s, run_id, attempt, lease_s)
         if run is None:
             kind: Kind = "busy" if answer == "busy" else "skipped"
-            return Outcome(kind, f"run {run_id}: not run ({answer})")
-        world = world_model(s.get_one(World, run.world_id))
+            return Outcome(kind, f"run {run_id}: not run ({answer})", found=answer)
+        world = world if world is not None else world_model(s.get_one(World, run.world_id))
         params, seed = RunParams.from_json(run.params), run.seed
-    final = (settings.runs_dir / str(run_id)).resolve()
-    folder = attempt_dir(final, attempt)
-    reporter = ProgressReporter(url, run_id, redis_client, attempt=attempt)
+    final = (place.report_dir or settings.runs_dir / str(run_id)).resolve()
+    folder = final if place.own_folder else attempt_dir(final, attempt)
+    if on_progress is None:
+        on_progress = ProgressReporter(url, run_id, redis_client, attempt=attempt)
+    job = _Job(url, run_id, attempt, folder, final, place)
     try:
-        result = run_and_store(url, run_id, attempt, (world, params, seed), reporter, folder, final)
+        result = job.run_and_store((world, params, seed), on_progress)
     except RunSuperseded as exc:
-        return _lost(folder, "lost", f"run {run_id}: {exc}")
+        return job.lost("lost", f"run {run_id}: {exc}")
     except RunCancelled:
-        return _lost(folder, RunStatus.CANCELLED, f"run {run_id}: cancelled")
+        return job.lost(RunStatus.CANCELLED, f"run {run_id}: cancelled")
     except TransitionRefused as exc:
-        return _lost(folder, "lost", f"run {run_id}: result not stored ({exc})")
+        return job.lost("lost", f"run {run_id}: result not stored ({exc})")
     except Exception as exc:  # SoftTimeLimitExceeded included: the run failed, not the worker
         log.exception("run %s failed", run_id)
-        return _failed(url, run_id, attempt, folder, final, f"{type(exc).__name__}: {exc}")
+        return job.failed(f"{type(exc).__name__}: {exc}")
+    except BaseException as exc:
+        if place.fail_on_interrupt:
+            job.failed(f"{type(exc).__name__}: {exc}")
+        raise
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
-    return Outcome(RunStatus.DONE, f"run {run_id}: {result.summary['outcome']}")
+    summary = result.summary
+    return Outcome(RunStatus.DONE, f"run {run_id}: {summary['outcome']}", summary, str(final))
 
 
-def run_and_store(
-    url: str,
-    run_id: int,
-    attempt: str,
-    job: tuple[Any, Any, int],
-    on_progress: Any,
-    folder: Path,
-    final: Path,
-    rename: bool = True,
-) -> Any:
-    """Run the pipeline on `job` = (world, RunParams, seed) writing into `folder`, write the
-    report there, and store the result as `attempt`'s in one transaction, `folder` renamed to
-    `final` inside it (`rename=False`: the report stays where it was written, as `final`).
-    The `RunResult`; TransitionRefused when the attempt no longer holds the run."""
-    from worker.pipeline import run_one
-    from worker.report.folder import SIM_LOG, write_report
+@dataclass(frozen=True)
+class _Job:
+    """One attempt at one run: where it writes, and how it ends."""
 
-    world, params, seed = job
-    result = run_one(world, params, seed, on_progress, sim_log=folder / SIM_LOG)
-    write_report(result, folder)
-    ex = result.exploration
-    with session_scope(url) as s:
-        store_run_result(
-            s, run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
-            pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
-            map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
-            report_dir=str(final), attempt=attempt, folder=folder if rename else None,
-        )  # fmt: skip
-    return result
+    url: str
+    run_id: int
+    attempt: str
+    folder: Path  # where the attempt writes its report
+    final: Path  # the run's report folder
+    place: Placement
 
+    def run_and_store(self, job: tuple[Any, Any, int], on_progress: Callable[[Any], None]) -> Any:
+        """Run the pipeline on `job` = (world, RunParams, seed) writing into the folder, write
+        the report there, and store the result as this attempt's in one transaction, the
+        folder renamed into place inside it. The `RunResult`; TransitionRefused when the
+        attempt no longer holds the run."""
+        from worker.pipeline import run_one
+        from worker.report.folder import write_report, write_report_zip
 
-def _lost(folder: Path, kind: Kind, message: str) -> Outcome:
-    """This attempt no longer holds the run: it keeps nothing."""
-    shutil.rmtree(folder, ignore_errors=True)
-    log.info("%s", message)
-    return Outcome(kind, message)
+        world, params, seed = job
+        log_path = self.folder / self.place.sim_log if self.place.sim_log else None
+        result = run_one(world, params, seed, on_progress, sim_log=log_path)
+        write_report(result, self.folder)
+        if not self.place.own_folder:  # renamed into place with the rest, served as it is
+            write_report_zip(self.folder, f"run{self.run_id}")
+        ex = result.exploration
+        rename = None if self.place.own_folder else self.folder
+        with session_scope(self.url) as s:
+            store_run_result(
+                s, self.run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
+                pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
+                map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
+                report_dir=str(self.final), attempt=self.attempt, folder=rename,
+            )  # fmt: skip
+        return result
 
+    def lost(self, kind: Kind, message: str) -> Outcome:
+        """This attempt no longer holds the run: it keeps nothing (of its own folder)."""
+        self._discard()
+        log.info("%s", message)
+        return Outcome(kind, message)
 
-def _failed(url: str, run_id: int, attempt: str, folder: Path, final: Path, error: str) -> Outcome:
-    """Mark the run failed if this attempt still holds it (a cancelled run stays cancelled)."""
-    shutil.rmtree(folder, ignore_errors=True)
-    with session_scope(url) as s:
-        if not mark_run_failed(s, run_id, error, attempt):
-            return Outcome("lost", f"run {run_id}: failed, but no longer this attempt's ({error})")
-        # a run folder there now is the leftover of an interrupted rename-and-commit
-        if s.get_one(Run, run_id).status != RunStatus.DONE:
-            shutil.rmtree(final, ignore_errors=True)
-    return Outcome(RunStatus.FAILED, f"run {run_id}: failed ({error})")
+    def failed(self, error: str) -> Outcome:
+        """Mark the run failed if this attempt still holds it (a cancelled run stays cancelled)."""
+        self._discard()
+        run_id = self.run_id
+        with session_scope(self.url) as s:
+            if not mark_run_failed(s, run_id, error, self.attempt):
+                return Outcome(
+                    "lost", f"run {run_id}: failed, but no longer this attempt's ({error})"
+                )
+            # a run folder there now is the leftover of an interrupted rename-and-commit
+            if not self.place.own_folder and s.get_one(Run, run_id).status != RunStatus.DONE:
+                shutil.rmtree(self.final, ignore_errors=True)
+        return Outcome(RunStatus.FAILED, f"run {run_id}: failed ({error})", error=error)
+
+    def _discard(self) -> None:
+        if not self.place.own_folder:
+            shutil.rmtree(self.folder, ignore_errors=True)

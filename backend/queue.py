@@ -19,23 +19,16 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session
 
 from backend.db.models import Run
+from worker.celery_conf import RUN_TASK, producer_conf
 
-RUN_TASK = "mapqual.run"
 EPOCH_KEY = "mapqual:broker_epoch"
 
 
 @lru_cache(maxsize=4)
 def _client(broker_url: str) -> Celery:
-    # A producer-only app with the worker's serialiser and queue (worker.celery_app has the rest).
-    app = Celery("mapqual-api", broker=broker_url)
-    app.conf.update(
-        task_serializer="json",
-        accept_content=["json"],
-        task_default_queue="mapqual",
-        broker_connection_retry=False,
-        broker_connection_max_retries=0,
-        broker_transport_options={"socket_connect_timeout": 2, "socket_timeout": 5},
-    )
+    """A producer-only app: the worker's wire format and queue (`worker.celery_conf`)."""
+    app = Celery("mapqual-api")
+    app.conf.update(producer_conf(broker_url))
     return app
 
 

@@ -280,8 +280,12 @@ def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[s
 
 
 def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
     import numba
 
-    from mapqual import __version__
-
-    return {"mapqual": __version__, "numpy": np.__version__, "numba": numba.__version__}
+    try:
+        mapqual = version("mapqual")
+    except PackageNotFoundError:  # a source tree on sys.path, never installed
+        mapqual = "unknown"
+    return {"mapqual": mapqual, "numpy": np.__version__, "numba": numba.__version__}

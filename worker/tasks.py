@@ -12,19 +12,19 @@ from typing import Any
 from celery import Task
 from celery.signals import worker_process_init
 
-from worker.celery_app import app
+from backend.core.config import get_settings
+from worker.celery_app import configure
+from worker.celery_conf import RUN_TASK
 
 log = logging.getLogger("mapqual.tasks")
+app = configure(get_settings().redis_url, get_settings().task_limits())
 
 
-@app.task(
-    name="mapqual.run", bind=True, acks_late=True, reject_on_worker_lost=True, max_retries=None
-)
+@app.task(name=RUN_TASK, bind=True, acks_late=True, reject_on_worker_lost=True, max_retries=None)
 def run_task(self: Task, run_id: int) -> str:
     """Execute one stored run exactly once. A delivery that finds another attempt alive comes
     back later (no retry cap), so that the run is finished even if that attempt dies; one
     that finds the run done, cancelled or failed does nothing."""
-    from backend.core.config import get_settings
     from backend.execute import execute_run
 
     settings = get_settings()
@@ -39,7 +39,6 @@ def run_task(self: Task, run_id: int) -> str:
 @worker_process_init.connect
 def _start_sweeper(**_: Any) -> None:
     """Each worker process sweeps for runs whose message a restarted broker lost."""
-    from backend.core.config import get_settings
     from backend.recovery import start_sweeper
 
     settings = get_settings()

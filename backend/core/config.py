@@ -9,6 +9,8 @@ from typing import Literal
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from worker.celery_conf import TaskLimits
+
 
 class Settings(BaseSettings):
     """mapqual's settings; the embedded default needs no server of any kind."""
@@ -51,6 +53,17 @@ class Settings(BaseSettings):
     # A running run whose attempt gave no sign of life for this long [s] may be taken over by
     # another delivery of its task (the first attempt's worker is presumed dead).
     run_lease_s: float = Field(default=60.0, gt=0, alias="MAPQUAL_RUN_LEASE")
+    # A run's Celery task: soft and hard time limits [s], and the broker's visibility timeout
+    # [s] (unset: the hard limit + 300 s); see `worker.celery_conf.TaskLimits`.
+    task_soft_time_limit_s: int = Field(default=7200, ge=1, alias="MAPQUAL_TASK_SOFT_TIME_LIMIT")
+    task_time_limit_s: int = Field(default=7500, ge=1, alias="MAPQUAL_TASK_TIME_LIMIT")
+    visibility_timeout_s: int | None = Field(default=None, ge=1, alias="MAPQUAL_VISIBILITY_TIMEOUT")
+
+    def task_limits(self) -> TaskLimits:
+        """The run task's time limits and visibility timeout."""
+        return TaskLimits(
+            self.task_soft_time_limit_s, self.task_time_limit_s, self.visibility_timeout_s
+        )
 
 
 @lru_cache(maxsize=1)

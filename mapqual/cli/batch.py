@@ -123,47 +123,62 @@ def _terminate(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt  # SIGTERM cleans up like Ctrl-C: workers stopped, runs requeued
 
 
+WorldsArg = Annotated[
+    list[Path] | None,
+    typer.Argument(metavar="WORLDS", help="Floorplan files (.yaml, .world) or folders."),
+]
+RunsOpt = Annotated[int | None, typer.Option(min=1, help="Seeds 1..N per condition.")]
+SeedsOpt = Annotated[str | None, typer.Option(help="Seeds: A-B or a list, e.g. 1-10.")]
+SlamOpt = Annotated[str | None, typer.Option(help="Algorithms, e.g. rbpf,odometry.")]
+NoiseOpt = Annotated[str | None, typer.Option(help="Laser noise sigmas [m], e.g. 0,0.1,0.3.")]
+ParamsOpt = Annotated[
+    Path | None,
+    typer.Option("--params", help="YAML/JSON with sim, slam, explore, eval sections."),
+]
+TimeLimitOpt = Annotated[
+    float | None, typer.Option(min=1.0, help="Simulated-time limit of each run [s].")
+]
+ExperimentOpt = Annotated[
+    str | None, typer.Option(help="Experiment YAML file, or 'thesis' (bundled).")
+]
+OnlyOpt = Annotated[
+    str | None, typer.Option(help="Keep only worlds whose file name matches this glob.")
+]
+WorkersOpt = Annotated[
+    int | None, typer.Option(min=1, help="Local worker processes (default: cores).")
+]
+CeleryOpt = Annotated[
+    bool, typer.Option("--celery", help="Run on Celery workers (REDIS_URL) instead.")
+]
+RetryOpt = Annotated[
+    bool, typer.Option("--retry-failed", help="Redo runs that stopped on an internal error.")
+]
+SimLogOpt = Annotated[
+    bool, typer.Option("--sim-log", help="Keep each run's full CARMEN log (large).")
+]
+DryRunOpt = Annotated[
+    bool, typer.Option("--dry-run", help="List the runs and how many are left; run none.")
+]
+OutOpt = Annotated[Path, typer.Option("-o", "--out", help="Output folder.")]
+
+
 @app.command("batch")
 def batch(
-    worlds: Annotated[
-        list[Path] | None,
-        typer.Argument(metavar="WORLDS", help="Floorplan files (.yaml, .world) or folders."),
-    ] = None,
-    runs: Annotated[int | None, typer.Option(min=1, help="Seeds 1..N per condition.")] = None,
-    seeds: Annotated[str | None, typer.Option(help="Seeds: A-B or a list, e.g. 1-10.")] = None,
-    slam: Annotated[str | None, typer.Option(help="Algorithms, e.g. rbpf,odometry.")] = None,
-    laser_noise: Annotated[
-        str | None, typer.Option(help="Laser noise sigmas [m], e.g. 0,0.1,0.3.")
-    ] = None,
-    params_file: Annotated[
-        Path | None,
-        typer.Option("--params", help="YAML/JSON with sim, slam, explore, eval sections."),
-    ] = None,
-    time_limit: Annotated[
-        float | None, typer.Option(min=1.0, help="Simulated-time limit of each run [s].")
-    ] = None,
-    experiment: Annotated[
-        str | None, typer.Option(help="Experiment YAML file, or 'thesis' (bundled).")
-    ] = None,
-    only: Annotated[
-        str | None, typer.Option(help="Keep only worlds whose file name matches this glob.")
-    ] = None,
-    workers: Annotated[
-        int | None, typer.Option(min=1, help="Local worker processes (default: cores).")
-    ] = None,
-    celery: Annotated[
-        bool, typer.Option("--celery", help="Run on Celery workers (REDIS_URL) instead.")
-    ] = False,
-    retry_failed: Annotated[
-        bool, typer.Option("--retry-failed", help="Redo runs that stopped on an internal error.")
-    ] = False,
-    sim_log: Annotated[
-        bool, typer.Option("--sim-log", help="Keep each run's full CARMEN log (large).")
-    ] = False,
-    dry_run: Annotated[
-        bool, typer.Option("--dry-run", help="List the runs and how many are left; run none.")
-    ] = False,
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder.")] = Path("batch"),
+    worlds: WorldsArg = None,
+    runs: RunsOpt = None,
+    seeds: SeedsOpt = None,
+    slam: SlamOpt = None,
+    laser_noise: NoiseOpt = None,
+    params_file: ParamsOpt = None,
+    time_limit: TimeLimitOpt = None,
+    experiment: ExperimentOpt = None,
+    only: OnlyOpt = None,
+    workers: WorkersOpt = None,
+    celery: CeleryOpt = False,
+    retry_failed: RetryOpt = False,
+    sim_log: SimLogOpt = False,
+    dry_run: DryRunOpt = False,
+    out: OutOpt = Path("batch"),
     allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Run an experiment (WORLDS x seeds x --slam x --laser-noise) and write its tables,
@@ -174,24 +189,14 @@ def batch(
     same keys: the experiment is the union of their products. Options override the file's
     values; --only narrows its worlds.
     """
-    from worker.batch.experiment import build_groups, expand, load_experiment, load_params, merge
     from worker.batch.state import BatchDir
-    from worker.world.loader import load_world
 
     if worlds and experiment:
         raise InputError("give WORLDS or --experiment, not both (--only GLOB narrows one)")
     if workers is not None and celery:
         raise InputError("--workers is for the local pool; Celery workers are started apart")
-    raw, base_dir = load_experiment(experiment) if experiment else ({}, None)
-    base_params = load_params(params_file)
-    if time_limit is not None:
-        base_params = merge(base_params, {"explore": {"time_limit": time_limit}})
-    groups = build_groups(
-        raw, base_dir, _overrides(worlds or [], runs, seeds, slam, laser_noise), base_params
-    )
-    if only is not None:
-        groups = _only(groups, only)
-    specs, loaded = expand(groups, partial(load_world, allow_outside=allow_outside))
+    choices = (worlds or [], runs, seeds, slam, laser_noise)
+    specs, loaded = _specs(experiment, choices, params_file, time_limit, only, allow_outside)
     bdir = BatchDir(out)
     records = bdir.load_records(s.key for s in specs)
     redo = {k for k, r in records.items() if retry_failed and r["status"] != RecordStatus.DONE}
@@ -206,6 +211,29 @@ def batch(
     bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
     _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log,
              allow_outside=allow_outside)  # fmt: skip
+
+
+def _specs(
+    experiment: str | None,
+    choices: tuple[Any, ...],
+    params_file: Path | None,
+    time_limit: float | None,
+    only: str | None,
+    allow_outside: bool,
+) -> tuple[list[Any], dict[str, Any]]:
+    """The experiment's runs (from its file, then the options: `choices` = worlds, runs,
+    seeds, slam, laser_noise) and its worlds, loaded."""
+    from worker.batch.experiment import build_groups, expand, load_experiment, load_params, merge
+    from worker.world.loader import load_world
+
+    raw, base_dir = load_experiment(experiment) if experiment else ({}, None)
+    base_params = load_params(params_file)
+    if time_limit is not None:
+        base_params = merge(base_params, {"explore": {"time_limit": time_limit}})
+    groups = build_groups(raw, base_dir, _overrides(*choices), base_params)
+    if only is not None:
+        groups = _only(groups, only)
+    return expand(groups, partial(load_world, allow_outside=allow_outside))
 
 
 def _only(groups, pattern: str):
@@ -223,26 +251,26 @@ def _only(groups, pattern: str):
 def _execute(
     specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log, *, allow_outside=False
 ) -> None:
+    from backend.batch import DbBatch
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
-    from mapqual.cli.batch_db import DbBatch, run_celery
     from worker.batch.local import run_local
+    from worker.batch.remote import run_celery
     from worker.batch.results import write_results
 
     settings = get_settings()
     upgrade(settings.database_url)
-    db = DbBatch(settings.database_url, bdir.batch_id(), specs, loaded)
+    db = DbBatch(settings, bdir.batch_id(), specs, loaded)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         with BatchProgress(len(specs), len(specs) - len(todo)) as progress:
             if celery:
-                run_celery(todo, bdir, db, settings.redis_url, progress, retry_failed=retry_failed)
+                run_celery(todo, bdir, db, progress, retry_failed=retry_failed)
             else:
                 # runs a killed invocation left `running` are this pool's to redo: queued
                 db.interrupted(todo)
-                run_local(
-                    todo, bdir, workers, db, progress, sim_log=sim_log, allow_outside=allow_outside
-                )
+                run_local(todo, bdir, workers, db, progress, sim_log=sim_log,
+                          allow_outside=allow_outside, fn=db.pool_run())  # fmt: skip
     finally:
         signal.signal(signal.SIGTERM, previous)
         records = bdir.load_records(s.key for s in specs)

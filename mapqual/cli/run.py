@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -87,102 +86,94 @@ class _Progress:
             )
 
 
+WorldArg = Annotated[
+    Path,
+    typer.Argument(metavar="WORLD", help="Floorplan: .yaml, .world or an image with --resolution."),
+]
+SeedOpt = Annotated[int, typer.Option(min=0, help="Random seed: same seed, same run.")]
+SlamOpt = Annotated[
+    str | None, typer.Option(help=f"{' | '.join(registry.names())} (default rbpf).")
+]
+NoiseOpt = Annotated[float | None, typer.Option(min=0.0, help="Laser range noise sigma [m].")]
+TimeLimitOpt = Annotated[float | None, typer.Option(min=1.0, help="Simulated-time limit [s].")]
+ParamsOpt = Annotated[
+    Path | None,
+    typer.Option("--params", help="YAML/JSON with sim, slam, explore, eval sections."),
+]
+ResolutionOpt = Annotated[float | None, typer.Option(help="m/pixel, for a bare image.")]
+OutOpt = Annotated[
+    Path | None, typer.Option("-o", "--out", help="Report folder (default runs/<id>/).")
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")]
+
+
 @app.command("run")
 def run(
-    world_path: Annotated[
-        Path,
-        typer.Argument(
-            metavar="WORLD", help="Floorplan: .yaml, .world or an image with --resolution."
-        ),
-    ],
-    seed: Annotated[int, typer.Option(min=0, help="Random seed: same seed, same run.")] = 1,
-    slam: Annotated[
-        str | None, typer.Option(help=f"{' | '.join(registry.names())} (default rbpf).")
-    ] = None,
-    laser_noise: Annotated[
-        float | None, typer.Option(min=0.0, help="Laser range noise sigma [m].")
-    ] = None,
-    time_limit: Annotated[
-        float | None, typer.Option(min=1.0, help="Simulated-time limit [s].")
-    ] = None,
-    params_file: Annotated[
-        Path | None,
-        typer.Option("--params", help="YAML/JSON with sim, slam, explore, eval sections."),
-    ] = None,
-    resolution: Annotated[float | None, typer.Option(help="m/pixel, for a bare image.")] = None,
-    out: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Report folder (default runs/<id>/).")
-    ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the summary as JSON on stdout.")
-    ] = False,
+    world_path: WorldArg,
+    seed: SeedOpt = 1,
+    slam: SlamOpt = None,
+    laser_noise: NoiseOpt = None,
+    time_limit: TimeLimitOpt = None,
+    params_file: ParamsOpt = None,
+    resolution: ResolutionOpt = None,
+    out: OutOpt = None,
+    as_json: JsonOpt = False,
     allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Simulate, explore with SLAM, evaluate, and store one run of WORLD."""
-    from backend.core.config import get_settings
-    from backend.db.migrate import upgrade
-    from backend.db.session import session_scope
-    from backend.execute import run_and_store
-    from backend.lifecycle import attempt_dir, new_attempt
-    from backend.store import (
-        create_job,
-        local_user,
-        mark_run_failed,
-        mark_run_started,
-        save_world,
-        world_fingerprint,
-    )  # fmt: skip
     from worker.world.loader import load_world
 
     if slam is not None and slam not in registry.names():
         raise InputError(f"--slam must be one of {', '.join(registry.names())}, not {slam!r}")
     params = build_params(params_file, slam, laser_noise, time_limit)
     world = load_world(world_path, resolution, allow_outside=allow_outside)
-    settings = get_settings()
-    url = settings.database_url
-    upgrade(url)
-    attempt = new_attempt()
-    with session_scope(url) as s:
-        owner = local_user(s).id
-        row = save_world(
-            s,
-            owner_id=owner,
-            world=world,
-            sha256=world_fingerprint(world),
-            source_format=world_path.suffix.lstrip(".") or "image",
-        )
-        job = create_job(
-            s,
-            owner_id=owner,
-            world_id=row.id,
-            slam=params.algorithm,
-            params=params.to_json(),
-            seeds=[seed],
-        )
-        run_id = job.runs[0].id
-        mark_run_started(s, run_id, attempt)
-    # the default runs/<id>/ is filled like a worker's: in the attempt's folder, renamed into
-    # place with the commit of the result; a folder the user named (-o) is written directly
-    shown = out if out is not None else settings.runs_dir / str(run_id)
-    out_dir = shown.resolve()
-    folder = out_dir if out is not None else attempt_dir(out_dir, attempt)
-    try:
-        with _Progress(params.explore.time_limit, quiet=as_json) as progress:
-            result = run_and_store(
-                url, run_id, attempt, (world, params, seed), progress, folder, out_dir,
-                rename=out is None,
-            )  # fmt: skip
-    except BaseException as exc:
-        with session_scope(url) as s:
-            mark_run_failed(s, run_id, f"{type(exc).__name__}: {exc}", attempt)
-        if out is None:
-            shutil.rmtree(folder, ignore_errors=True)
-        raise
-    summary = {"run_id": run_id, "report_dir": str(shown), **result.summary}
+    run_id, shown, summary = _execute(world, world_path.suffix, params, seed, out, as_json)
+    summary = {"run_id": run_id, "report_dir": str(shown), **summary}
     if as_json:
         print(json.dumps(summary))
     else:
         _print_summary(summary)
+
+
+def _execute(
+    world: Any, suffix: str, params: Any, seed: int, out: Path | None, quiet: bool
+) -> tuple[int, Path, dict[str, Any]]:
+    """Store the world and a job of one run, and execute it with the run service: the default
+    runs/<id>/ is filled like a worker's (in the attempt's folder, renamed into place with the
+    commit of the result); a folder the user named (-o) is written directly. (run id, report
+    folder as shown, summary); a failed run is one line on stderr and exit code 1."""
+    from backend.core.config import get_settings
+    from backend.db.migrate import upgrade
+    from backend.execute import Placement, execute_run
+
+    settings = get_settings()
+    upgrade(settings.database_url)
+    run_id = _store_job(settings.database_url, world, suffix, params, seed)
+    place = Placement(report_dir=out, own_folder=out is not None, fail_on_interrupt=True)
+    with _Progress(params.explore.time_limit, quiet=quiet) as progress:
+        outcome = execute_run(run_id, settings, place=place, on_progress=progress, world=world)
+    if outcome.summary is None:
+        print(f"mapqual: error: {outcome.message}", file=sys.stderr)
+        raise typer.Exit(1)
+    return run_id, out if out is not None else settings.runs_dir / str(run_id), outcome.summary
+
+
+def _store_job(url: str, world: Any, suffix: str, params: Any, seed: int) -> int:
+    """The world (found again by its content) and a new job of one run for it: the run's id."""
+    from backend.db.session import session_scope
+    from backend.store import create_job, local_user, save_world, world_fingerprint
+
+    with session_scope(url) as s:
+        owner = local_user(s).id
+        row = save_world(
+            s, owner_id=owner, world=world, sha256=world_fingerprint(world),
+            source_format=suffix.lstrip(".") or "image",
+        )  # fmt: skip
+        job = create_job(
+            s, owner_id=owner, world_id=row.id, slam=params.algorithm,
+            params=params.to_json(), seeds=[seed],
+        )  # fmt: skip
+        return job.runs[0].id
 
 
 def _print_summary(s: dict[str, Any]) -> None:

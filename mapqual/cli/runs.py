@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -35,9 +35,15 @@ def runs_list(
     as_json: Annotated[bool, typer.Option("--json", help="One JSON array on stdout.")] = False,
 ) -> None:
     """The most recent runs with their outcome, coverage and B errors."""
-    from rich.console import Console
-    from rich.table import Table
+    rows = _run_rows(limit)
+    if as_json:
+        print(json.dumps(rows))
+        return
+    _print_runs(rows)
 
+
+def _run_rows(limit: int) -> list[dict[str, Any]]:
+    """The newest `limit` runs, one plain mapping each."""
     from backend.db.models import World
     from backend.db.session import session_scope
     from backend.store import list_runs
@@ -64,9 +70,14 @@ def runs_list(
                     "created_at": r.created_at.isoformat() if r.created_at else None,
                 }
             )
-    if as_json:
-        print(json.dumps(rows))
-        return
+    return rows
+
+
+def _print_runs(rows: list[dict[str, Any]]) -> None:
+    """The runs as a table on the terminal."""
+    from rich.console import Console
+    from rich.table import Table
+
     table = Table(title="runs (newest first)")
     for col in (
         "id",

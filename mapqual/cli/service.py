@@ -40,7 +40,8 @@ def worker(
     loglevel: Annotated[str, typer.Option(help="Celery log level.")] = "INFO",
 ) -> None:
     """A Celery worker that executes runs from the queue."""
-    from worker.celery_app import app as celery_app
+    from worker.celery_conf import QUEUE
+    from worker.tasks import app as celery_app  # configured from the settings on import
 
     celery_app.worker_main(
         [
@@ -48,7 +49,7 @@ def worker(
             f"--concurrency={concurrency}",
             f"--loglevel={loglevel}",
             "--pool=prefork",
-            "--queues=mapqual",
+            f"--queues={QUEUE}",
             "--without-gossip",
             "--without-mingle",
         ]

@@ -23,36 +23,44 @@ class OdomModel(StrEnum):
     gaussian = "gaussian"
 
 
+WorldArg = Annotated[Path, typer.Argument(help="Image, map_server YAML or Stage .world file.")]
+OutOpt = Annotated[Path, typer.Option("--out", "-o", help="Output folder.")]
+SeedOpt = Annotated[int, typer.Option(help="Random seed: same seed, same bytes out.")]
+DurationOpt = Annotated[float, typer.Option(help="Simulated time in seconds.")]
+DriveOpt = Annotated[Drive, typer.Option(help="Reactive wanderer or waypoint follower.")]
+PathOpt = Annotated[
+    Path | None,
+    typer.Option("--path", help="Waypoints file: `x y` in metres per line (world frame)."),
+]
+NoiseOpt = Annotated[
+    float, typer.Option(help="Gaussian range noise sigma in metres (thesis: 0, 0.1, 0.3).")
+]
+OdomOpt = Annotated[OdomModel, typer.Option(help="Odometry error model.")]
+ResolutionOpt = Annotated[float | None, typer.Option(help="Metres per pixel (for a bare image).")]
+StartOpt = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(help="Start pose X Y THETA (metres, radians); default: the world's."),
+]
+PlotOpt = Annotated[
+    bool, typer.Option(help="Also draw DIR/sim.png: paths and the last scan on the map.")
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+
+
 @app.command("simulate")
 def simulate(
-    world: Annotated[Path, typer.Argument(help="Image, map_server YAML or Stage .world file.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
-    seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes out.")] = 0,
-    duration: Annotated[float, typer.Option(help="Simulated time in seconds.")] = 600.0,
-    drive: Annotated[Drive, typer.Option(help="Reactive wanderer or waypoint follower.")] = (
-        Drive.wander
-    ),
-    path: Annotated[
-        Path | None,
-        typer.Option("--path", help="Waypoints file: `x y` in metres per line (world frame)."),
-    ] = None,
-    laser_noise: Annotated[
-        float, typer.Option(help="Gaussian range noise sigma in metres (thesis: 0, 0.1, 0.3).")
-    ] = 0.0,
-    odom_model: Annotated[OdomModel, typer.Option(help="Odometry error model.")] = (
-        OdomModel.stage
-    ),
-    resolution: Annotated[
-        float | None, typer.Option(help="Metres per pixel (for a bare image).")
-    ] = None,
-    start: Annotated[
-        tuple[float, float, float] | None,
-        typer.Option(help="Start pose X Y THETA (metres, radians); default: the world's."),
-    ] = None,
-    plot: Annotated[
-        bool, typer.Option(help="Also draw DIR/sim.png: paths and the last scan on the map.")
-    ] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    world: WorldArg,
+    out: OutOpt,
+    seed: SeedOpt = 0,
+    duration: DurationOpt = 600.0,
+    drive: DriveOpt = Drive.wander,
+    path: PathOpt = None,
+    laser_noise: NoiseOpt = 0.0,
+    odom_model: OdomOpt = OdomModel.stage,
+    resolution: ResolutionOpt = None,
+    start: StartOpt = None,
+    plot: PlotOpt = False,
+    as_json: JsonOpt = False,
     allow_outside: AllowOutsideOpt = False,
 ) -> None:
     """Simulate a robot (laser, odometry, ground truth) and write DIR/sim.log (CARMEN: ODOM,

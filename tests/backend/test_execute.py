@@ -9,6 +9,7 @@ import os
 import signal
 import threading
 import time
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Run, RunTrajectory
 from backend.db.session import session_scope
-from backend.execute import execute_run
+from backend.execute import Placement, execute_run
 from backend.lifecycle import cancel_run, history, history_faults
 from backend.store import create_job, local_user, save_world
 from tests.backend.plans import rooms_occupancy
@@ -95,7 +96,13 @@ def test_a_run_is_done_once_and_a_second_delivery_does_nothing(pg_url, tmp_path)
     first = execute_run(run_id, settings)
     assert first.kind == "done", first
     assert _folders(tmp_path / "runs") == [str(run_id)]  # renamed into place, nothing beside
-    assert (tmp_path / "runs" / str(run_id) / "summary.json").exists()
+    folder = tmp_path / "runs" / str(run_id)
+    assert (folder / "summary.json").exists()
+    with zipfile.ZipFile(folder / "report.zip") as zf:  # made before the rename, with the rest
+        on_disk = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
+        assert sorted(zf.namelist()) == sorted(f"run{run_id}/{n}" for n in on_disk - {"report.zip"})
+        assert {"summary.json", "sim.log", "relations_B.txt"} <= on_disk
+        assert zf.read(f"run{run_id}/sim.log") == (folder / "sim.log").read_bytes()
     again = execute_run(run_id, settings)
     assert (again.kind, again.message) == ("skipped", f"run {run_id}: not run (done)")
     with session_scope(pg_url) as s:
@@ -137,3 +144,61 @@ def test_an_exception_on_a_cancelled_run_leaves_it_cancelled(pg_url, tmp_path):
         run = s.get_one(Run, run_id)
         assert (run.status, run.error) == ("cancelled", None)
         assert [e.to_status for e in history(s, run_id)] == ["running", "cancelled"]
+
+
+def test_a_callers_own_folder_gets_the_same_files_as_a_workers_run(pg_url, tmp_path):
+    """The placement of `mapqual run -o` and of a batch's runs: the report written straight
+    into the folder (no attempt folder, no zip, no sim.log unless named), progress to the
+    caller only, the world passed in; the files are the worker's, byte for byte."""
+    world = _rooms(2, 1)
+    worker_run, own_run = (
+        _run(pg_url, "odometry", 60.0, world),
+        _run(pg_url, "odometry", 60.0, world),
+    )
+    settings = _settings(pg_url, tmp_path / "runs")
+    assert execute_run(worker_run, settings).kind == "done"
+    seen: list[float] = []
+    own = tmp_path / "mine"
+    place = Placement(report_dir=own, own_folder=True, sim_log=None, lease_s=0.0)
+    outcome = execute_run(
+        own_run, settings, place=place, on_progress=lambda p: seen.append(p.t), world=world
+    )
+    assert (outcome.kind, outcome.report_dir) == ("done", str(own.resolve()))
+    assert seen and seen == sorted(seen)
+    assert _folders(tmp_path) == ["mine", "runs"] and _folders(tmp_path / "runs") == [
+        str(worker_run)
+    ]
+    worker_files = {p.name for p in (tmp_path / "runs" / str(worker_run)).iterdir()}
+    assert {p.name for p in own.iterdir()} == worker_files - {"report.zip", "sim.log"}
+    for name in ("relations_B.txt", "T.errors", "gt.log", "est.tum", "map.pgm", "map.yaml"):
+        assert (own / name).read_bytes() == (
+            tmp_path / "runs" / str(worker_run) / name
+        ).read_bytes(), name
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, own_run)
+        assert (run.status, run.report_dir, run.progress) == ("done", str(own.resolve()), {})
+        assert run.summary["relations"] == outcome.summary["relations"]
+
+
+def _interrupt(_progress) -> None:
+    raise KeyboardInterrupt
+
+
+def test_an_interrupt_fails_a_foreground_run_and_leaves_a_workers_to_its_lease(pg_url, tmp_path):
+    settings = _settings(pg_url, tmp_path / "runs")
+    mine, workers = (
+        _run(pg_url, "odometry", 60.0, _rooms(2, 1)),
+        _run(pg_url, "odometry", 60.0, _rooms(2, 1)),
+    )
+    own = tmp_path / "mine"
+    place = Placement(report_dir=own, own_folder=True, fail_on_interrupt=True)  # mapqual run -o
+    with pytest.raises(KeyboardInterrupt):
+        execute_run(mine, settings, place=place, on_progress=_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        execute_run(workers, settings, on_progress=_interrupt)
+    with session_scope(pg_url) as s:
+        run = s.get_one(Run, mine)
+        assert (run.status, run.error) == ("failed", "KeyboardInterrupt: ")
+        assert [e.to_status for e in history(s, mine)] == ["running", "failed"]
+        assert s.get_one(Run, workers).status == "running"  # another delivery takes it over
+    assert own.is_dir()  # the user's folder is the user's

@@ -1,5 +1,6 @@
-"""Running a batch's runs in a local process pool: each process calls `run_one`, and the
-parent persists each result (through a sink: the database) and then its record (OUT)."""
+"""Running a batch's runs in a local process pool: each process executes a run (`execute`, or
+the run service that stores it: `backend.batch`), and the parent tells a sink (the database)
+how each ended and then writes its record (OUT)."""
 
 from __future__ import annotations
 
@@ -10,27 +11,21 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Protocol
 
-import numpy as np
-
 from worker.batch.experiment import RunSpec
 from worker.batch.pool import PoolMessage, run_pool
 from worker.batch.state import BatchDir, record_of
 from worker.status import RecordStatus
 
 PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running run
+SIM_LOG_GZ = "sim.log.gz"  # a run's full CARMEN log in its folder, with --sim-log
 
 
 @dataclass(frozen=True)
 class RunOutput:
-    """What a finished run sends back to the parent: the summary and what the database keeps."""
+    """What a finished run sends back to the parent, for its record in OUT (the database, when
+    there is one, has the rest: the run service stored it in the worker process)."""
 
     summary: dict[str, Any]
-    t: np.ndarray  # (N,) [s]
-    pose_gt: np.ndarray  # (N, 3) [x, y, theta]
-    pose_est: np.ndarray  # (N, 3) [x, y, theta]
-    map_ros: np.ndarray  # (H, W) int8, -1 unknown, 0..100
-    map_resolution: float  # [m/cell]
-    map_origin: tuple[float, float]  # [m]
     report_dir: str
 
 
@@ -56,7 +51,7 @@ class Event:
 
 
 class Sink(Protocol):
-    """Where results go besides OUT (the database); called in the parent process only."""
+    """Who hears how runs end besides OUT (the database); called in the parent process only."""
 
     def started(self, spec: RunSpec) -> None: ...
     def finished(self, spec: RunSpec, out: RunOutput) -> dict[str, Any]: ...
@@ -81,45 +76,41 @@ class NullSink:
 
 
 @lru_cache(maxsize=8)
-def _world(path: str, allow_outside: bool = False):
+def load_cached(path: str, allow_outside: bool = False) -> Any:
+    """The world of a floorplan file, loaded once per worker process."""
     from worker.world.loader import load_world
 
     return load_world(Path(path), allow_outside=allow_outside)
 
 
-def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
-    """One run in a worker process: `run_one`, then its report folder."""
-    from worker.pipeline import run_one
-    from worker.report.folder import write_report
-    from worker.run_params import RunParams
-
-    spec = task.spec
+def throttled(progress: Callable[[Any], None]) -> Callable[[Any], None]:
+    """A pipeline progress callback that passes (t [s], coverage) to `progress` at most once
+    every PROGRESS_EVERY_S of wall time."""
     last = [0.0]
 
-    def on_progress(p) -> None:
+    def on_progress(p: Any) -> None:
         now = time.monotonic()
         if now - last[0] >= PROGRESS_EVERY_S:
             last[0] = now
             progress((float(p.t), float(p.coverage)))
 
+    return on_progress
+
+
+def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
+    """One run in a worker process with no database: `run_one`, then its report folder."""
+    from worker.pipeline import run_one
+    from worker.report.folder import write_report
+    from worker.run_params import RunParams
+
+    spec = task.spec
     out = Path(task.report_dir)
-    log = out / "sim.log.gz" if task.sim_log else None
+    log = out / SIM_LOG_GZ if task.sim_log else None
     params = RunParams.from_json(spec.params)
-    result = run_one(
-        _world(spec.world_path, task.allow_outside), params, spec.seed, on_progress, sim_log=log
-    )
+    world = load_cached(spec.world_path, task.allow_outside)
+    result = run_one(world, params, spec.seed, throttled(progress), sim_log=log)
     write_report(result, out)
-    ex = result.exploration
-    return RunOutput(
-        summary=result.summary,
-        t=ex.t,
-        pose_gt=ex.pose_gt,
-        pose_est=ex.pose_est,
-        map_ros=ex.final_map.to_ros(),
-        map_resolution=float(ex.final_map.resolution),
-        map_origin=(float(ex.final_map.origin[0]), float(ex.final_map.origin[1])),
-        report_dir=str(out.resolve()),
-    )
+    return RunOutput(summary=result.summary, report_dir=str(out.resolve()))
 
 
 def run_local(

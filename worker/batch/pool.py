@@ -31,6 +31,10 @@ class PoolMessage:
     payload: Any = None  # progress data, the result, or the error text
 
 
+class TaskFailed(Exception):
+    """Raised by a task that failed with an error text of its own: sent as it is."""
+
+
 class ParentGone(SystemExit):
     """Raised inside a worker whose parent died: the run stops instead of running orphaned."""
 
@@ -59,6 +63,9 @@ def _child(fn: Callable, conn: Connection, parent_pid: int) -> None:
             out = fn(arg, progress)
         except ParentGone:
             return
+        except TaskFailed as exc:
+            conn.send(("error", index, str(exc)))
+            continue
         except BaseException as exc:  # noqa: BLE001 - any failure fails this task only
             last = traceback.extract_tb(exc.__traceback__)[-1:]
             where = f" (at {last[0].filename}:{last[0].lineno})" if last else ""

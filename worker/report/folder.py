@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import secrets
+import zipfile
 from pathlib import Path
 
 from worker.evaluate.trajio import write_carmen, write_errors, write_relations, write_tum
@@ -10,6 +13,7 @@ from worker.report.plots import errors_png, map_png, trajectories_png
 
 SUMMARY = "summary.json"
 SIM_LOG = "sim.log"
+REPORT_ZIP = "report.zip"  # the whole folder as one download, made once the report is written
 
 
 def error_lines(summary: dict) -> list[str]:
@@ -57,3 +61,29 @@ def write_report(result, out_dir: str | Path) -> Path:
     write_tum(out / "gt.tum", result.gt)
     write_tum(out / "est.tum", result.est)
     return out
+
+
+def write_report_zip(folder: str | Path, arc_root: str) -> Path:
+    """Zip every file of the report `folder` (but the zip itself) as `arc_root/<path>` into
+    `folder/report.zip`: written under a temporary name and renamed, so that a reader (or a
+    racing writer) sees a whole zip or none."""
+    folder = Path(folder)
+    files = [p for p in sorted(folder.rglob("*")) if p.is_file() and not _zip_own(p, folder)]
+    tmp = folder / f".{REPORT_ZIP}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+            for path in files:
+                zf.write(path, f"{arc_root}/{path.relative_to(folder).as_posix()}")
+        os.replace(tmp, folder / REPORT_ZIP)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return folder / REPORT_ZIP
+
+
+def _zip_own(path: Path, folder: Path) -> bool:
+    """The zip, or a zip being written, at the top of the folder."""
+    if path.parent != folder:
+        return False
+    return path.name == REPORT_ZIP or (
+        path.name.startswith(f".{REPORT_ZIP}.") and path.name.endswith(".tmp")
+    )

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import tempfile
-import zipfile
 from pathlib import Path
 from typing import Literal
 
@@ -112,16 +111,18 @@ def get_relations(
 
 
 @router.get("/runs/{run_id}/report.zip")
-def get_report(run_id: IdPath, session: SessionDep, user: CurrentUser) -> Response:
-    """The whole report folder as one zip."""
+def get_report(run_id: IdPath, session: SessionDep, user: CurrentUser) -> FileResponse:
+    """The whole report folder as one zip: the one written with the run's result, or (a run
+    stored before runs had one, or a folder of `mapqual run -o` or a batch) made once now."""
+    from worker.report.folder import REPORT_ZIP, write_report_zip
+
     folder = _report_dir(_run(session, user, run_id))
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
-        for path in sorted(folder.rglob("*")):
-            if path.is_file():
-                zf.write(path, f"run{run_id}/{path.relative_to(folder)}")
-    return Response(
-        buf.getvalue(),
-        media_type="application/zip",
-        headers={"Content-Disposition": f'attachment; filename="run{run_id}.zip"'},
-    )
+    path = folder / REPORT_ZIP
+    if not path.is_file():
+        try:
+            path = write_report_zip(folder, f"run{run_id}")
+        except OSError as exc:  # a folder this process may not write: nothing to serve
+            raise HTTPException(
+                status.HTTP_503_SERVICE_UNAVAILABLE, f"run {run_id}: report.zip not made ({exc})"
+            ) from exc
+    return FileResponse(path, media_type="application/zip", filename=f"run{run_id}.zip")

@@ -7,7 +7,7 @@ import signal
 import threading
 import time
 
-from worker.batch.pool import run_pool
+from worker.batch.pool import TaskFailed, run_pool
 
 
 def square_or_fail(x, progress):
@@ -55,3 +55,15 @@ def test_two_workers_run_at_once():
     a = [iv for iv in out if iv[0] == out[0][0]]
     b = [iv for iv in out if iv[0] != out[0][0]]
     assert any(s1 < e2 and s2 < e1 for _, s1, e1 in a for _, s2, e2 in b)
+
+
+def fails_in_its_own_words(x, progress):
+    """A task that reports its failure with a text of its own (the run service's error)."""
+    raise TaskFailed(f"ValueError: run {x} broke")
+
+
+def test_a_task_failed_in_its_own_words_is_reported_verbatim():
+    messages = []
+    run_pool(fails_in_its_own_words, [7], 1, messages.append)
+    errors = [m.payload for m in messages if m.kind == "error"]
+    assert errors == ["ValueError: run 7 broke"]  # no type prefix, no location appended
