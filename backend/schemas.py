@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, Field, model_validator
 
 from backend.db.models import Job, Run, World
+from worker.report.summary import RunSummary
 
 MAX_RUNS_PER_JOB = 1000
 # Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
@@ -161,7 +162,7 @@ class RunOut(RunBrief):
     slam: str
     params: dict[str, Any]
     metrics: dict[str, Any]
-    summary: dict[str, Any]
+    summary: RunSummary | None  # null until the run is done
     error: str | None
     sim_time: float | None
     wall_time: float | None
@@ -179,7 +180,7 @@ class RunOut(RunBrief):
             slam=r.slam,
             params=r.params,
             metrics=r.metrics or {},
-            summary=r.summary or {},
+            summary=RunSummary.load(r.summary),
             error=r.error,
             sim_time=r.sim_time,
             wall_time=r.wall_time,

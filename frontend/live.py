@@ -14,6 +14,7 @@ from backend.db.models import Run, World
 from backend.db.session import session_scope
 from backend.progress import FREE, OCCUPIED, UNKNOWN, decode_map_patch
 from backend.store import load_map, load_trajectory, world_occupancy
+from worker.report.summary import RunSummary
 
 
 @dataclass
@@ -84,7 +85,7 @@ class FinishedRun:
     gt: np.ndarray  # (N, 3)
     est: np.ndarray  # (N, 3)
     map: MapState | None
-    summary: dict[str, Any]
+    summary: RunSummary | None
 
     def index_at(self, t: float) -> int:
         """Index of the last pose at or before `t` (0 before the start)."""
@@ -104,7 +105,7 @@ def load_finished(url: str, run_id: int) -> FinishedRun | None:
             state = MapState(ros_codes(grid), res, origin)
         except LookupError:
             state = None
-        return FinishedRun(t, gt, est, state, dict(run.summary or {}))
+        return FinishedRun(t, gt, est, state, RunSummary.load(run.summary))
 
 
 @dataclass

@@ -13,6 +13,7 @@ from typing import Any
 from worker.batch.experiment import RunSpec
 from worker.batch.local import Event, RunOutput
 from worker.batch.state import BatchDir, record_of
+from worker.report.summary import RunSummary
 from worker.world.world import World
 
 log = logging.getLogger("mapqual.batch")
@@ -125,7 +126,8 @@ class DbBatch:
 def _record_from_run(spec: RunSpec, run: Any, ids: dict[str, Any]) -> dict[str, Any] | None:
     """The OUT record of a run the database holds as finished, or None while it is not."""
     if run.status == "done":
-        return record_of(spec, summary=run.summary, report_dir=run.report_dir, **ids)
+        summary = RunSummary.load(run.summary)
+        return record_of(spec, summary=summary, report_dir=run.report_dir, **ids)
     if run.status in ("failed", "cancelled"):
         error = run.error or "cancelled"
         return record_of(spec, summary=None, error=error, report_dir=run.report_dir, **ids)

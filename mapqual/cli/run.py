@@ -6,13 +6,16 @@ import json
 import shutil
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from mapqual.cli import app
 from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
+
+if TYPE_CHECKING:
+    from worker.report.summary import RunSummary
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -178,38 +181,37 @@ def run(
         if out is None:
             shutil.rmtree(folder, ignore_errors=True)
         raise
-    summary = {"run_id": run_id, "report_dir": str(shown), **result.summary}
     if as_json:
-        print(json.dumps(summary))
+        print(json.dumps({"run_id": run_id, "report_dir": str(shown), **result.summary.to_dict()}))
     else:
-        _print_summary(summary)
+        _print_summary(result.summary, run_id, str(shown))
 
 
-def _print_summary(s: dict[str, Any]) -> None:
+def _print_summary(s: RunSummary, run_id: int, report_dir: str) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    outcome = s["outcome"] + (f" ({s['reason']})" if s["reason"] else "")
-    t = s["timings"]
-    table = Table(title=f"run {s['run_id']}: {s['world']}, seed {s['seed']}, {s['algorithm']}")
+    outcome = s.outcome + (f" ({s.reason})" if s.reason else "")
+    t = s.timings
+    table = Table(title=f"run {run_id}: {s.world}, seed {s.seed}, {s.algorithm}")
     table.add_column("")
     table.add_column("translation [m]", justify="right")
     table.add_column("rotation [rad]", justify="right")
     table.add_column("relations", justify="right")
-    for kind, e in s["relations"].items():
-        tr, ro = e["translation"], e["rotation"]
+    for kind, e in s.relations.items():
+        tr, ro = e.translation, e.rotation
         fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
         table.add_row(
             f"{kind} mean ± std",
-            f"{fmt(tr['mean'], '.3f')} ± {fmt(tr['std'], '.3f')}",
-            f"{fmt(ro['mean'], '.4f')} ± {fmt(ro['std'], '.4f')}",
-            str(tr["n"]),
+            f"{fmt(tr.mean, '.3f')} ± {fmt(tr.std, '.3f')}",
+            f"{fmt(ro.mean, '.4f')} ± {fmt(ro.std, '.4f')}",
+            str(tr.n),
         )
     console = Console()
     console.print(table)
     console.print(
-        f"outcome [bold]{outcome}[/bold] — {s['stop_detail']}; coverage {s['coverage']:.1%}; "
-        f"path {s['path_length_m']:.0f} m; {t['sim_time_s']:.0f} s simulated in "
-        f"{t['wall_time_s']:.1f} s (x{t['real_time_factor']:.0f} real time)"
+        f"outcome [bold]{outcome}[/bold] — {s.stop_detail}; coverage {s.coverage:.1%}; "
+        f"path {s.path_length_m:.0f} m; {t.sim_time_s:.0f} s simulated in "
+        f"{t.wall_time_s:.1f} s (x{t.real_time_factor:.0f} real time)"
     )
-    console.print(f"report: {s['report_dir']}")
+    console.print(f"report: {report_dir}")

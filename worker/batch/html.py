@@ -10,7 +10,14 @@ from pathlib import Path
 from typing import Any
 
 from worker.batch.state import now_iso
-from worker.batch.tables import ERROR_COLUMNS, error_rows, is_good, outcome_of, success_rows
+from worker.batch.tables import (
+    ERROR_COLUMNS,
+    error_rows,
+    is_good,
+    outcome_of,
+    success_rows,
+    summary_of,
+)
 
 CAPTIONS = {
     "errors_by_world.png": (
@@ -81,9 +88,8 @@ def _runs_table(records: Sequence[dict[str, Any]], out: Path) -> str:
     rows = []
     for r in records:
         outcome, reason = outcome_of(r)
-        s = r["summary"] or {}
-        b = (s.get("relations") or {}).get("B") or {}
-        t, ro = b.get("translation") or {}, b.get("rotation") or {}
+        s = summary_of(r)
+        b = s.relations.get("B") if s else None
         cls = "good" if is_good(r) else "bad"
         link = _e(r["world"])
         map_png = Path(r["report_dir"] or "") / "map.png"
@@ -95,9 +101,9 @@ def _runs_table(records: Sequence[dict[str, Any]], out: Path) -> str:
         rows.append(
             f'<tr><td class="l">{link}</td><td>{r["seed"]}</td><td class="l">{_e(r["slam"])}</td>'
             f'<td>{r["noise"]:g}</td><td class="l {cls}">{_e(what)}</td>'
-            f"<td>{_num(s.get('coverage'), 3)}</td><td>{_num(t.get('mean'))}</td>"
-            f"<td>{_num(ro.get('mean'))}</td><td>{t.get('n', 0)}</td>"
-            f"<td>{_num((s.get('timings') or {}).get('sim_time_s'), 0)}</td></tr>"
+            f"<td>{_num(s and s.coverage, 3)}</td><td>{_num(b and b.translation.mean)}</td>"
+            f"<td>{_num(b and b.rotation.mean)}</td><td>{b.translation.n if b else 0}</td>"
+            f"<td>{_num(s and s.timings.sim_time_s, 0)}</td></tr>"
         )
     head = (
         '<tr><th class="l">world</th><th>seed</th><th class="l">slam</th><th>noise [m]</th>'

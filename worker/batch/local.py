@@ -15,6 +15,7 @@ import numpy as np
 from worker.batch.experiment import RunSpec
 from worker.batch.pool import PoolMessage, run_pool
 from worker.batch.state import BatchDir, record_of
+from worker.report.summary import RunSummary
 
 PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running run
 
@@ -23,7 +24,7 @@ PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running
 class RunOutput:
     """What a finished run sends back to the parent: the summary and what the database keeps."""
 
-    summary: dict[str, Any]
+    summary: RunSummary
     t: np.ndarray  # (N,) [s]
     pose_gt: np.ndarray  # (N, 3) [x, y, theta]
     pose_est: np.ndarray  # (N, 3) [x, y, theta]

@@ -45,6 +45,7 @@ from backend.schemas import JobIn, WorldOut
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from backend.world_analysis import world_pool
 from worker.errors import InputError
+from worker.report.summary import RunSummary
 
 FRONTEND = Path(__file__).resolve().parents[3] / "frontend"
 templates = Jinja2Templates(directory=FRONTEND / "templates")
@@ -240,7 +241,8 @@ def job_page(
 
 
 def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
-    b = (run.summary or {}).get("relations", {}).get("B") or {}
+    summary = RunSummary.load(run.summary)
+    b = summary.relations.get("B") if summary else None
     report = bool(run.report_dir) and Path(run.report_dir).is_dir()
     return {
         "run": run,
@@ -380,8 +382,8 @@ def _relation_counts(session, user: Principal) -> dict[int, int]:
         stmt = stmt.where(Run.owner_id == user.id)
     out: dict[int, int] = {}
     for wid, summary in session.execute(stmt):
-        b = (summary or {}).get("relations", {}).get("B") or {}
-        out[wid] = out.get(wid, 0) + int(b.get("translation", {}).get("n", 0))
+        b = (s := RunSummary.load(summary)) and s.relations.get("B")
+        out[wid] = out.get(wid, 0) + (b.translation.n if b else 0)
     return out
 
 

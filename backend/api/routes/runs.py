@@ -6,7 +6,7 @@ import io
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
@@ -15,6 +15,7 @@ from backend.api.deps import CurrentUser, IdPath, SessionDep, owned
 from backend.db.models import Run
 from backend.schemas import RunOut
 from backend.store import load_map, load_trajectory
+from worker.report.summary import RunSummary, summary_json_schema
 
 router = APIRouter(tags=["runs"])
 
@@ -34,6 +35,13 @@ def _require_done(run: Run) -> None:
         raise HTTPException(
             status.HTTP_404_NOT_FOUND, f"run {run.id} is {run.status}: no results yet"
         )
+
+
+@router.get("/schemas/summary")
+def get_summary_schema() -> dict[str, Any]:
+    """The JSON Schema of a run's summary (summary.json; `summary` in a run). Public, like
+    the OpenAPI document that holds it too: it describes the API, no one's data."""
+    return summary_json_schema()
 
 
 @router.get("/runs/{run_id}", response_model=RunOut)
@@ -82,7 +90,8 @@ def _map_files(run: Run, session) -> dict[str, bytes]:
         "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
     ).encode()
     buf = io.BytesIO()
-    map_png(buf, grid, error_lines(run.summary) if run.summary.get("relations") else [])
+    summary = RunSummary.load(run.summary)
+    map_png(buf, grid, error_lines(summary) if summary and summary.relations else [])
     return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
 
 
