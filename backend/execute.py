@@ -63,7 +63,7 @@ def execute_run(run_id: int, settings: Settings, redis_client: Any | None = None
         log.exception("run %s failed", run_id)
         return _failed(url, run_id, attempt, folder, final, f"{type(exc).__name__}: {exc}")
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
-    return Outcome("done", f"run {run_id}: {result.summary['outcome']}")
+    return Outcome("done", f"run {run_id}: {result.summary.outcome}")
 
 
 def run_and_store(
