@@ -28,6 +28,7 @@ from backend.lifecycle import (
 from backend.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
 from worker.report.folder import SIM_LOG
+from worker.report.summary import RunSummary
 from worker.status import RunStatus
 
 log = logging.getLogger("mapqual.execute")
@@ -42,7 +43,7 @@ class Outcome:
 
     kind: Kind
     message: str
-    summary: dict[str, Any] | None = field(default=None, compare=False)  # done: the summary
+    summary: RunSummary | None = field(default=None, compare=False)  # done: the summary
     report_dir: str | None = None  # done: where its report folder is
     found: str | None = None  # skipped: the status the run had (done, cancelled, failed, missing)
     error: str | None = None  # failed: the error stored with the run
@@ -115,7 +116,7 @@ def execute_run(
         raise
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
     summary = result.summary
-    return Outcome(RunStatus.DONE, f"run {run_id}: {summary['outcome']}", summary, str(final))
+    return Outcome(RunStatus.DONE, f"run {run_id}: {summary.outcome}", summary, str(final))
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 
 from backend.db.models import Job, Run, World
+from worker.report.summary import RunSummary
 from worker.run_params import run_params_schema
 from worker.slam import registry
 from worker.status import JobStatus, RunOutcome, RunStatus, WorldStatus
@@ -183,7 +184,7 @@ class RunOut(RunBrief):
     slam: str
     params: dict[str, Any]
     metrics: dict[str, Any]
-    summary: dict[str, Any]
+    summary: RunSummary | None  # null until the run is done
     error: str | None
     sim_time: float | None
     wall_time: float | None
@@ -201,7 +202,7 @@ class RunOut(RunBrief):
             slam=r.slam,
             params=r.params,
             metrics=r.metrics or {},
-            summary=r.summary or {},
+            summary=RunSummary.load(r.summary),
             error=r.error,
             sim_time=r.sim_time,
             wall_time=r.wall_time,

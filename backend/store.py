@@ -87,6 +87,7 @@ __all__ = [
     "world_occupancy",
     "world_upload",
 ]
+from worker.report.summary import RunSummary
 
 TRAJECTORY_KINDS = ("gt", "est")
 
@@ -155,7 +156,7 @@ def store_run_result(
     session: Session,
     run_id: int,
     *,
-    summary: dict[str, Any],
+    summary: RunSummary,
     t: np.ndarray,
     pose_gt: np.ndarray,
     pose_est: np.ndarray,
@@ -174,16 +175,14 @@ def store_run_result(
     `t (N,)`, `pose_gt`/`pose_est (N, 3)` at the same timestamps; `map_ros (H, W) int8`.
     `summary` is the report's summary.json; its headline figures are copied into columns.
     """
-    b_trans = summary.get("relations", {}).get("B", {}).get("translation", {})
-    b_rot = summary.get("relations", {}).get("B", {}).get("rotation", {})
-    timings = summary.get("timings", {})
+    doc, b, timings = summary.to_dict(), summary.relations.get("B"), summary.timings
     run = finish_run(
         session, run_id, attempt, {
-            "summary": summary, "outcome": summary.get("outcome"),
-            "metrics": {k: summary[k] for k in ("relations", "ate") if k in summary},
-            "reason": summary.get("reason"), "coverage": summary.get("coverage"),
-            "b_mean_t": b_trans.get("mean"), "b_mean_r": b_rot.get("mean"),
-            "sim_time": timings.get("sim_time_s"), "wall_time": timings.get("wall_time_s"),
+            "summary": doc, "outcome": summary.outcome,
+            "metrics": {k: doc[k] for k in ("relations", "ate")},
+            "reason": summary.reason, "coverage": summary.coverage,
+            "b_mean_t": b and b.translation.mean, "b_mean_r": b and b.rotation.mean,
+            "sim_time": timings.sim_time_s, "wall_time": timings.wall_time_s,
             "report_dir": report_dir,
         },
     )  # fmt: skip

@@ -46,7 +46,7 @@ def _batch(specs, workers: int) -> tuple[float, float, float, list[dict]]:
         cpu0, t0 = _cpu_children(), time.perf_counter()
         run_local(specs, BatchDir(tmp), workers, NullSink(), on_event)
         wall, cpu = time.perf_counter() - t0, _cpu_children() - cpu0
-    sim = sum(r["summary"]["timings"]["sim_time_s"] for r in records if r["summary"])
+    sim = sum(r["summary"].timings.sim_time_s for r in records if r["summary"])
     return wall, cpu, sim, records
 
 

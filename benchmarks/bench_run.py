@@ -52,26 +52,26 @@ def main() -> None:
         write_report(result, tmp)
         t2 = time.perf_counter()
     s = result.summary
-    t = s["timings"]
+    t = s.timings
     total = t2 - t0
-    nav, slam, sim = t["navigation_wall_s"], t["slam_wall_s"], t["simulation_wall_s"]
-    other = t["explore_wall_s"] - nav - slam - sim
+    nav, slam, sim = t.navigation_wall_s, t.slam_wall_s, t.simulation_wall_s
+    other = t.explore_wall_s - nav - slam - sim
     print(
         f"{world.name}, seed {args.seed}, {args.slam}, {args.slam_threads} scan-matching "
-        f"thread(s): {s['outcome']}"
-        f"{' (' + s['reason'] + ')' if s['reason'] else ''}, coverage {s['coverage']:.1%}, "
-        f"{t['sim_time_s']:.0f} s simulated"
+        f"thread(s): {s.outcome}"
+        f"{' (' + s.reason + ')' if s.reason else ''}, coverage {s.coverage:.1%}, "
+        f"{t.sim_time_s:.0f} s simulated"
     )
-    print(f"real-time factor, run_one:            {t['sim_time_s'] / (t1 - t0):7.1f}x")
+    print(f"real-time factor, run_one:            {t.sim_time_s / (t1 - t0):7.1f}x")
     target = "  (target >= 20x on one core)" if args.slam_threads == 1 else ""
-    print(f"real-time factor, with report files:  {t['sim_time_s'] / total:7.1f}x{target}")
+    print(f"real-time factor, with report files:  {t.sim_time_s / total:7.1f}x{target}")
     print("share of wall time per stage:")
     for name, v in (
         ("simulation + CARMEN log", sim),
         ("SLAM", slam),
         ("navigation", nav),
         ("exploration loop, other", other),
-        ("evaluation", t["evaluate_wall_s"]),
+        ("evaluation", t.evaluate_wall_s),
         ("report files", t2 - t1),
     ):
         print(f"  {name:26s} {v:8.2f} s  {100 * v / total:5.1f} %")

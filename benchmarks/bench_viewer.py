@@ -148,7 +148,7 @@ def main() -> None:
             best["noop"] = _best(best["noop"], took)
             reporter = ProgressReporter(url, run_id, client)
             took, summary = _timed(world, params, args.seed, reporter)
-            assert summary["timings"]["sim_time_s"] == ref["timings"]["sim_time_s"]
+            assert summary.timings.sim_time_s == ref.timings.sim_time_s
             best["unwatched"] = _best(best["unwatched"], took)
             assert reporter._listeners == 0
             took, stats = _watched(redis_url, url, run_id, client, world, params, args.seed)

@@ -14,6 +14,7 @@ from backend.db.models import Run, World
 from backend.db.session import session_scope
 from backend.store import load_map, load_trajectory, world_occupancy
 from worker.live_wire import decode_map_patch, ros_codes
+from worker.report.summary import RunSummary
 from worker.status import RunOutcome, RunStatus
 
 
@@ -85,7 +86,7 @@ class FinishedRun:
     gt: np.ndarray  # (N, 3)
     est: np.ndarray  # (N, 3)
     map: MapState | None
-    summary: dict[str, Any]
+    summary: RunSummary | None
 
     def index_at(self, t: float) -> int:
         """Index of the last pose at or before `t` (0 before the start)."""
@@ -105,7 +106,7 @@ def load_finished(url: str, run_id: int) -> FinishedRun | None:
             state = MapState(ros_codes(grid), res, origin)
         except LookupError:
             state = None
-        return FinishedRun(t, gt, est, state, dict(run.summary or {}))
+        return FinishedRun(t, gt, est, state, RunSummary.load(run.summary))
 
 
 @dataclass

@@ -14,6 +14,7 @@ from frontend.live import Delta, FinishedRun, LiveRun, RunInfo
 
 if TYPE_CHECKING:
     from frontend.viewer import ViewerApp
+    from worker.report.summary import RunSummary
 
 NEED_LINK = (
     "**No run to show.** This viewer opens a run only through the *open viewer* link on the "
@@ -264,7 +265,7 @@ class RunView:
         self.shown_i = i
         L["robot_gt"].pose(*fin.gt[i])
         L["robot_est"].pose(*fin.est[i])
-        p = {"t": float(fin.t[i]), "coverage": fin.summary.get("coverage")}
+        p = {"t": float(fin.t[i]), "coverage": fin.summary.coverage if fin.summary else None}
         self.metrics.content = metrics_markdown(self.info, p, fin.summary)
 
     def describe(self) -> dict[str, Any]:
@@ -292,7 +293,7 @@ def refuse(client: Any, note: Note) -> None:
     client.gui.add_markdown(NOTES[note])
 
 
-def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: dict | None) -> str:
+def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: RunSummary | None) -> str:
     """The metrics panel: run, simulated time, coverage, real-time factor, B errors when done."""
     lines = []
     if info is not None:
@@ -309,12 +310,12 @@ def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: dict | No
         row.append(f"{p['status']}, {p.get('goals_reached', 0)} goals")
     lines.append(" · ".join(row))
     if summary:
-        lines.append(f"outcome **{summary.get('outcome')}** ({summary.get('stop')})")
-        b = summary.get("relations", {}).get("B")
-        if b and b["translation"]["n"]:
-            tr, rot = b["translation"], b["rotation"]
+        lines.append(f"outcome **{summary.outcome}** ({summary.stop})")
+        b = summary.relation("B")
+        if b is not None:
+            tr, rot = b.translation, b.rotation
             lines.append(
-                f"B error: trans **{tr['mean']:.3f} ± {tr['std']:.3f} m**, "
-                f"rot **{rot['mean']:.4f} ± {rot['std']:.4f} rad** ({tr['n']} relations)"
+                f"B error: trans **{tr.mean:.3f} ± {tr.std:.3f} m**, "
+                f"rot **{rot.mean:.4f} ± {rot.std:.4f} rad** ({tr.n} relations)"
             )
     return "\n\n".join(lines)

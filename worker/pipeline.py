@@ -26,6 +26,7 @@ from worker.evaluate.relations import (
 )
 from worker.evaluate.trajectory import Trajectory
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
+from worker.report.summary import RunSummary
 from worker.run_params import EvalParams, RunParams
 from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
@@ -79,7 +80,7 @@ class RunResult:
     relations: dict[str, Relations]  # "B", "A", "SM"
     errors: dict[str, RelationErrors]
     ate: AteResult | None
-    summary: dict[str, Any]
+    summary: RunSummary
 
 
 class _TimedSimulator:
@@ -174,8 +175,9 @@ def run_one(
     relations, errors = _evaluate(gt, est, params.eval, rng_eval)
     ate = absolute_trajectory_error(gt, est, params.eval.max_gap) if len(gt) > 1 else None
     wall = time.perf_counter() - wall0
-    summary = _summary(world, seed, params, exploration, errors, ate, wall_explore, wall)
-    summary["timings"].update(stage_wall)
+    summary = _summary(
+        world, seed, params, exploration, errors, ate, wall_explore, wall, stage_wall
+    )
     return RunResult(world, seed, params, exploration, gt, est, relations, errors, ate, summary)
 
 
@@ -243,12 +245,12 @@ def _evaluate(
     return relations, errors
 
 
-def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[str, Any]:
+def _summary(world, seed, params, ex, errors, ate, wall_explore, wall, stage_wall) -> RunSummary:
     """summary.json: outcome and coverage at the top level, each relation kind's figures in
     exactly the shape `mapqual evaluate --json` prints."""
     failed = ex.outcome != RunOutcome.COMPLETED
     sim_time = float(ex.t[-1]) if len(ex.t) else 0.0
-    return {
+    doc = {
         "outcome": ex.outcome,
         "reason": ex.reason if failed else None,
         "stop": ex.reason,
@@ -273,10 +275,12 @@ def _summary(world, seed, params, ex, errors, ate, wall_explore, wall) -> dict[s
             "evaluate_wall_s": wall - wall_explore,
             "navigation_wall_s": float(np.sum(ex.nav_wall_s)),
             "real_time_factor": sim_time / wall if wall > 0 else None,
+            **stage_wall,
         },
         "params": params.to_json(),
         "versions": _versions(),
     }
+    return RunSummary.model_validate(doc)
 
 
 def _versions() -> dict[str, str]:

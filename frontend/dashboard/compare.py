@@ -13,6 +13,7 @@ from backend.api.deps import Principal, SessionDep
 from backend.api.routes import stats as stats_api
 from backend.db.models import Run
 from frontend.dashboard.pages import PageUser, render
+from worker.report.summary import RunSummary
 from worker.status import RunOutcome, RunStatus
 
 router = APIRouter(include_in_schema=False)
@@ -37,8 +38,8 @@ def _relation_counts(session, user: Principal) -> dict[int, int]:
         stmt = stmt.where(Run.owner_id == user.id)
     out: dict[int, int] = {}
     for wid, summary in session.execute(stmt):
-        b = (summary or {}).get("relations", {}).get("B") or {}
-        out[wid] = out.get(wid, 0) + int(b.get("translation", {}).get("n", 0))
+        b = (s := RunSummary.load(summary)) and s.relations.get("B")
+        out[wid] = out.get(wid, 0) + (b.translation.n if b else 0)
     return out
 
 

@@ -32,6 +32,7 @@ from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from worker.errors import InputError
+from worker.report.summary import RunSummary
 from worker.slam import registry
 from worker.status import ACTIVE_JOB, FINISHED_RUN, RunStatus, WorldStatus
 
@@ -230,7 +231,8 @@ def job_page(
 
 
 def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
-    b = (run.summary or {}).get("relations", {}).get("B") or {}
+    summary = RunSummary.load(run.summary)
+    b = summary.relations.get("B") if summary else None
     report = bool(run.report_dir) and Path(run.report_dir).is_dir()
     return {
         "run": run,

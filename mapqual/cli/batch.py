@@ -102,9 +102,9 @@ def _line(rec: dict[str, Any]) -> str:
         return f"{text}: {rec['error']}"
     b = relation_stats(rec)
     if b is not None:
-        text += f", B {b['translation']['mean']:.3f} m {b['rotation']['mean']:.4f} rad"
-    t = rec["summary"]["timings"]
-    return text + f", {t['sim_time_s']:.0f} s simulated in {t['wall_time_s']:.0f} s"
+        text += f", B {b.translation.mean:.3f} m {b.rotation.mean:.4f} rad"
+    t = rec["summary"].timings
+    return text + f", {t.sim_time_s:.0f} s simulated in {t.wall_time_s:.0f} s"
 
 
 def _overrides(worlds, runs, seeds, slam, laser_noise) -> dict[str, Any]:

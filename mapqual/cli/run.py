@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -13,6 +13,9 @@ from mapqual.cli import app
 from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
 from worker.slam import registry
+
+if TYPE_CHECKING:
+    from worker.report.summary import RunSummary
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -128,16 +131,15 @@ def run(
     params = build_params(params_file, slam, laser_noise, time_limit)
     world = load_world(world_path, resolution, allow_outside=allow_outside)
     run_id, shown, summary = _execute(world, world_path.suffix, params, seed, out, as_json)
-    summary = {"run_id": run_id, "report_dir": str(shown), **summary}
     if as_json:
-        print(json.dumps(summary))
+        print(json.dumps({"run_id": run_id, "report_dir": str(shown), **summary.to_dict()}))
     else:
-        _print_summary(summary)
+        _print_summary(summary, run_id, str(shown))
 
 
 def _execute(
     world: Any, suffix: str, params: Any, seed: int, out: Path | None, quiet: bool
-) -> tuple[int, Path, dict[str, Any]]:
+) -> tuple[int, Path, RunSummary]:
     """Store the world and a job of one run, and execute it with the run service: the default
     runs/<id>/ is filled like a worker's (in the attempt's folder, renamed into place with the
     commit of the result); a folder the user named (-o) is written directly. (run id, report
@@ -176,31 +178,31 @@ def _store_job(url: str, world: Any, suffix: str, params: Any, seed: int) -> int
         return job.runs[0].id
 
 
-def _print_summary(s: dict[str, Any]) -> None:
+def _print_summary(s: RunSummary, run_id: int, report_dir: str) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    outcome = s["outcome"] + (f" ({s['reason']})" if s["reason"] else "")
-    t = s["timings"]
-    table = Table(title=f"run {s['run_id']}: {s['world']}, seed {s['seed']}, {s['algorithm']}")
+    outcome = s.outcome + (f" ({s.reason})" if s.reason else "")
+    t = s.timings
+    table = Table(title=f"run {run_id}: {s.world}, seed {s.seed}, {s.algorithm}")
     table.add_column("")
     table.add_column("translation [m]", justify="right")
     table.add_column("rotation [rad]", justify="right")
     table.add_column("relations", justify="right")
-    for kind, e in s["relations"].items():
-        tr, ro = e["translation"], e["rotation"]
+    for kind, e in s.relations.items():
+        tr, ro = e.translation, e.rotation
         fmt = lambda v, f: "-" if v is None else format(v, f)  # noqa: E731
         table.add_row(
             f"{kind} mean ± std",
-            f"{fmt(tr['mean'], '.3f')} ± {fmt(tr['std'], '.3f')}",
-            f"{fmt(ro['mean'], '.4f')} ± {fmt(ro['std'], '.4f')}",
-            str(tr["n"]),
+            f"{fmt(tr.mean, '.3f')} ± {fmt(tr.std, '.3f')}",
+            f"{fmt(ro.mean, '.4f')} ± {fmt(ro.std, '.4f')}",
+            str(tr.n),
         )
     console = Console()
     console.print(table)
     console.print(
-        f"outcome [bold]{outcome}[/bold] — {s['stop_detail']}; coverage {s['coverage']:.1%}; "
-        f"path {s['path_length_m']:.0f} m; {t['sim_time_s']:.0f} s simulated in "
-        f"{t['wall_time_s']:.1f} s (x{t['real_time_factor']:.0f} real time)"
+        f"outcome [bold]{outcome}[/bold] — {s.stop_detail}; coverage {s.coverage:.1%}; "
+        f"path {s.path_length_m:.0f} m; {t.sim_time_s:.0f} s simulated in "
+        f"{t.wall_time_s:.1f} s (x{t.real_time_factor:.0f} real time)"
     )
-    console.print(f"report: {s['report_dir']}")
+    console.print(f"report: {report_dir}")

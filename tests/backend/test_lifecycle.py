@@ -31,6 +31,7 @@ from backend.store import (
     mark_run_failed,
     store_run_result,
 )
+from tests.summaries import make_summary
 from worker.pipeline import RunCancelled, RunProgress, RunSuperseded
 
 STATUSES = ("queued", "running", "done", "failed", "cancelled")
@@ -56,7 +57,7 @@ def _result(s, run_id: int, attempt: str | None, folder: Path | None = None, fin
     t = np.arange(5) * 0.1
     poses = np.zeros((5, 3))
     return store_run_result(
-        s, run_id, summary={"outcome": "completed"}, t=t, pose_gt=poses, pose_est=poses,
+        s, run_id, summary=make_summary(), t=t, pose_gt=poses, pose_est=poses,
         map_ros=np.zeros((4, 4), np.int8), map_resolution=0.05, map_origin=(0, 0),
         report_dir=None if final is None else str(final), attempt=attempt, folder=folder,
     )  # fmt: skip

@@ -23,6 +23,7 @@ from backend.store import (
     user_for_key,
     world_occupancy,
 )
+from tests.summaries import make_summary, relation, stats
 
 
 def _world(session, sha="a" * 64):
@@ -45,13 +46,14 @@ def _world(session, sha="a" * 64):
 
 
 def _summary(b_t=0.12, b_r=0.004):
-    return {
-        "outcome": "completed",
-        "reason": None,
-        "coverage": 0.97,
-        "relations": {"B": {"translation": {"mean": b_t}, "rotation": {"mean": b_r}}},
-        "timings": {"sim_time_s": 600.0, "wall_time_s": 12.5},
-    }
+    return make_summary(
+        outcome="completed",
+        reason=None,
+        stop="no_frontier",
+        coverage=0.97,
+        relations={"B": relation(stats(b_t), stats(b_r))},
+        timings={"sim_time_s": 600.0, "wall_time_s": 12.5},
+    )
 
 
 def _result_arrays(n=1000, seed=0):

@@ -17,6 +17,8 @@ from backend.store import (
     mark_run_started,
     store_run_result,
 )
+from tests.summaries import summary_doc
+from worker.report.summary import RunSummary
 
 
 def _mapqual(tmp_path, *args):
@@ -41,7 +43,7 @@ def test_db_upgrade_creates_the_database(tmp_path):
 def test_runs_show_reads_back_a_stored_run(tmp_path):
     assert _mapqual(tmp_path, "db", "upgrade").returncode == 0
     url = f"sqlite:///{tmp_path / 'm.db'}"
-    summary = {"outcome": "failed", "reason": "collision", "coverage": 0.4}
+    summary = summary_doc(outcome="failed", reason="collision", stop="collision", coverage=0.4)
     with session_scope(url) as s:
         w = get_or_create_world(
             s,
@@ -66,7 +68,7 @@ def test_runs_show_reads_back_a_stored_run(tmp_path):
         store_run_result(
             s,
             run_id,
-            summary=summary,
+            summary=RunSummary.model_validate(summary),
             t=np.arange(3.0),
             pose_gt=z,
             pose_est=z,

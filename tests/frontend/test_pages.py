@@ -82,7 +82,7 @@ def site(tmp_path_factory):
     settings = Settings(DATABASE_URL=url, REDIS_URL=redis_url, MAPQUAL_VIEWER_URL=VIEWER)
     app = create_app(settings)
     return {"app": app, "url": url, "a": key_a, "b": key_b, "job": job_id, "run": run_id,
-            "summary": result.summary, "report": report, "a_id": a_id}  # fmt: skip
+            "summary": result.summary.to_dict(), "report": report, "a_id": a_id}  # fmt: skip
 
 
 def _client(site) -> TestClient:

@@ -30,6 +30,7 @@ from backend.viewer_tokens import issue, sign
 from frontend.viewer import ViewerApp, run_link
 from tests.frontend.conftest import free_port
 from tests.services import scratch_database
+from tests.summaries import summary_doc
 from worker.world.world import World
 
 # the nodes a shown run puts in its client's scene (frontend.view.RunView.reset)
@@ -57,7 +58,7 @@ def _finished_run(s, owner_id: int, world_id: int, seed: int) -> int:
     run.map = RunMap(
         resolution=0.05, origin_x=0.0, origin_y=0.0, width=120, height=80, data=pack_array(grid)
     )
-    run.summary = {"outcome": "completed", "stop": "time limit", "coverage": 0.4}
+    run.summary = summary_doc(outcome="completed", reason=None, stop="no_frontier", coverage=0.4)
     run.status, run.outcome, run.coverage = "done", "completed", 0.4
     s.flush()
     return run.id

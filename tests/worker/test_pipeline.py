@@ -7,6 +7,7 @@ import pytest
 
 from worker.errors import InputError
 from worker.pipeline import RunCancelled, run_one
+from worker.report.summary import RunSummary
 from worker.run_params import RunParams
 from worker.world.world import World
 
@@ -22,8 +23,8 @@ def two_rooms() -> World:
     return World.from_array(occ, 0.05, name="two_rooms")
 
 
-def _strip_wall_times(summary: dict) -> dict:
-    s = dict(summary)
+def _strip_wall_times(summary: RunSummary) -> dict:
+    s = summary.to_dict()
     s.pop("timings")
     return s
 
@@ -32,14 +33,14 @@ def test_oracle_run_completes_covers_the_rooms_and_scores_zero(tmp_path):
     p = RunParams.from_json({"algorithm": "oracle", "explore": {"time_limit": 600.0}})
     r = run_one(two_rooms(), p, seed=3, sim_log=tmp_path / "sim.log")
     s = r.summary
-    assert (s["outcome"], s["reason"], s["collision"]) == ("completed", None, None)
-    assert s["coverage"] >= 0.95
+    assert (s.outcome, s.reason, s.collision) == ("completed", None, None)
+    assert s.coverage >= 0.95
     # the oracle's estimate is the ground truth: every relation error is zero
     assert np.array_equal(r.gt.poses, r.est.poses)
-    assert s["relations"]["A"]["translation"]["max"] == 0.0
-    assert s["relations"]["A"]["translation"]["n"] == pytest.approx(r.gt.t[-1] / 0.5, abs=1)
+    assert s.relations["A"].translation.max == 0.0
+    assert s.relations["A"].translation.n == pytest.approx(r.gt.t[-1] / 0.5, abs=1)
     # thesis rule: a pilot standard deviation of 0 asks for N = 0 B relations
-    assert s["relations"]["B"]["translation"]["n"] == 0
+    assert s.relations["B"].translation.n == 0
     # the CARMEN log has one ODOM, ROBOTLASER1 and TRUEPOS line per 10 Hz step
     lines = (tmp_path / "sim.log").read_text().splitlines()
     n = len(r.gt.t)
@@ -70,9 +71,9 @@ def test_more_odometry_noise_gives_larger_b_errors():
                 "eval": {"b": {"min_relations": 500}},
             }
         )
-        b = run_one(two_rooms(), p, seed=2).summary["relations"]["B"]["translation"]
-        assert b["n"] >= 500
-        return b["mean"]
+        b = run_one(two_rooms(), p, seed=2).summary.relations["B"].translation
+        assert b.n >= 500
+        return b.mean
 
     low, high = b_mean(0.02), b_mean(0.2)
     assert 0 < low < high

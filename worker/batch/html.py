@@ -1,16 +1,26 @@
-"""report.html: a batch's tables and figures on one self-contained page (images embedded)."""
+"""report.html: a batch's tables and figures on one self-contained page (images embedded),
+rendered from the Jinja2 template `templates/report.html` (autoescaped)."""
 
 from __future__ import annotations
 
 import base64
-import html
 import os
 from collections.abc import Sequence
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from jinja2 import Environment, PackageLoader, StrictUndefined, Template
+
 from worker.batch.state import now_iso
-from worker.batch.tables import ERROR_COLUMNS, error_rows, is_good, outcome_of, success_rows
+from worker.batch.tables import (
+    ERROR_COLUMNS,
+    error_rows,
+    is_good,
+    outcome_of,
+    success_rows,
+    summary_of,
+)
 from worker.status import RecordStatus, RunOutcome
 
 CAPTIONS = {
@@ -31,44 +41,19 @@ MISSING = {
     "noise.png": "no world run at more than one noise level",
     "a_vs_b.png": "no run with both A and B relations",
 }
-STYLE = """
-body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1200px;color:#222}
-table{border-collapse:collapse;margin:0.5em 0 1.5em;font-size:0.85em}
-th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
-th{background:#f0f0f0}td.l,th.l{text-align:left}
-img{max-width:100%;border:1px solid #ddd}figure{margin:1em 0 2em}
-figcaption{color:#555;font-size:0.9em}.bad{color:#b00}.good{color:#070}
-"""
-
-
-def _e(v: Any) -> str:
-    return html.escape(str(v))
 
 
 def _num(v: Any, digits: int = 4) -> str:
+    """A table figure: floats to `digits` decimals, None as a dash."""
     if v is None:
         return "–"
     if isinstance(v, float):
         return f"{v:.{digits}f}"
-    return _e(v)
+    return str(v)
 
 
 # columns shown with fewer digits than the errors
 DIGITS = {"noise": None, "NUMMEASURES": 1}
-
-
-def _table(rows: Sequence[dict[str, Any]], columns: Sequence[str], left: int = 1) -> str:
-    head = "".join(
-        f'<th class="{"l" if i < left else ""}">{_e(c)}</th>' for i, c in enumerate(columns)
-    )
-    body = []
-    for row in rows:
-        cells = "".join(
-            f'<td class="{"l" if i < left else ""}">{_cell(row.get(c), c)}</td>'
-            for i, c in enumerate(columns)
-        )
-        body.append(f"<tr>{cells}</tr>")
-    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
 
 
 def _cell(v: Any, column: str) -> str:
@@ -78,44 +63,46 @@ def _cell(v: Any, column: str) -> str:
     return f"{v:g}" if digits is None else f"{v:.{digits}f}"
 
 
-def _runs_table(records: Sequence[dict[str, Any]], out: Path) -> str:
-    rows = []
-    for r in records:
-        outcome, reason = outcome_of(r)
-        s = r["summary"] or {}
-        b = (s.get("relations") or {}).get("B") or {}
-        t, ro = b.get("translation") or {}, b.get("rotation") or {}
-        cls = "good" if is_good(r) else "bad"
-        link = _e(r["world"])
-        map_png = Path(r["report_dir"] or "") / "map.png"
-        if r["report_dir"] and map_png.is_file():
-            link = f'<a href="{_e(os.path.relpath(map_png, out))}">{link}</a>'
-        what = outcome + (f" ({reason})" if reason else "")
-        if r.get("error"):
-            what += f": {r['error']}"
-        rows.append(
-            f'<tr><td class="l">{link}</td><td>{r["seed"]}</td><td class="l">{_e(r["slam"])}</td>'
-            f'<td>{r["noise"]:g}</td><td class="l {cls}">{_e(what)}</td>'
-            f"<td>{_num(s.get('coverage'), 3)}</td><td>{_num(t.get('mean'))}</td>"
-            f"<td>{_num(ro.get('mean'))}</td><td>{t.get('n', 0)}</td>"
-            f"<td>{_num((s.get('timings') or {}).get('sim_time_s'), 0)}</td></tr>"
-        )
-    head = (
-        '<tr><th class="l">world</th><th>seed</th><th class="l">slam</th><th>noise [m]</th>'
-        '<th class="l">outcome</th><th>coverage</th><th>B mean t [m]</th><th>B mean r [rad]</th>'
-        "<th>B relations</th><th>sim time [s]</th></tr>"
+@lru_cache(maxsize=1)
+def _template() -> Template:
+    env = Environment(
+        loader=PackageLoader("worker.batch", "templates"),
+        autoescape=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        undefined=StrictUndefined,
+        keep_trailing_newline=True,
     )
-    return f"<table>{head}{''.join(rows)}</table>"
+    env.filters.update(num=_num, cell=_cell, g=lambda v: f"{v:g}")
+    return env.get_template("report.html")
 
 
-def _figure(name: str, path: Path | None) -> str:
-    if path is None or not path.is_file():
-        return f"<p><i>{_e(name)}: not drawn ({_e(MISSING[name])}).</i></p>"
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return (
-        f'<figure><img alt="{_e(name)}" src="data:image/png;base64,{data}">'
-        f"<figcaption>{_e(CAPTIONS[name])} ({_e(name)})</figcaption></figure>"
-    )
+def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
+    """One line of the runs table: labels, outcome, coverage, B means, B count, sim time."""
+    outcome, reason = outcome_of(r)
+    s = summary_of(r)
+    b = s.relations.get("B") if s else None
+    map_png = Path(r["report_dir"] or "") / "map.png"
+    link = None
+    if r["report_dir"] and map_png.is_file():
+        link = os.path.relpath(map_png, out)
+    what = outcome + (f" ({reason})" if reason else "")
+    if r.get("error"):
+        what += f": {r['error']}"
+    return {
+        "world": r["world"], "link": link, "seed": r["seed"], "slam": r["slam"],
+        "noise": r["noise"], "cls": "good" if is_good(r) else "bad", "what": what,
+        "coverage": s and s.coverage, "b_mean_t": b and b.translation.mean,
+        "b_mean_r": b and b.rotation.mean, "b_n": b.translation.n if b else 0,
+        "sim_time_s": s and s.timings.sim_time_s,
+    }  # fmt: skip
+
+
+def _figure(name: str, path: Path | None) -> dict[str, Any]:
+    data = None
+    if path is not None and path.is_file():
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return {"name": name, "data": data, "caption": CAPTIONS[name], "missing": MISSING[name]}
 
 
 def write_html(
@@ -126,36 +113,23 @@ def write_html(
     expected: int,
 ) -> Path:
     """report.html in `out`, readable offline: every image is embedded in the page."""
-    done = sum(outcome_of(r)[0] == RunOutcome.COMPLETED for r in records)
-    good = sum(is_good(r) for r in records)
-    errors = sum(r["status"] != RecordStatus.DONE for r in records)
-    head = (
-        f"<h1>mapqual batch {_e(info.get('batch_id', ''))}</h1>"
-        f"<p>{_e(info.get('command', ''))}</p>"
-        f"<p>{len(records)} of {expected} runs finished: {done} completed, {good} visually good "
-        f"(B mean under 1 m and 0.03 rad), {errors} internal errors. Written {now_iso()}.</p>"
-    )
     success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good", "failed"]
     success_cols += ["collision", "stuck", "time_limit", "slam_diverged", "error"]
-    parts = [
-        head,
-        "<h2>Success (thesis Table 6.3)</h2>",
-        _table(success_rows(records), success_cols),
-        "<h2>Translational B error [m] (Table 6.4; averages over completed runs)</h2>",
-        _table(error_rows(records, "translation"), ERROR_COLUMNS),
-        "<h2>Rotational B error [rad] (Table 6.5)</h2>",
-        _table(error_rows(records, "rotation"), ERROR_COLUMNS),
-        "<h2>Figures</h2>",
-        *(_figure(name, path) for name, path in figures.items()),
-        "<h2>Runs</h2><details><summary>every run (links open its map)</summary>",
-        _runs_table(records, out),
-        "</details>",
-    ]
-    page = (
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        f"<title>mapqual batch</title><style>{STYLE}</style></head><body>"
-        + "\n".join(parts)
-        + "</body></html>\n"
+    page = _template().render(
+        info=info,
+        finished=len(records),
+        expected=expected,
+        completed=sum(outcome_of(r)[0] == RunOutcome.COMPLETED for r in records),
+        good=sum(is_good(r) for r in records),
+        errors=sum(r["status"] != RecordStatus.DONE for r in records),
+        written=now_iso(),
+        success=success_rows(records),
+        success_columns=success_cols,
+        translation=error_rows(records, "translation"),
+        rotation=error_rows(records, "rotation"),
+        error_columns=ERROR_COLUMNS,
+        figures=[_figure(name, path) for name, path in figures.items()],
+        runs=[_run_row(r, out) for r in records],
     )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")

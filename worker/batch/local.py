@@ -14,6 +14,7 @@ from typing import Any, Protocol
 from worker.batch.experiment import RunSpec
 from worker.batch.pool import PoolMessage, run_pool
 from worker.batch.state import BatchDir, record_of
+from worker.report.summary import RunSummary
 from worker.status import RecordStatus
 
 PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running run
@@ -25,7 +26,7 @@ class RunOutput:
     """What a finished run sends back to the parent, for its record in OUT (the database, when
     there is one, has the rest: the run service stored it in the worker process)."""
 
-    summary: dict[str, Any]
+    summary: RunSummary
     report_dir: str
 
 

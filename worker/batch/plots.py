@@ -61,15 +61,15 @@ def errors_by_world(records: Sequence[dict[str, Any]], path: Path) -> Path | Non
 def _mean_std(recs: Sequence[dict[str, Any]], axis: str) -> tuple[float, float, int]:
     """Average over completed runs of each run's mean and std B error, and how many runs."""
     stats = [
-        b[axis]
+        getattr(b, axis)
         for r in recs
         if outcome_of(r)[0] == RunOutcome.COMPLETED and (b := relation_stats(r))
     ]
     if not stats:
         return float("nan"), float("nan"), 0
     return (
-        float(np.mean([s["mean"] for s in stats])),
-        float(np.mean([s["std"] for s in stats])),
+        float(np.mean([s.mean for s in stats])),
+        float(np.mean([s.std for s in stats])),
         len(stats),
     )
 
@@ -167,7 +167,7 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     )
     for ax, (axis, unit, good), floor in zip(axs, AXES, (1e-5, 1e-6), strict=True):
         for label, color, member in classes:
-            sel = [(b[axis]["mean"], a[axis]["mean"]) for r, a, b in pts if member(r)]
+            sel = [(getattr(b, axis).mean, getattr(a, axis).mean) for r, a, b in pts if member(r)]
             if sel:
                 xs, ys = np.maximum(np.asarray(sel), floor).T  # zeros drawn on the floor
                 ax.scatter(xs, ys, s=22, color=color, alpha=0.8, label=f"{label} ({len(sel)})")

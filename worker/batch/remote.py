@@ -11,6 +11,7 @@ from typing import Any, Protocol
 from worker.batch.experiment import RunSpec
 from worker.batch.local import Event
 from worker.batch.state import BatchDir, record_of
+from worker.report.summary import RunSummary
 from worker.status import ACTIVE_RUN, RecordStatus, RunStatus
 
 POLL_S = 1.0  # [s] between polls of the runs' state while Celery workers run the batch
@@ -22,7 +23,7 @@ class RunState:
 
     id: int
     status: str  # queued | running | done | failed | cancelled
-    summary: dict[str, Any] | None = None
+    summary: dict[str, Any] | None = None  # as stored (RunSummary.load reads it)
     error: str | None = None
     report_dir: str | None = None
     progress: dict[str, Any] = field(default_factory=dict)
@@ -40,7 +41,9 @@ class RunQueue(Protocol):
 def record_from_run(spec: RunSpec, run: RunState, ids: dict[str, Any]) -> dict[str, Any] | None:
     """The OUT record of a run the database holds as finished, or None while it is not."""
     if run.status == RunStatus.DONE:
-        return record_of(spec, summary=run.summary, report_dir=run.report_dir, **ids)
+        return record_of(
+            spec, summary=RunSummary.load(run.summary), report_dir=run.report_dir, **ids
+        )
     if run.status in (RunStatus.FAILED, RunStatus.CANCELLED):
         error = run.error or RunStatus.CANCELLED.value
         return record_of(spec, summary=None, error=error, report_dir=run.report_dir, **ids)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from worker.batch.experiment import RunSpec
+from worker.report.summary import RunSummary
 from worker.status import RecordStatus
 
 RECORD = "record.json"
@@ -33,7 +34,7 @@ def now_iso() -> str:
 def record_of(
     spec: RunSpec,
     *,
-    summary: dict[str, Any] | None,
+    summary: RunSummary | None,
     error: str | None = None,
     run_id: int | None = None,
     job_id: int | None = None,
@@ -44,6 +45,7 @@ def record_of(
     `status` is `RecordStatus.DONE` when the pipeline finished the run (whatever the
     exploration's outcome), `ERROR` when it raised: the tables count such a run as failed,
     reason "error".
+    In memory `summary` is the typed summary; record.json holds its persisted form.
     """
     return {
         **asdict(spec),
@@ -114,14 +116,18 @@ class BatchDir:
         for key in keys:
             path = self.run_dir(key) / RECORD
             if path.is_file():
-                out[key] = json.loads(path.read_text())
+                record = json.loads(path.read_text())
+                record["summary"] = RunSummary.load(record["summary"])
+                out[key] = record
         return out
 
     def write_record(self, record: dict[str, Any]) -> None:
         """Mark a run finished (atomically; the last thing written for a run)."""
         d = self.run_dir(record["key"])
         d.mkdir(parents=True, exist_ok=True)
-        _write_atomic(d / RECORD, json.dumps(record, indent=1) + "\n")
+        s = record["summary"]
+        doc = {**record, "summary": None if s is None else s.to_dict()}
+        _write_atomic(d / RECORD, json.dumps(doc, indent=1) + "\n")
 
     def journal(self, event: str, key: str | None = None, **fields: Any) -> None:
         """Append one event (start, done, error, interrupted, enqueued) to journal.jsonl."""

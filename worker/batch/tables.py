@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from worker.report.summary import RelationErrorsSummary, RelationKind, RunSummary
 from worker.status import RecordStatus, RunOutcome
 
 # Thesis 6.3.4: a map is visually bad above these mean B errors.
@@ -22,19 +23,23 @@ ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES")
 RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
 
 
+def summary_of(rec: dict[str, Any]) -> RunSummary | None:
+    """The run's summary; None for a run that raised."""
+    return rec["summary"] if rec["status"] == RecordStatus.DONE else None
+
+
 def outcome_of(rec: dict[str, Any]) -> tuple[str, str | None]:
     """(outcome, reason): a run that raised counts as failed with reason "error"."""
-    if rec["status"] != RecordStatus.DONE:
+    s = summary_of(rec)
+    if s is None:
         return RunOutcome.FAILED, "error"
-    return rec["summary"]["outcome"], rec["summary"]["reason"]
+    return s.outcome, s.reason
 
 
-def relation_stats(rec: dict[str, Any], kind: str = "B") -> dict[str, Any] | None:
+def relation_stats(rec: dict[str, Any], kind: RelationKind = "B") -> RelationErrorsSummary | None:
     """The run's {translation, rotation, skipped} figures of relation `kind`, if evaluated."""
-    if rec["status"] != RecordStatus.DONE:
-        return None
-    rel = rec["summary"]["relations"].get(kind)
-    return rel if rel and rel["translation"]["n"] else None
+    s = summary_of(rec)
+    return None if s is None else s.relation(kind)
 
 
 def is_good(rec: dict[str, Any]) -> bool:
@@ -43,32 +48,33 @@ def is_good(rec: dict[str, Any]) -> bool:
     return (
         outcome_of(rec)[0] == RunOutcome.COMPLETED
         and b is not None
-        and b["translation"]["mean"] <= GOOD_T
-        and b["rotation"]["mean"] <= GOOD_R
+        and b.translation.mean <= GOOD_T
+        and b.rotation.mean <= GOOD_R
     )
 
 
 def run_row(rec: dict[str, Any]) -> dict[str, Any]:
     """One runs.csv row."""
     outcome, reason = outcome_of(rec)
-    s = rec["summary"] or {}
+    s = summary_of(rec)
     row: dict[str, Any] = {k: rec[k] for k in RUN_LABELS}
     row.update(outcome=outcome, reason=reason or "", good=is_good(rec))
-    row["coverage"] = s.get("coverage")
+    row["coverage"] = s and s.coverage
     for kind, prefix in KINDS:
         rel = relation_stats(rec, kind)
         for axis, suffix in (("translation", "t"), ("rotation", "r")):
+            stats = getattr(rel, axis) if rel else None
             for stat in STATS:
-                row[f"{prefix}_{stat}_{suffix}"] = rel[axis][stat] if rel else None
-        row[f"{prefix}_n"] = rel["translation"]["n"] if rel else 0
-    ate = s.get("ate") or {}
-    row["ate_rmse_t"] = (ate.get("translation") or {}).get("rmse")
-    row["ate_rmse_r"] = (ate.get("rotation") or {}).get("rmse")
-    timings = s.get("timings") or {}
-    row["path_length_m"] = s.get("path_length_m")
-    row["sim_time_s"] = timings.get("sim_time_s")
-    row["wall_time_s"] = timings.get("wall_time_s")
-    row["real_time_factor"] = timings.get("real_time_factor")
+                row[f"{prefix}_{stat}_{suffix}"] = getattr(stats, stat) if stats else None
+        row[f"{prefix}_n"] = rel.translation.n if rel else 0
+    ate = s and s.ate
+    row["ate_rmse_t"] = ate and ate.translation.rmse
+    row["ate_rmse_r"] = ate and ate.rotation.rmse
+    timings = s and s.timings
+    row["path_length_m"] = s and s.path_length_m
+    row["sim_time_s"] = timings and timings.sim_time_s
+    row["wall_time_s"] = timings and timings.wall_time_s
+    row["real_time_factor"] = timings and timings.real_time_factor
     row.update(run_id=rec.get("run_id"), key=rec["key"], error=rec.get("error") or "")
     return row
 
@@ -113,7 +119,7 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
     rows = []
     for (world, slam, noise), recs in _conditions(records).items():
         stats = [
-            b[axis]
+            getattr(b, axis)
             for r in recs
             if outcome_of(r)[0] == RunOutcome.COMPLETED and (b := relation_stats(r))
         ]
@@ -121,7 +127,7 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
             continue
         row = {"ENVIRONMENT": environment_label(records, world, slam, noise)}
         for col, stat in zip(ERROR_COLUMNS[1:], (*STATS, "n"), strict=True):
-            row[col] = float(np.mean([s[stat] for s in stats]))
+            row[col] = float(np.mean([getattr(s, stat) for s in stats]))
         rows.append(row)
     return rows
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import secrets
 import zipfile
@@ -10,22 +9,23 @@ from pathlib import Path
 
 from worker.evaluate.trajio import write_carmen, write_errors, write_relations, write_tum
 from worker.report.plots import errors_png, map_png, trajectories_png
+from worker.report.summary import RunSummary
 
 SUMMARY = "summary.json"
 SIM_LOG = "sim.log"
 REPORT_ZIP = "report.zip"  # the whole folder as one download, made once the report is written
 
 
-def error_lines(summary: dict) -> list[str]:
+def error_lines(summary: RunSummary) -> list[str]:
     """The B errors as the thesis printed them on the map (Fig. 5.3)."""
-    b = summary.get("relations", {}).get("B")
-    if not b or not b["translation"]["n"]:
-        return [f"{summary['world']} seed {summary['seed']}: no B relations evaluated"]
-    t, r = b["translation"], b["rotation"]
+    b = summary.relation("B")
+    if b is None:
+        return [f"{summary.world} seed {summary.seed}: no B relations evaluated"]
+    t, r = b.translation, b.rotation
     return [
-        f"trans. error: mean {t['mean']:.3f} m, std {t['std']:.3f} m",
-        f"rot. error: mean {r['mean']:.4f} rad, std {r['std']:.4f} rad",
-        f"{t['n']} B relations; {summary['outcome']}, coverage {summary['coverage']:.0%}",
+        f"trans. error: mean {t.mean:.3f} m, std {t.std:.3f} m",
+        f"rot. error: mean {r.mean:.4f} rad, std {r.std:.4f} rad",
+        f"{t.n} B relations; {summary.outcome}, coverage {summary.coverage:.0%}",
     ]
 
 
@@ -37,13 +37,13 @@ def write_report(result, out_dir: str | Path) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ex, summary = result.exploration, result.summary
-    (out / SUMMARY).write_text(json.dumps(summary, indent=2) + "\n")
+    (out / SUMMARY).write_text(summary.to_json_text())
     ex.final_map.save_map_server(out / "map")
     map_png(out / "map.png", ex.final_map.to_ros(), error_lines(summary))
     world = result.world
-    title = f"{world.name}, seed {result.seed}, {summary['algorithm']}: {summary['outcome']}"
-    if summary["reason"]:
-        title += f" ({summary['reason']})"
+    title = f"{world.name}, seed {result.seed}, {summary.algorithm}: {summary.outcome}"
+    if summary.reason:
+        title += f" ({summary.reason})"
     trajectories_png(
         out / "trajectories.png", world.occ, world.resolution, world.origin,
         ex.pose_gt, ex.pose_est, title,

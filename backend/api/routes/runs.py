@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import tempfile
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
@@ -14,6 +14,7 @@ from backend.api.deps import CurrentUser, IdPath, SessionDep, owned
 from backend.db.models import Run
 from backend.schemas import RunOut
 from backend.store import load_map, load_trajectory
+from worker.report.summary import RunSummary, summary_json_schema
 from worker.status import RunStatus
 
 router = APIRouter(tags=["runs"])
@@ -34,6 +35,13 @@ def _require_done(run: Run) -> None:
         raise HTTPException(
             status.HTTP_404_NOT_FOUND, f"run {run.id} is {run.status}: no results yet"
         )
+
+
+@router.get("/schemas/summary")
+def get_summary_schema() -> dict[str, Any]:
+    """The JSON Schema of a run's summary (summary.json; `summary` in a run). Public, like
+    the OpenAPI document that holds it too: it describes the API, no one's data."""
+    return summary_json_schema()
 
 
 @router.get("/runs/{run_id}", response_model=RunOut)
@@ -76,8 +84,9 @@ def _map_files(run: Run, session) -> dict[str, bytes]:
     grid, res, origin = load_map(session, run.id)
     pgm, yaml = map_server_files(grid, res, origin, "map.pgm")
     buf = io.BytesIO()
-    map_png(buf, grid, error_lines(run.summary) if run.summary.get("relations") else [])
-    return {"pgm": pgm, "yaml": yaml.encode(), "png": buf.getvalue()}
+    summary = RunSummary.load(run.summary)
+    map_png(buf, grid, error_lines(summary) if summary and summary.relations else [])
+    return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
 
 
 @router.get("/runs/{run_id}/map.{ext}")

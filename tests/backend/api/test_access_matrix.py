@@ -51,6 +51,8 @@ ROUTES: dict[tuple[str, str], str] = {
     ("GET", "/api/v1/runs/{run_id}/relations"): OWNED,
     ("GET", "/api/v1/runs/{run_id}/report.zip"): OWNED,
     ("GET", "/api/v1/stats"): LIST,
+    # public, like the OpenAPI document that holds it too: it describes the API, no one's data
+    ("GET", "/api/v1/schemas/summary"): OPEN,
 }
 # Dashboard pages (not in the schema) that read one owner's object.
 OWNED_PAGES = ("/jobs/{job_id}", "/runs/{run_id}/plot/trajectories.png")
@@ -171,6 +173,17 @@ def test_the_matrix_covers_every_route_of_the_schema(site):
         ("GET", "/compare/{kind}.png"),
     }  # fmt: skip
     assert pages == known, f"pages the matrix does not know: {pages - known}"
+
+
+OPEN_READS = [op for op, kind in ROUTES.items() if kind == OPEN and op[0] == "GET"]
+
+
+@pytest.mark.parametrize("method,path", OPEN_READS, ids=[p for _, p in OPEN_READS])
+def test_an_open_route_answers_everyone_alike(site, method, path):
+    answers = [site.call(method, path, caller) for caller in CALLERS]
+    assert [r.status_code for r in answers] == [200] * len(CALLERS)
+    if path != "/readyz":  # readiness carries the moment's checks
+        assert all(r.content == answers[0].content for r in answers)
 
 
 OWNED_READS = [op for op, kind in ROUTES.items() if kind == OWNED and op[0] == "GET"]

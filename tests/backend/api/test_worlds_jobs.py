@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from tests.summaries import make_summary, relation, stats
+
 
 def _png(w=80, h=60, door=False) -> bytes:
     img = np.full((h, w), 255, np.uint8)
@@ -255,15 +257,17 @@ def test_a_finished_run_without_its_report_folder_serves_its_map_from_the_databa
     grid[0, :] = 100  # bottom row a wall
     t = np.arange(5) * 0.1
     poses = np.zeros((5, 3))
-    b = {"n": 7, "mean": 0.25, "std": 0.125, "min": 0.0, "max": 1.0}
-    summary = {
-        "world": "box",
-        "seed": 1,
-        "outcome": "completed",
-        "coverage": 0.5,
-        "relations": {"B": {"translation": b, "rotation": b, "skipped": 0}},
-        "timings": {"sim_time_s": 0.4, "wall_time_s": 1.0},
-    }
+    b = stats(0.25, 0.125, 7, min=0.0, max=1.0)
+    summary = make_summary(
+        world="box",
+        seed=1,
+        outcome="completed",
+        reason=None,
+        stop="no_frontier",
+        coverage=0.5,
+        relations={"B": relation(b)},
+        timings={"sim_time_s": 0.4, "wall_time_s": 1.0},
+    )
     with session_scope(api.url) as s:
         mark_run_started(s, run_id)
         store_run_result(
@@ -299,13 +303,13 @@ def test_a_job_reads_the_same_by_id_as_in_the_list_and_follows_its_runs(api):
     listed = api.get("/api/v1/jobs").json()["items"]
     assert [j["created_at"] for j in listed] == [job["created_at"]]
     done, running, _ = (r["id"] for r in job["runs"])
-    b = {"n": 3, "mean": 0.5, "std": 0.1, "min": 0.25, "max": 0.75}
+    b = stats(0.5, 0.1, 3, min=0.25, max=0.75)
     with session_scope(api.url) as s:
         mark_run_started(s, running).progress = {"t": 12.5, "coverage": 0.25, "pose": [1, 2, 0]}
         mark_run_started(s, done)
         store_run_result(
-            s, done, summary={"outcome": "completed", "coverage": 0.875,
-                              "relations": {"B": {"translation": b, "rotation": b}}},
+            s, done, summary=make_summary(outcome="completed", reason=None, coverage=0.875,
+                                          stop="no_frontier", relations={"B": relation(b)}),
             t=np.zeros(2), pose_gt=np.zeros((2, 3)), pose_est=np.zeros((2, 3)),
             map_ros=np.zeros((2, 2), np.int8), map_resolution=0.05, map_origin=(0, 0),
             report_dir=None,

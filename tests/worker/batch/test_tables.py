@@ -6,6 +6,7 @@ import csv
 
 import pytest
 
+from tests.summaries import make_summary
 from worker.batch.experiment import RunSpec
 from worker.batch.results import write_results
 from worker.batch.state import BatchDir, record_of
@@ -25,11 +26,11 @@ def _rec(world, seed, outcome="completed", reason=None, t=(0.5, 0.2, 0.0, 2.0, 1
         return record_of(spec, summary=None, error=error)
     rel = {"translation": _stats(*t), "rotation": _stats(*r), "skipped": 0}
     a = {"translation": _stats(0.01, 0, 0, 0.1, 50), "rotation": _stats(0.001, 0, 0, 0.01, 50)}
-    summary = {
-        "outcome": outcome, "reason": reason, "coverage": 0.9, "path_length_m": 10.0,
-        "relations": {"B": rel, "A": {**a, "skipped": 0}}, "ate": None,
-        "timings": {"sim_time_s": 100.0, "wall_time_s": 10.0, "real_time_factor": 10.0},
-    }  # fmt: skip
+    summary = make_summary(
+        outcome=outcome, reason=reason, stop=reason or "no_frontier", coverage=0.9,
+        path_length_m=10.0, relations={"B": rel, "A": {**a, "skipped": 0}}, ate=None,
+        timings={"sim_time_s": 100.0, "wall_time_s": 10.0, "real_time_factor": 10.0},
+    )  # fmt: skip
     return record_of(spec, summary=summary)
 
 

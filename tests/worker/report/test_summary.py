@@ -1,0 +1,111 @@
+"""The typed run summary: summary.json byte for byte as the json module wrote it, old files load."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import get_args
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from tests.summaries import EXAMPLE, make_summary, relation, stats, summary_doc
+from worker.report.folder import SUMMARY, write_report
+from worker.report.summary import SCHEMA_VERSION, RunSummary, summary_json_schema
+
+
+def _dumps(doc: dict) -> str:
+    """How summary.json was written before it was typed (json.dumps of the dict)."""
+    return json.dumps(doc, indent=2) + "\n"
+
+
+def test_a_summary_json_of_the_untyped_code_reads_back_to_the_same_bytes():
+    # examples/office_a/summary.json was written by the code before the model existed
+    text = EXAMPLE.read_text()
+    s = RunSummary.model_validate_json(text)
+    assert s.to_json_text() == text
+    assert s.schema_version == SCHEMA_VERSION == 1  # no key in the file: version 1
+    assert s.relations["SM"].rotation.min == 6.522917410656248e-07  # float formatting kept
+    assert s.timings.slam_wall_s == 52.23980639000547 and s.collision is None
+
+
+def test_a_summary_from_before_the_stages_were_timed_apart_still_loads():
+    doc = summary_doc()
+    for key in ("simulation_wall_s", "slam_wall_s"):
+        del doc["timings"][key]
+    s = RunSummary.load(doc)
+    assert s is not None and s.timings.slam_wall_s is None
+    assert s.timings.wall_time_s == 68.72248093200051
+
+
+def test_nothing_stored_is_no_summary_and_a_wrong_one_is_refused():
+    assert RunSummary.load(None) is None and RunSummary.load({}) is None
+    with pytest.raises(ValidationError, match="schema_version"):
+        RunSummary.load(summary_doc(schema_version=2))
+    with pytest.raises(ValidationError, match="extra"):
+        RunSummary.load(summary_doc(flavour="vanilla"))
+    with pytest.raises(ValidationError, match="outcome"):
+        RunSummary.load(summary_doc(outcome="maybe"))
+    doc = summary_doc()
+    del doc["goals"]["total"]
+    with pytest.raises(ValidationError, match="goals.total"):
+        RunSummary.load(doc)
+
+
+def test_relation_is_none_for_a_kind_not_evaluated_or_with_no_relation():
+    s = make_summary(relations={"A": relation(stats(0.5, n=3)), "B": relation(stats(None, n=0))})
+    assert s.relation("B") is None and s.relation("SM") is None
+    assert s.relation("A").translation.mean == 0.5
+
+
+def test_the_outcomes_and_reasons_are_the_exploration_loops():
+    from worker.explore import loop
+    from worker.report import summary
+
+    assert get_args(summary.Outcome) == get_args(loop.Outcome)
+    assert get_args(summary.Reason) == get_args(loop.Reason)
+
+
+def test_the_module_imports_neither_numpy_nor_numba():
+    code = "import sys, worker.report.summary; print(sorted({'numpy', 'numba'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_json_schema_names_every_field_and_versions_default_to_1():
+    schema = summary_json_schema()
+    assert schema["properties"]["schema_version"]["default"] == 1
+    assert "schema_version" not in schema["required"]
+    assert set(schema["required"]) == set(json.loads(EXAMPLE.read_text()))
+    timings = schema["$defs"]["Timings"]
+    assert "slam_wall_s" not in timings["required"] and "wall_time_s" in timings["required"]
+
+
+def _two_rooms():
+    from worker.world.world import World
+
+    occ = np.zeros((120, 200), bool)
+    occ[[0, -1], :] = True
+    occ[:, [0, -1]] = True
+    occ[:, 100] = True
+    occ[50:70, 100] = False
+    occ[60, 30:60] = True
+    return World.from_array(occ, 0.05, name="two_rooms")
+
+
+def test_a_fresh_runs_summary_json_is_what_json_dumps_writes_of_it(tmp_path):
+    from worker.pipeline import RunParams, run_one
+
+    params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 20.0}})
+    result = run_one(_two_rooms(), params, seed=4)
+    write_report(result, tmp_path)
+    text = (tmp_path / SUMMARY).read_text()
+    doc = json.loads(text)
+    # the old writer's bytes: same keys in the same order, the json module's float formatting
+    assert _dumps(doc) == text
+    assert list(doc) == list(json.loads(EXAMPLE.read_text()))
+    assert list(doc["timings"])[-2:] == ["simulation_wall_s", "slam_wall_s"]
+    assert doc["params"] == params.to_json() and doc["seed"] == 4
+    assert RunSummary.model_validate_json(text) == result.summary
