@@ -72,7 +72,7 @@ def test_each_run_is_stored_by_its_worker_process_and_recorded_as_stored(setup):
             run, rec = s.get_one(Run, db.run_ids[spec.key]), records[spec.key]
             assert (run.status, run.attempts, run.seed) == ("done", 1, spec.seed)
             assert run.report_dir == rec["report_dir"] == str(bdir.run_dir(spec.key).resolve())
-            assert rec["summary"] == run.summary and rec["run_id"] == run.id
+            assert rec["summary"].to_dict() == run.summary and rec["run_id"] == run.id
             assert [e.to_status for e in history(s, run.id)] == ["running", "done"]
             files = {p.name for p in bdir.run_dir(spec.key).iterdir()}
             assert {"summary.json", "relations_B.txt", "est.tum"} <= files
@@ -110,5 +110,8 @@ def test_a_run_stored_before_its_record_was_written_is_not_run_again(setup):
         run = s.get_one(Run, db.run_ids["rooms-s1"])
         assert (run.status, run.attempts) == ("done", 1)  # stored once
         assert [e.to_status for e in history(s, run.id)] == ["running", "done"]
-    assert rec["status"] == "done" and rec["summary"]["relations"] == run.summary["relations"]
+    assert (
+        rec["status"] == "done"
+        and rec["summary"].to_dict()["relations"] == run.summary["relations"]
+    )
     assert (bdir.run_dir("rooms-s1") / "summary.json").is_file()  # its files written again

@@ -177,7 +177,7 @@ def test_a_callers_own_folder_gets_the_same_files_as_a_workers_run(pg_url, tmp_p
     with session_scope(pg_url) as s:
         run = s.get_one(Run, own_run)
         assert (run.status, run.report_dir, run.progress) == ("done", str(own.resolve()), {})
-        assert run.summary["relations"] == outcome.summary["relations"]
+        assert run.summary["relations"] == outcome.summary.to_dict()["relations"]
 
 
 def _interrupt(_progress) -> None:

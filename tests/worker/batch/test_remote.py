@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from tests.summaries import summary_doc
 from worker.batch import remote
 from worker.batch.experiment import RunSpec
 from worker.batch.remote import RunState, record_from_run, run_celery
@@ -44,7 +45,7 @@ class FakeQueue:
         out = []
         for i in run_ids:
             st = self.status[i]
-            summary = {"outcome": "completed"} if st == "done" else None
+            summary = summary_doc(outcome="completed") if st == "done" else None
             progress = {"t": 5.0, "coverage": 0.5} if st == "running" else {}
             error = "boom" if st == "failed" else None
             out.append(RunState(i, st, summary, error, f"/runs/{i}", progress))
@@ -93,5 +94,5 @@ def test_a_run_still_queued_or_running_has_no_record_yet():
     spec = _spec(1)
     for status in ("queued", "running"):
         assert record_from_run(spec, RunState(1, status), {}) is None
-    done = record_from_run(spec, RunState(1, "done", {"outcome": "failed"}, None, "/r"), {})
+    done = record_from_run(spec, RunState(1, "done", summary_doc(outcome="failed"), None, "/r"), {})
     assert done is not None and (done["status"], done["report_dir"]) == ("done", "/r")

@@ -63,8 +63,9 @@ def test_relation_is_none_for_a_kind_not_evaluated_or_with_no_relation():
 def test_the_outcomes_and_reasons_are_the_exploration_loops():
     from worker.explore import loop
     from worker.report import summary
+    from worker.status import RunOutcome
 
-    assert get_args(summary.Outcome) == get_args(loop.Outcome)
+    assert get_args(summary.Outcome) == tuple(o.value for o in RunOutcome)
     assert get_args(summary.Reason) == get_args(loop.Reason)
 
 
