@@ -257,6 +257,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     # The footprint's front edge 1 cm into the cell of a wall the scans and the map both hold
     # (the cells are 5 cm): every motion "collides" at the start pose; the way out backs off.
     from worker.explore.navigator import Navigator
+    from worker.explore.recovery import unwedge
 
     p = ExploreParams()
     angles = np.linspace(-2.35, 2.35, 541)
@@ -265,7 +266,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     face = np.column_stack((np.full(21, 2.0), np.linspace(1.0, 2.0, 21)))
     nav.local.add_points(0.0, face)
     pose = np.array([1.81, 1.5, 0.0])  # front edge at x = 2.01
-    v, w = nav._unwedge(pose)
+    v, w = unwedge(p, nav.local, nav.costmap, pose)
     assert v < 0
     # independent check: one second of it leaves the 0.4 m square clear of the face by more
     x, y, th = 1.81, 1.5, 0.0
@@ -275,13 +276,16 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     u = np.abs((face[:, 0] - x) * c + (face[:, 1] - y) * s) - 0.2
     q = np.abs(-(face[:, 0] - x) * s + (face[:, 1] - y) * c) - 0.2
     assert np.min(np.hypot(np.maximum(u, 0), np.maximum(q, 0))) > 0.05
-    assert nav._unwedge(np.array([1.5, 1.5, 0.0])) is None  # clear of it: nothing to do
+    assert (
+        unwedge(p, nav.local, nav.costmap, np.array([1.5, 1.5, 0.0])) is None
+    )  # clear of it: nothing to do
 
 
 def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     # office_b_furnitures: a table edge under the footprint's right side, a chair 6 cm ahead;
     # no turn is legal and backing off leaves the side gap as it is, but gets the robot out
     from worker.explore.navigator import Navigator
+    from worker.explore.recovery import unwedge
 
     p = ExploreParams()
     nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
@@ -291,7 +295,7 @@ def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     ahead = np.column_stack((np.full(11, 1.86), np.linspace(1.35, 1.65, 11)))
     pts = np.concatenate([side, ahead])
     nav.local.add_points(0.0, pts)
-    v, w = nav._unwedge(np.array([1.6, 1.5, 0.0]))
+    v, w = unwedge(p, nav.local, nav.costmap, np.array([1.6, 1.5, 0.0]))
     assert v < 0
     # independent check: a second of it takes the 0.4 m square no nearer any obstacle point
     x, y, th = 1.6, 1.5, 0.0
