@@ -6,7 +6,7 @@ import numpy as np
 
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
 from worker.explore.dwa import Command, DwaPlanner
-from worker.explore.frontiers import FrontierSearch
+from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.nav_state import (
     FrontierMemory,
     GoalRecord,
@@ -59,8 +59,8 @@ class Navigator:
         self._beams_box: tuple[float, float, float, float] | None = None
 
     @property
-    def goal(self):
-        """The frontier goal pursued (worker.explore.frontiers.FrontierGoal), or None."""
+    def goal(self) -> FrontierGoal | None:
+        """The frontier goal pursued, or None."""
         return None if self.pursuit is None else self.pursuit.goal
 
     @property

@@ -14,6 +14,7 @@ from worker.explore.params import ExploreParams
 # added to the end cost of a motion against the way the robot is already moving: more than
 # any costmap value, so it only decides when nothing else is legal
 _SWITCH_PENALTY = 1000
+_END_POSE_STEPS = 10  # Euler steps of a motion's end pose (_cost_after)
 
 
 class HeadingShim:
@@ -143,7 +144,7 @@ def _carrot(path_xy: np.ndarray, x: float, y: float, lookahead: float) -> tuple[
 
 def _cost_after(pose: np.ndarray, v: float, w: float, duration: float, local: LocalCostmap) -> int:
     """Local costmap value [0, 255] where driving (v, w) for `duration` [s] ends."""
-    x, y, _ = drive(float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, 10)
+    x, y, _ = drive(float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, _END_POSE_STEPS)
     ix = int(math.floor((x - local.origin[0]) / local.resolution))
     iy = int(math.floor((y - local.origin[1]) / local.resolution))
     if not (0 <= ix < local.n and 0 <= iy < local.n):
