@@ -9,6 +9,7 @@ import pytest
 
 from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
+from worker.explore import local_kernels as lk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
 from worker.explore.params import ExploreParams
 
@@ -136,9 +137,9 @@ def test_growing_cropped_map_keeps_one_frame_and_matches_a_fresh_costmap():
 def _single_obstacle_layers(cx, cy, n=40):
     """Local layers of a window (origin 0, 0) with one obstacle cell (cx, cy)."""
     pts = np.array([[(cx + 0.5) * RES, (cy + 0.5) * RES]])
-    lethal, near, inner, _ = ck.local_layers(
+    lethal, near, inner, _ = lk.local_layers(
         pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
-        ck.disc_half_widths(5 * math.sqrt(2) + 0.01), ck.disc_half_widths(4.0),
+        lk.disc_half_widths(5 * math.sqrt(2) + 0.01), lk.disc_half_widths(4.0),
         np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), n,
         0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
@@ -239,14 +240,14 @@ def test_local_layers_equal_a_disc_dilation():
     rng = np.random.default_rng(4)
     n, radius = 60, 6.3
     pts = rng.uniform(0.0, n * RES, size=(40, 2))
-    lethal, near, inner, _ = ck.local_layers(
+    lethal, near, inner, _ = lk.local_layers(
         pts[:, 0].copy(), pts[:, 1].copy(), 0.0, 0.0, RES, n,
-        ck.disc_half_widths(radius), ck.disc_half_widths(2.5),
+        lk.disc_half_widths(radius), lk.disc_half_widths(2.5),
         np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), 0,
         0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
     for layer, r in ((near, radius), (inner, 2.5)):
-        off = ck.disc_offsets(r)
+        off = lk.disc_offsets(r)
         R = int(np.abs(off).max())
         disc = np.zeros((2 * R + 1, 2 * R + 1), dtype=bool)
         disc[off[:, 0] + R, off[:, 1] + R] = True
