@@ -38,7 +38,6 @@ _GIVES_UP_AND_BACKS_OUT = "the goal given up: back out along the trail"
 _GOAL_LAYER = {
     _S.DRIVING: "a goal chosen (the frontier search's path is its first plan), or a plan found",
     _S.PLANNING: "the planner found no path to the goal",
-    _S.IDLE: _ENDS_GOAL,
     _S.EXHAUSTED: "no reachable frontier left",
 }
 # (state -> {next state: why}): every change of `Navigator.state`, each for one reason
