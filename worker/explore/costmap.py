@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from worker.explore import costmap_kernels as ck
+from worker.explore import local_kernels as lk
 from worker.explore.params import ExploreParams
 
 _TILE = 8  # [cells] block size of the inflation updates
@@ -165,7 +166,7 @@ class LocalCostmap:
     the DWA scores trajectories against it directly. ROS's local costmap held scan obstacles
     only; ours adds the map's obstacles, so that walls in the laser's blind 90 degrees behind
     the robot still count when it turns. Arrays `(n, n)`, `[iy, ix]`: `lethal`, `near`,
-    `inner` bool (see costmap_kernels.local_layers) and `cost` uint8.
+    `inner` bool (see local_kernels.local_layers) and `cost` uint8.
     """
 
     def __init__(self, params: ExploreParams, resolution: float):
@@ -176,8 +177,8 @@ class LocalCostmap:
         half = (params.footprint_half_m + params.footprint_padding) / res_m
         # A footprint corner reaches half*sqrt(2) from the centre, and both the robot and the
         # obstacle may sit anywhere in their cells: centre cells up to (half + 1) sqrt(2) apart.
-        self._near = ck.disc_half_widths((half + 1.0) * math.sqrt(2.0) + 0.01)
-        self._inner = ck.disc_half_widths(half)
+        self._near = lk.disc_half_widths((half + 1.0) * math.sqrt(2.0) + 0.01)
+        self._inner = lk.disc_half_widths(half)
         # farthest a trajectory takes the footprint from the robot: the map's obstacles
         # matter for the collision test only that near
         reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m
@@ -222,7 +223,7 @@ class LocalCostmap:
     ) -> None:
         """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given);
         with the robot's heading theta, the cells under its footprint are cleared (see
-        costmap_kernels.local_layers; clear_touching: the scan cells it touches too). use_map
+        local_kernels.local_layers; clear_touching: the scan cells it touches too). use_map
         False: the map's obstacles are left out (the thesis's scan-only local costmap)."""
         res = self.resolution
         half = self.n // 2
@@ -237,7 +238,7 @@ class LocalCostmap:
         else:
             g_lethal, g_cost = costmap.lethal, costmap.inflated
             g_oy, g_ox = iy - half, ix - half
-        self.lethal, self.near, self.inner, self.cost = ck.local_layers(
+        self.lethal, self.near, self.inner, self.cost = lk.local_layers(
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
             float(self.origin[0]), float(self.origin[1]), res, self.n,
             self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox), self._reach,

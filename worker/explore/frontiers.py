@@ -136,15 +136,26 @@ class FrontierSearch:
         `avoid` point (goals already reached without the frontier going away). None when no
         frontier can be reached.
         """
-        p = self.params
-        res = costmap.resolution
         sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
             return None
         cells, labels = self.clusters()
+        sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist)
+        if not cell_valid.any():
+            return None
+        found = self._search(costmap, (sx, sy), cells, labels, cell_valid, avoid)
+        if found.size == 0:
+            return None
+        return self._goal(costmap, robot_xy, found, cells, labels, sizes)
+
+    def _valid_cells(
+        self, costmap: GlobalCostmap, cells: np.ndarray, labels: np.ndarray, blacklist
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve."""
+        p = self.params
         is_open = self.open_cells(costmap, cells)
         is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
-        sizes = np.bincount(labels, weights=is_open) * res
+        sizes = np.bincount(labels, weights=is_open) * costmap.resolution
         cell_valid = is_open & (sizes[labels] >= p.min_frontier_size)
         if blacklist:
             # A cluster with a cell near a failed goal is dropped whole: a shifted goal on the
@@ -154,8 +165,13 @@ class FrontierSearch:
             for b in blacklist:
                 near |= np.hypot(xs - b[0], ys - b[1]) <= p.blacklist_radius
             cell_valid &= ~np.isin(labels, labels[near])
-        if not cell_valid.any():
-            return None
+        return sizes, cell_valid
+
+    def _search(self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid):
+        """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
+        robot's cell `start (ix, iy)`: flat indices, nearest first."""
+        p = self.params
+        res = costmap.resolution
         offsets = cells_in_radius(p.goal_radius, res)
         marked = fk.stamp_targets(
             cells, labels, cell_valid, offsets, costmap.inflated, costmap.unknown,
@@ -170,19 +186,23 @@ class FrontierSearch:
                 ok = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
                 self._target[ys[ok], xs[ok]] = False
         try:
-            # Look a little past the first candidate (two goal radii of free travel) so that
-            # the goal can be the lowest-cost cell of that cluster, not its nearest edge.
-            extra = p.neutral_cost * 2.0 * p.goal_radius / res
-            found = self.search.run(costmap, (sx, sy), self._target, p, extra, allow_unknown=False)
+            # Look a little past the first candidate (goal_search_extra goal radii of free
+            # travel) so that the goal can be the lowest-cost cell of that cluster.
+            extra = p.neutral_cost * p.goal_search_extra * p.goal_radius / res
+            found = self.search.run(costmap, start, self._target, p, extra, allow_unknown=False)
             if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
                 found = self.search.run(
-                    costmap, (sx, sy), self._target, p, extra, allow_unknown=False,
+                    costmap, start, self._target, p, extra, allow_unknown=False,
                     escape_m=p.pocket_escape_radius,
                 )  # fmt: skip
         finally:
             self._target[marked[:, 0], marked[:, 1]] = False
-        if found.size == 0:
-            return None
+        return found
+
+    def _goal(self, costmap: GlobalCostmap, robot_xy, found, cells, labels, sizes):
+        """The goal among the cells found for the nearest cluster: the lowest-cost one
+        (nearest on ties) that sees its frontier."""
+        p = self.params
         owners = self._owner.reshape(-1)[found]
         pots = self.search.potential_at(found)
         same = owners == owners[0]
@@ -193,8 +213,9 @@ class FrontierSearch:
         # The goal must see its frontier: a cell near it but behind a door jamb would be
         # "reached" without the robot ever seeing what lies beyond.
         k = fk.first_with_sight(
-            order, cand, members, costmap.lethal, costmap.unknown, costmap.shape[1], 64
-        )
+            order, cand, members, costmap.lethal, costmap.unknown, costmap.shape[1],
+            p.sight_candidates,
+        )  # fmt: skip
         best = order[max(k, 0)]
         gy, gx = divmod(int(cand[best]), costmap.shape[1])
         goal_xy = np.array(costmap.cell_to_world(gx, gy), dtype=float)

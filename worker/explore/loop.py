@@ -6,23 +6,26 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from worker.explore.coverage import align_map_to_world, coverage, reachable_free
 from worker.explore.navigator import GoalRecord, Navigator
 from worker.explore.params import ExploreParams
-from worker.explore.stop_rules import SnapshotRule
+from worker.explore.stop_rules import (
+    LoopState,
+    Outcome,
+    Reason,
+    StopReason,
+    default_rules,
+    first_stop,
+)
 from worker.status import RunOutcome
 
-__all__ = ["ExploreParams", "ExplorationResult", "ExploreProgress", "explore"]
-
-# completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
-# "slam_diverged"
-Reason = Literal[
-    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged"
-]
+__all__ = [
+    "Exploration", "ExploreParams", "ExplorationResult", "ExploreProgress", "Outcome", "Reason",
+    "explore",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -32,7 +35,7 @@ class ExploreProgress:
     t: float  # [s] simulated time
     pose_gt: np.ndarray  # (3,) [x, y, theta] world frame
     pose_est: np.ndarray  # (3,) [x, y, theta] SLAM map frame
-    coverage: float  # [0, 1] at the last coverage estimate (every snapshot or 10 s)
+    coverage: float  # [0, 1] at the last coverage estimate (every coverage_period)
     goals_reached: int
     status: str  # what the navigation stack is doing
     # For live viewers (all in the SLAM map frame; None when there is none):
@@ -104,12 +107,123 @@ def _odom_velocity(prev: np.ndarray | None, cur: np.ndarray, dt: float) -> tuple
     return forward / dt, dth / dt
 
 
-def _pose_error(T0: np.ndarray, pose_est: np.ndarray, pose_gt: np.ndarray) -> float:
-    """[m] distance between the ground truth and the estimate mapped by T0 into the world."""
-    c, s = math.cos(T0[2]), math.sin(T0[2])
-    x = T0[0] + c * pose_est[0] - s * pose_est[1]
-    y = T0[1] + s * pose_est[0] + c * pose_est[1]
-    return math.hypot(x - pose_gt[0], y - pose_gt[1])
+class Exploration:
+    """One closed-loop exploration, one control period per `step` (what `explore` runs)."""
+
+    def __init__(self, world, sim, slam, p: ExploreParams, oracle: bool, on_progress):
+        self.wall0 = time.perf_counter()
+        self.world, self.sim, self.slam, self.p = world, sim, slam, p
+        self.oracle = oracle
+        self.on_progress = on_progress
+        laser = sim.params.laser
+        self.dt = sim.params.dt
+        self.nav = Navigator(p, laser.angles, laser.range_max)
+        start = np.asarray(sim.pose_gt, dtype=float)
+        start_cell = (
+            int(math.floor((start[0] - world.origin[0]) / world.resolution)),
+            int(math.floor((start[1] - world.origin[1]) / world.resolution)),
+        )
+        self.reach = reachable_free(world.occ, world.resolution, start_cell, p.footprint_half_m)
+        self.rec = _Recorder()
+        self.n_collisions0 = len(sim.collisions)
+        self.rules = default_rules(p, start, self.n_collisions0)
+        self.prev_odom: np.ndarray | None = None
+        self.last_map_t = -math.inf  # [s] the last costmap update
+        self.last_full_t = 0.0  # [s] the last whole-map re-read
+        self.last_cov = 0.0
+        self.next_progress = 0.0  # [s]
+
+    def step(self) -> StopReason | None:
+        """Sense, map, navigate, check the stop rules, report; drive on unless one fired."""
+        sim, slam = self.sim, self.slam
+        t = sim.t
+        pose_gt = sim.pose_gt
+        pose_odom = sim.pose_odom
+        ranges = sim.scan()
+        updated = slam.process(t, pose_gt if self.oracle else pose_odom, ranges)
+        pose_est = np.asarray(slam.pose_estimate(), dtype=float)
+        nav_s, cpu_s = self._feed_map(t, updated)
+        v0, w0 = _odom_velocity(self.prev_odom, pose_odom, self.dt)
+        self.prev_odom = pose_odom
+        c0, u0 = time.perf_counter(), time.thread_time()
+        cmd = self.nav.step(t, pose_est, v0, w0, ranges)
+        nav_s += time.perf_counter() - c0
+        cpu_s += time.thread_time() - u0
+        self.rec.add(t, pose_gt, pose_est, nav_s, cpu_s)
+        failures = self.nav.stats.consecutive_failures
+        state = LoopState(
+            t, self.dt, pose_gt, pose_est, cmd.status, failures, sim.collisions, slam.occupancy
+        )
+        stop = first_stop(self.rules, state)
+        if self.on_progress is not None and t >= self.next_progress - 1e-9:
+            self._progress(t, pose_gt, pose_est, cmd.status, ranges)
+        if stop is None:
+            sim.step(cmd.v, cmd.w)
+        return stop
+
+    def _feed_map(self, t: float, updated: bool) -> tuple[float, float]:
+        """Give the navigator the SLAM map at global_costmap_rate (whole every
+        full_map_check_period); its (wall, CPU) time [s]."""
+        p = self.p
+        nav_s = cpu_s = 0.0
+        if updated and t - self.last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:
+            grid = self.slam.occupancy()
+            full = t - self.last_full_t >= p.full_map_check_period
+            c0, u0 = time.perf_counter(), time.thread_time()
+            self.nav.update_map(grid.prob, grid.resolution, grid.origin, full)
+            nav_s += time.perf_counter() - c0
+            cpu_s += time.thread_time() - u0
+            self.last_map_t = t
+            if full:
+                self.last_full_t = t
+        return nav_s, cpu_s
+
+    def _progress(self, t: float, pose_gt, pose_est, status: str, ranges) -> None:
+        """on_progress, with the coverage refreshed every coverage_period."""
+        p, nav = self.p, self.nav
+        self.next_progress += p.progress_period
+        if int(round(t / self.dt)) % max(1, int(round(p.coverage_period / self.dt))) == 0:
+            self.last_cov = _coverage(self.world, self.reach, self.slam, self.rec)
+        done = sum(g.status in ("reached", "explored") for g in nav.stats.goals)
+        goal = None if nav.goal is None else np.asarray(nav.goal.goal_xy, dtype=float)
+        live = (goal, nav.path, ranges, self.slam.occupancy)
+        self.on_progress(ExploreProgress(t, pose_gt, pose_est, self.last_cov, done, status, *live))
+
+    def result(self, stop: StopReason) -> ExplorationResult:
+        """The run, ended by `stop`: its recording, final map, coverage and counters."""
+        world, sim, nav, rec = self.world, self.sim, self.nav, self.rec
+        grid = self.slam.occupancy()
+        pose_gt = rec.buf[: rec.n, 1:4].copy()
+        pose_est = rec.buf[: rec.n, 4:7].copy()
+        T = align_map_to_world(pose_est, pose_gt)
+        cov = coverage(
+            self.reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
+            grid.occ_thresh, T,
+        )  # fmt: skip
+        n0 = self.n_collisions0
+        col = sim.collisions[n0] if len(sim.collisions) > n0 else None
+        goals = tuple(nav.stats.goals)
+        return ExplorationResult(
+            outcome=stop.outcome,
+            reason=stop.reason,
+            stop_detail=stop.detail,
+            t=rec.buf[: rec.n, 0].copy(),
+            pose_gt=pose_gt,
+            pose_est=pose_est,
+            path_length_m=float(np.sum(np.hypot(*np.diff(pose_gt[:, :2], axis=0).T))),
+            coverage=float(cov),
+            collision=None if col is None else (col.t, col.x, col.y, col.theta),
+            final_map=grid,
+            goals=goals,
+            goals_reached=sum(g.status in ("reached", "explored") for g in goals),
+            goals_failed=sum(g.status == "failed" for g in goals),
+            safety_triggers=nav.safety.n_triggers,
+            recoveries=nav.stats.recoveries,
+            T_world_map=T,
+            nav_wall_s=rec.nav[: rec.n].copy(),
+            nav_cpu_s=rec.cpu[: rec.n].copy(),
+            wall_s=time.perf_counter() - self.wall0,
+        )
 
 
 def explore(
@@ -127,102 +241,13 @@ def explore(
     worker.sim.simulator.Simulator at its start; slam: a worker.slam SlamAlgorithm, fresh.
     oracle: feed the ground-truth pose to SLAM instead of odometry (use the "odometry"
     algorithm: perfect map and pose), which separates navigation failures from SLAM failures.
+    The stop rules (stop_rules.default_rules) are asked in order after every control period.
     """
-    p = params or ExploreParams()
-    wall0 = time.perf_counter()
-    laser = sim.params.laser
-    dt = sim.params.dt
-    nav = Navigator(p, laser.angles, laser.range_max)
-    snapshots = SnapshotRule(p.snapshot_period, p.snapshot_mse)
-    start = np.asarray(sim.pose_gt, dtype=float)
-    start_cell = (
-        int(math.floor((start[0] - world.origin[0]) / world.resolution)),
-        int(math.floor((start[1] - world.origin[1]) / world.resolution)),
-    )
-    reach = reachable_free(world.occ, world.resolution, start_cell, p.footprint_half_m)
-    rec = _Recorder()
-    n_collisions0 = len(sim.collisions)
-    T0 = None
-    prev_odom = None
-    last_map_t = -math.inf
-    last_full_t = 0.0
-    no_frontier_since: float | None = None
-    last_cov = 0.0
-    next_progress = 0.0
-    moved_ref, moved_t = start[:2].copy(), 0.0
-    reason: Reason | None = None
-    detail = ""
-    status = "planning"
-    while reason is None:
-        t = sim.t
-        pose_gt = sim.pose_gt
-        pose_odom = sim.pose_odom
-        ranges = sim.scan()
-        updated = slam.process(t, pose_gt if oracle else pose_odom, ranges)
-        pose_est = np.asarray(slam.pose_estimate(), dtype=float)
-        if T0 is None:
-            T0 = align_map_to_world(pose_est[None, :], pose_gt[None, :])
-        nav_s = cpu_s = 0.0
-        if updated and t - last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:
-            grid = slam.occupancy()
-            full = t - last_full_t >= p.full_map_check_period
-            c0, u0 = time.perf_counter(), time.thread_time()
-            nav.update_map(grid.prob, grid.resolution, grid.origin, full)
-            nav_s += time.perf_counter() - c0
-            cpu_s += time.thread_time() - u0
-            last_map_t = t
-            if full:
-                last_full_t = t
-        v0, w0 = _odom_velocity(prev_odom, pose_odom, dt)
-        prev_odom = pose_odom
-        c0, u0 = time.perf_counter(), time.thread_time()
-        cmd = nav.step(t, pose_est, v0, w0, ranges)
-        nav_s += time.perf_counter() - c0
-        cpu_s += time.thread_time() - u0
-        status = cmd.status
-        rec.add(t, pose_gt, pose_est, nav_s, cpu_s)
-        # --- outcome checks: the harness may look at the ground truth, the robot may not ---
-        if cmd.status == "no_frontier":
-            # for a whole second: a transient gap in the map must not end the run
-            if no_frontier_since is None:
-                no_frontier_since = t
-            elif t - no_frontier_since >= 1.0 - 1e-9:
-                reason, detail = "no_frontier", "no reachable frontier left"
-        else:
-            no_frontier_since = None
-        if len(sim.collisions) > n_collisions0:
-            c = sim.collisions[n_collisions0]
-            reason = "collision"
-            detail = f"hit an obstacle at t={c.t:.1f} s, ({c.x:.2f}, {c.y:.2f})"
-        elif _pose_error(T0, pose_est, pose_gt) > p.slam_divergence:
-            reason = "slam_diverged"
-            detail = f"SLAM pose more than {p.slam_divergence:g} m off at t={t:.1f} s"
-        elif nav.stats.consecutive_failures >= p.max_goal_failures:
-            reason, detail = "stuck", f"{p.max_goal_failures} goals given up in a row"
-        if np.hypot(*(pose_gt[:2] - moved_ref)) > 0.5:
-            moved_ref, moved_t = pose_gt[:2].copy(), t
-        elif reason is None and t - moved_t >= p.stuck_timeout:
-            reason, detail = "stuck", f"moved less than 0.5 m in {p.stuck_timeout:g} s"
-        if reason is None and snapshots.due(t):
-            grid = slam.occupancy()
-            if snapshots.check(t, grid.prob, grid.origin, grid.resolution, grid.occ_thresh):
-                reason = "map_unchanged"
-                detail = (
-                    f"map snapshots {p.snapshot_period:g} s apart: MSE {snapshots.last_mse:.2f}"
-                )
-        if reason is None and t + dt > p.time_limit + 1e-9:
-            reason, detail = "time_limit", f"time limit {p.time_limit:g} s reached"
-        if on_progress is not None and t >= next_progress - 1e-9:
-            next_progress += p.progress_period
-            if int(round(t / dt)) % int(round(10.0 / dt)) == 0:
-                last_cov = _coverage(world, reach, slam, rec)
-            done = sum(g.status in ("reached", "explored") for g in nav.stats.goals)
-            goal = None if nav.goal is None else np.asarray(nav.goal.goal_xy, dtype=float)
-            live = (goal, nav.path, ranges, slam.occupancy)
-            on_progress(ExploreProgress(t, pose_gt, pose_est, last_cov, done, status, *live))
-        if reason is None:
-            sim.step(cmd.v, cmd.w)
-    return _result(world, sim, slam, nav, rec, reach, reason, detail, n_collisions0, wall0)
+    run = Exploration(world, sim, slam, params or ExploreParams(), oracle, on_progress)
+    stop = None
+    while stop is None:
+        stop = run.step()
+    return run.result(stop)
 
 
 def _coverage(world, reach, slam, rec: _Recorder) -> float:
@@ -232,39 +257,3 @@ def _coverage(world, reach, slam, rec: _Recorder) -> float:
         reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
         grid.occ_thresh, T,
     )  # fmt: skip
-
-
-def _result(world, sim, slam, nav, rec, reach, reason, detail, n_col0, wall0):
-    grid = slam.occupancy()
-    pose_gt = rec.buf[: rec.n, 1:4].copy()
-    pose_est = rec.buf[: rec.n, 4:7].copy()
-    T = align_map_to_world(pose_est, pose_gt)
-    cov = coverage(
-        reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
-        grid.occ_thresh, T,
-    )  # fmt: skip
-    col = sim.collisions[n_col0] if len(sim.collisions) > n_col0 else None
-    goals = tuple(nav.stats.goals)
-    return ExplorationResult(
-        outcome=RunOutcome.COMPLETED
-        if reason in ("no_frontier", "map_unchanged")
-        else RunOutcome.FAILED,
-        reason=reason,
-        stop_detail=detail,
-        t=rec.buf[: rec.n, 0].copy(),
-        pose_gt=pose_gt,
-        pose_est=pose_est,
-        path_length_m=float(np.sum(np.hypot(*np.diff(pose_gt[:, :2], axis=0).T))),
-        coverage=float(cov),
-        collision=None if col is None else (col.t, col.x, col.y, col.theta),
-        final_map=grid,
-        goals=goals,
-        goals_reached=sum(g.status in ("reached", "explored") for g in goals),
-        goals_failed=sum(g.status == "failed" for g in goals),
-        safety_triggers=nav.safety.n_triggers,
-        recoveries=nav.stats.recoveries,
-        T_world_map=T,
-        nav_wall_s=rec.nav[: rec.n].copy(),
-        nav_cpu_s=rec.cpu[: rec.n].copy(),
-        wall_s=time.perf_counter() - wall0,
-    )

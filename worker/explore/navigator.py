@@ -2,61 +2,35 @@
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
-from worker.explore import costmap_kernels as ck
-from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
-from worker.explore.dwa import Command, DwaPlanner, drive
+from worker.explore.dwa import Command, DwaPlanner
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
+from worker.explore.nav_state import (
+    FrontierMemory,
+    GoalRecord,
+    NavCommand,
+    NavState,
+    NavStats,
+    Pursuit,
+    Retrace,
+)
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, path_length
+from worker.explore.recovery import Trail, back_out, safe_override, unwedge
 from worker.explore.safety import SafetyController
 from worker.explore.shim import HeadingShim
 
-
-@dataclass(frozen=True)
-class GoalRecord:
-    """One exploration goal and how it ended (map frame)."""
-
-    t_start: float  # [s]
-    t_end: float  # [s]
-    x: float  # [m]
-    y: float  # [m]
-    # "reached" (arrived and turned to the frontier), "explored" (its frontier vanished on
-    # the way), "failed" (no plan, no legal command or no progress for too long), "replaced"
-    # (a nearer frontier came up), "dropped" (no frontier reachable any more)
-    status: str
-    detail: str = ""
-
-
-@dataclass(frozen=True)
-class NavCommand:
-    """The velocity to send and what the stack is doing."""
-
-    v: float  # [m/s]
-    w: float  # [rad/s]
-    status: str  # "driving", "aligning", "safety", "recovering", "planning", "no_frontier"
-
-
-@dataclass
-class NavStats:
-    """Counters of one run."""
-
-    goals: list[GoalRecord] = field(default_factory=list)
-    recoveries: int = 0  # local costmap clearings + replans after the controller failed
-    plan_failures: int = 0
-    consecutive_failures: int = 0  # given-up goals since the last success
+__all__ = ["GoalRecord", "NavCommand", "NavState", "NavStats", "Navigator"]
 
 
 class Navigator:
     """Chooses frontier goals, plans, follows the plan with the DWA, recovers, stays safe.
 
     Fed only with the SLAM map (`update_map`) and the SLAM pose plus the latest scan (`step`).
+    `state` says what it is doing (nav_state.TRANSITIONS: how and why that changes); the
+    goal pursued is `pursuit`, a back-out under way `retrace`.
     """
 
     def __init__(self, params: ExploreParams, angles: np.ndarray, range_max: float):
@@ -71,27 +45,28 @@ class Navigator:
         self.safety = SafetyController(params, self.angles, self.range_max)
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
-        self.blacklist: list[np.ndarray] = []
-        # (frontier, goal) of goals reached whose frontier did not vanish
-        self._arrived_at: list[tuple[np.ndarray, np.ndarray]] = []
-        self._blacklist_retries = params.blacklist_retries
-        self.goal: FrontierGoal | None = None
-        self.path: np.ndarray | None = None
-        self._goal_t0 = 0.0
-        self._next_choice_t = 0.0
-        self._next_plan_t = 0.0
-        self._plan_fail_since: float | None = None
-        self._ctrl_fail_since: float | None = None
+        self.state = NavState.WAITING
+        self.pursuit: Pursuit | None = None
+        self.retrace: Retrace | None = None
+        self.memory = FrontierMemory(params.blacklist_retries)
+        self.trail = Trail(params)
+        self._next_choice_t = 0.0  # [s] when to choose the frontier again
+        # the local costmap was cleared since the DWA last found a legal command (any goal)
         self._recovered = False
-        self._best_gap = math.inf
-        self._progress_t = 0.0
         self._frontier_changed = False
         self._map_updated = False
-        self._half_fov = float(np.max(np.abs(self.angles))) - 0.05  # [rad]
+        self._half_fov = float(np.max(np.abs(self.angles))) - params.look_fov_margin  # [rad]
         self._beams_box: tuple[float, float, float, float] | None = None
-        self._trail: list[np.ndarray] = []  # (2,) positions 5 cm apart, newest last
-        self._retrace_to: np.ndarray | None = None
-        self._retrace_until = 0.0
+
+    @property
+    def goal(self) -> FrontierGoal | None:
+        """The frontier goal pursued, or None."""
+        return None if self.pursuit is None else self.pursuit.goal
+
+    @property
+    def path(self) -> np.ndarray | None:
+        """`(K, 2) [x, y]` the plan being followed, or None."""
+        return None if self.pursuit is None else self.pursuit.path
 
     # --- map ---
     def update_map(self, prob, resolution: float, origin, full: bool) -> None:
@@ -110,47 +85,89 @@ class Navigator:
         self._map_updated = True
         if self.local is None:
             self.local = LocalCostmap(self.params, resolution)
+            self._enter(NavState.IDLE)
 
     # --- control ---
     def step(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
         """One control period: the command for pose `(3,)` [x, y, theta] (map frame)."""
-        p = self.params
         self._grow_beams_box(pose, ranges)
-        if self.local is None:
+        if self.state is NavState.WAITING:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
         self.local.build(pose[0], pose[1], self.costmap, pose[2])
-        self._grow_trail(pose)
+        self.trail.grow(pose)
         if self._map_updated:
             self._map_updated = False
             self.frontiers.observe(self.costmap, pose, self._half_fov)
-        if self.safety.active(t):
-            return NavCommand(
-                *self._safe_override(pose, self.safety.check(t, ranges, 0.0), v0, w0), "safety"
-            )
-        if self._retrace_to is not None:
+        if self.state is NavState.SAFETY:
+            if self.safety.active(t):
+                vw = safe_override(
+                    self.params, self.local, self.dwa, pose, self.safety.check(t, ranges, 0.0),
+                    v0, w0,
+                )  # fmt: skip
+                return NavCommand(*vw, "safety")
+            self._enter(NavState.DRIVING)
+        if self.state is NavState.RETRACING:
             vw = self._retrace(t, pose)
             if vw is not None:
                 return NavCommand(vw[0], vw[1], "recovering")
+        return self._pursue(t, pose, v0, w0, ranges)
+
+    def _pursue(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
+        """The goal layer: end a goal whose frontier vanished, re-choose the frontier when
+        due, replan when due, then drive along the plan."""
         self._check_goal_still_open(t)
-        if self.goal is None or t >= self._next_choice_t:
+        if self.pursuit is None or t >= self._next_choice_t:
             self._choose(t, pose)
-            if self.goal is None:
+            if self.pursuit is None:
                 return NavCommand(0.0, 0.0, "no_frontier")
-        if self.path is None or t >= self._next_plan_t:
+        g = self.pursuit
+        if g.path is None or t >= g.next_plan_t:
             self._plan(t, pose)
-        if self.path is None:
-            if t - self._plan_fail_since >= p.planner_patience:
+        if g.path is None:
+            if t - g.plan_fail_since >= self.params.planner_patience:
                 self._give_up(t, "no plan")
             return NavCommand(0.0, 0.0, "planning")
-        shim = self.shim.command(pose, w0, self.path, self.local)
+        return self._drive(t, pose, v0, w0, ranges)
+
+    def _drive(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
+        """Follow the plan: the heading shim when it lies behind, else the DWA; the safety
+        controller has the last word."""
+        g = self.pursuit
+        shim = self.shim.command(pose, w0, g.path, self.local)
         if shim is not None:
-            self._ctrl_fail_since = None
+            self._command_found()
             if self._no_progress(t, pose):
                 self._give_up(t, "no progress")
                 return NavCommand(0.0, 0.0, "recovering")
             status = "aligning" if shim[2] == "rotate" else "recovering"
             return NavCommand(shim[0], shim[1], status)
+        cmd = self._dwa_command(pose, v0, w0)
+        if cmd.kind == "aligned":
+            self._finish(t, "reached")
+            return NavCommand(0.0, 0.0, "aligning")
+        if not cmd.legal:
+            vw = unwedge(self.params, self.local, self.costmap, pose)
+            if vw is not None:
+                self._enter(NavState.ESCAPING)
+                return NavCommand(vw[0], vw[1], "recovering")
+            return self._controller_failed(t)
+        self._command_found()
+        self._recovered = False
+        if self._no_progress(t, pose):
+            self._give_up(t, "no progress")
+            return NavCommand(0.0, 0.0, "recovering")
+        override = self.safety.check(t, ranges, cmd.v)
+        if override is not None:
+            self._enter(NavState.SAFETY)
+            vw = safe_override(
+                self.params, self.local, self.dwa, pose, override, v0, w0, (cmd.v, cmd.w)
+            )
+            return NavCommand(*vw, "safety")
+        return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+
+    def _dwa_command(self, pose: np.ndarray, v0: float, w0: float) -> Command:
+        """The DWA's command; with nothing legal, its command on the scans alone."""
         # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
         # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
         cmd = self.dwa.command(pose, v0, w0, self.local, None)
@@ -162,88 +179,28 @@ class Navigator:
             if cmd.kind in ("escape", "rotate"):
                 # not blind: backing up or turning sweeps what the laser does not see
                 cmd = Command(0.0, 0.0, False, "none")
-        if cmd.kind == "aligned":
-            self._finish(t, "reached")
-            return NavCommand(0.0, 0.0, "aligning")
-        if not cmd.legal:
-            vw = self._unwedge(pose)
-            if vw is not None:
-                return NavCommand(vw[0], vw[1], "recovering")
-            return self._controller_failed(t)
-        self._ctrl_fail_since = None
-        self._recovered = False
-        if self._no_progress(t, pose):
-            self._give_up(t, "no progress")
-            return NavCommand(0.0, 0.0, "recovering")
-        override = self.safety.check(t, ranges, cmd.v)
-        if override is not None:
-            return NavCommand(
-                *self._safe_override(pose, override, v0, w0, (cmd.v, cmd.w)), "safety"
-            )
-        return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+        return cmd
 
-    def _safe_override(
-        self, pose: np.ndarray, vw, v0: float, w0: float, planned=(0.0, 0.0)
-    ) -> tuple[float, float]:
-        """The safety controller backs off blind (the laser does not see behind): check the
-        manoeuvre against the local costmap, which holds the map's obstacles; if it would hit
-        something, only turn; if that too, let the local planner turn or back off its way;
-        if it cannot either, its own (collision-checked) `planned` command, as the only way
-        out of the corner."""
-        p = self.params
-        L = self.local
-        for v, w in (vw, (0.0, vw[1])):
-            if dk.motion_legal(
-                float(pose[0]), float(pose[1]), float(pose[2]), v, w, p.safety_backoff_time,
-                L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]),
-                L.resolution, p.footprint_half_m, p.sim_granularity,
-            ):  # fmt: skip
-                return v, w
-        if self.dwa.path_xy is not None:
-            cmd = self.dwa.command(pose, v0, w0, L, None, no_forward=True)
-            if cmd.legal:
-                return cmd.v, cmd.w
-        return planned
+    # --- transitions ---
+    def _enter(self, state: NavState) -> None:
+        """Change `state`, counting the transition (nav_state.TRANSITIONS says why)."""
+        if state is not self.state:
+            self.stats.transitions[(self.state, state)] += 1
+            self.state = state
 
-    def _unwedge(self, pose: np.ndarray) -> tuple[float, float] | None:
-        """Out of contact: the footprint overlaps an obstacle cell (the scan's or the map's) at
-        the robot's own pose, so every motion collides, backing away included (in clutter the
-        DWA's unpadded pass can end a few centimetres from furniture, and a cell is 5 cm).
-        The slow motion (back, forward, turn, for one second) that takes the footprint
-        farthest from the cells it touches without touching any other, backwards first on
-        ties (sliding along an obstacle at its side is a way out too); None when it touches
-        nothing, or every such motion would take it nearer to them."""
-        p = self.params
-        L = self.local
-        x, y, th = (float(v) for v in pose)
-        half = p.footprint_half_m
-        L.build(x, y, self.costmap, th)
-        if not ck.footprint_collides(
-            L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
-            x, y, th, half,
-        ):  # fmt: skip
-            return None
-        blocked = L.lethal.copy()
-        L.build(x, y, self.costmap, th, clear_touching=True)  # same window: same origin
-        iy, ix = np.nonzero(blocked & ~L.lethal)
-        if iy.size == 0:
-            return None
-        cx = L.origin[0] + (ix + 0.5) * L.resolution
-        cy = L.origin[1] + (iy + 0.5) * L.resolution
-        best, best_gap = None, _square_gap(cx, cy, x, y, th, half) - 1e-6
-        duration = 1.0
-        for v in (p.escape_vel, 0.0, p.min_vel_x):
-            for w in (-p.min_in_place_vel_theta, 0.0, p.min_in_place_vel_theta):
-                if (v, w) == (0.0, 0.0) or not dk.motion_legal(
-                    x, y, th, v, w, duration, L.lethal, L.near, L.inner, float(L.origin[0]),
-                    float(L.origin[1]), L.resolution, half, p.sim_granularity,
-                ):  # fmt: skip
-                    continue
-                ex, ey, eth = drive(x, y, th, v, w, duration, 20)
-                gap = _square_gap(cx, cy, ex, ey, eth, half)
-                if gap > best_gap:
-                    best, best_gap = (v, w), gap
-        return best
+    def _command_found(self) -> None:
+        """A command to follow the plan: whatever failed before, the robot drives again."""
+        self.pursuit.ctrl_fail_since = None
+        self._enter(NavState.DRIVING)
+
+    def _goal_layer_state(self) -> NavState:
+        """The goal layer's state by its data."""
+        g = self.pursuit
+        if g is None:
+            return NavState.IDLE
+        if g.path is None:
+            return NavState.PLANNING
+        return NavState.DRIVING if g.ctrl_fail_since is None else NavState.RECOVERING
 
     def _grow_beams_box(self, pose: np.ndarray, ranges) -> None:
         """Bounding box `(x0, y0, x1, y1)` [m] of the robot and its beams' end points."""
@@ -262,161 +219,134 @@ class Navigator:
     def _check_goal_still_open(self, t: float) -> None:
         """A goal whose frontier disappeared (the robot saw the place on the way) is done."""
         if (
-            self.goal is not None
+            self.pursuit is not None
             and self._frontier_changed
             and not self.frontiers.frontier_near(
-                self.costmap, self.goal.frontier_xy, self.params.blacklist_radius
+                self.costmap, self.pursuit.goal.frontier_xy, self.params.blacklist_radius
             )
         ):
             self._finish(t, "explored")
         self._frontier_changed = False
 
     def _choose(self, t: float, pose: np.ndarray) -> None:
+        """Choose the frontier: keep the goal, switch to a clearly nearer one, or drop it."""
         p = self.params
+        mem = self.memory
         self._next_choice_t = t + p.frontier_period
-        avoid = [g for _, g in self._arrived_at]
-        new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist, avoid)
-        if new is None and self.blacklist and self._blacklist_retries > 0:
-            # before giving up on the building, give the blacklisted frontiers another chance
-            self._blacklist_retries -= 1
-            self.blacklist.clear()
-            self._arrived_at.clear()
-            new = self.frontiers.choose(self.costmap, pose[:2], self.blacklist)
+        new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist, mem.avoid())
+        # before giving up on the building, give the blacklisted frontiers another chance
+        if new is None and mem.retry():
+            new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist)
+        g = self.pursuit
         if new is None:
-            if self.goal is not None:
+            if g is not None:
                 self._end_goal(t, "dropped", "no reachable frontier left")
-            self.goal = None
+            self._enter(NavState.EXHAUSTED)
             return
-        if self.goal is not None:
-            if np.hypot(*(new.goal_xy - self.goal.goal_xy)) <= 1.0:
+        if g is not None:
+            if np.hypot(*(new.goal_xy - g.goal.goal_xy)) <= p.same_goal_distance:
                 return  # same goal, keep its plan and progress timers
             # Switch only to a clearly nearer frontier: two about equally near ones must not
             # make the robot dither between them.
-            remaining = path_length(self.path) / self.costmap.resolution * p.neutral_cost
-            if self.path is None or new.travel_cost >= p.goal_switch_ratio * remaining:
+            remaining = path_length(g.path) / self.costmap.resolution * p.neutral_cost
+            if g.path is None or new.travel_cost >= p.goal_switch_ratio * remaining:
                 return
             self._end_goal(t, "replaced", "a nearer frontier")
-        self.goal = new
-        self._goal_t0 = t
-        self.path = new.path_xy  # the frontier search's own path: the first plan
-        self.dwa.set_plan(self.path)
-        self._next_plan_t = t + 1.0 / p.planner_frequency
-        self._plan_fail_since = None
-        self._ctrl_fail_since = None
-        self._best_gap = math.inf
-        self._progress_t = t
+        # the frontier search's own path: the first plan
+        next_plan_t = t + 1.0 / p.planner_frequency
+        self.pursuit = Pursuit(new, t, new.path_xy, next_plan_t, progress_t=t)
+        self.dwa.set_plan(new.path_xy)
+        self._enter(NavState.DRIVING)
 
     def _plan(self, t: float, pose: np.ndarray) -> None:
-        self._next_plan_t = t + 1.0 / self.params.planner_frequency
-        path = self.planner.plan(self.costmap, pose[:2], self.goal.goal_xy)
+        g = self.pursuit
+        g.next_plan_t = t + 1.0 / self.params.planner_frequency
+        path = self.planner.plan(self.costmap, pose[:2], g.goal.goal_xy)
         if path is None:
             self.stats.plan_failures += 1
-            if self._plan_fail_since is None:
-                self._plan_fail_since = t
-            self.path = None
-            self._next_plan_t = t + 1.0 / self.params.controller_frequency
+            if g.plan_fail_since is None:
+                g.plan_fail_since = t
+            g.next_plan_t = t + 1.0 / self.params.controller_frequency
         else:
-            self._plan_fail_since = None
-            self.path = path
-        self.dwa.set_plan(self.path)
+            g.plan_fail_since = None
+        g.path = path
+        self.dwa.set_plan(path)
+        if path is None or self.state is NavState.PLANNING:
+            self._enter(self._goal_layer_state())
 
     def _controller_failed(self, t: float) -> NavCommand:
         """move_base: no legal command -> clear the local costmap and replan; later give up."""
-        if self._ctrl_fail_since is None:
-            self._ctrl_fail_since = t
-        elapsed = t - self._ctrl_fail_since
+        g = self.pursuit
+        if g.ctrl_fail_since is None:
+            g.ctrl_fail_since = t
+        self._enter(NavState.RECOVERING)
+        elapsed = t - g.ctrl_fail_since
         if elapsed >= self.params.controller_patience:
             self._give_up(t, "no legal command")
-        elif not self._recovered and elapsed >= 1.0:
+        elif not self._recovered and elapsed >= self.params.recovery_delay:
             self._recovered = True
             self.stats.recoveries += 1
             self.local.clear()
-            self._next_plan_t = t  # replan now
+            g.next_plan_t = t  # replan now
             self._start_retrace(t)
         return NavCommand(0.0, 0.0, "recovering")
 
     def _no_progress(self, t: float, pose: np.ndarray) -> bool:
         """explore_lite's progress_timeout: the goal got no nearer for too long."""
-        gap = float(np.hypot(*(self.goal.goal_xy - pose[:2])))
-        if gap < self._best_gap - 0.1:
-            self._best_gap = gap
-            self._progress_t = t
-        return t - self._progress_t >= self.params.progress_timeout
+        g = self.pursuit
+        gap = float(np.hypot(*(g.goal.goal_xy - pose[:2])))
+        if gap < g.best_gap - self.params.progress_step:
+            g.best_gap = gap
+            g.progress_t = t
+        return t - g.progress_t >= self.params.progress_timeout
 
     def _finish(self, t: float, status: str) -> None:
         """Goal done. A frontier still there after the robot arrived is approached from
-        elsewhere next time, and blacklisted after three such arrivals (the SLAM map updates
-        only after some motion, so one arrival is not enough to tell)."""
-        r = self.params.blacklist_radius
-        f = self.goal.frontier_xy
+        elsewhere next time, and blacklisted after blacklist_arrivals such arrivals (the SLAM
+        map updates only after some motion, so one arrival is not enough to tell)."""
+        p = self.params
+        goal = self.pursuit.goal
+        f, r = goal.frontier_xy, p.blacklist_radius
         if status == "reached" and self.frontiers.frontier_near(self.costmap, f, r):
-            # next time, a goal elsewhere near that frontier; after a few, drop the frontier
-            self._arrived_at.append((f.copy(), self.goal.goal_xy.copy()))
-            if sum(np.hypot(*(f - q)) <= 2 * r for q, _ in self._arrived_at) >= 3:
-                self.blacklist.append(f.copy())
+            self.memory.arrived(f, goal.goal_xy, r, p.blacklist_arrivals)
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
-    def _grow_trail(self, pose: np.ndarray) -> None:
-        if not self._trail or np.hypot(*(pose[:2] - self._trail[-1])) >= 0.05:
-            self._trail.append(pose[:2].copy())
-            if len(self._trail) > 200:
-                del self._trail[:100]
-
     def _start_retrace(self, t: float) -> None:
-        """Recovery: back out along the way the robot came (that space was free), ~0.8 m."""
-        if len(self._trail) < 4:
+        """Recovery: back out along the way the robot came (that space was free)."""
+        target = self.trail.back_target()
+        if target is None:
             return
-        self._retrace_to = self._trail[max(0, len(self._trail) - 17)].copy()
-        self._retrace_until = t + self.params.retrace_time
+        self.retrace = Retrace(target, t + self.params.retrace_time)
         self.stats.recoveries += 1
+        self._enter(NavState.RETRACING)
 
     def _retrace(self, t: float, pose: np.ndarray) -> tuple[float, float] | None:
-        """Reverse towards the retrace point, checked against the local costmap; None: done."""
-        p = self.params
-        d = self._retrace_to - pose[:2]
-        if np.hypot(*d) < 0.1 or t >= self._retrace_until:
-            self._retrace_to = None
-            self._trail.clear()
-            return None
-        # backwards: the robot's rear points at the target
-        err = wrap_angle(math.atan2(d[1], d[0]) + math.pi - pose[2])
-        w = max(-p.max_vel_theta, min(p.max_vel_theta, 1.5 * err))
-        v = p.escape_vel * 1.5 if abs(err) < 0.6 else 0.0
-        L = self.local
-        for vv, ww in ((v, w), (0.0, w), (v, 0.0)):
-            if (vv, ww) != (0.0, 0.0) and dk.motion_legal(
-                float(pose[0]), float(pose[1]), float(pose[2]), vv, ww, 0.5,
-                L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]),
-                L.resolution, p.footprint_half_m, p.sim_granularity,
-            ):  # fmt: skip
-                return vv, ww
-        self._retrace_to = None
-        return None
+        """Reverse towards the retrace point; None: done (or blocked), back to the goal layer."""
+        d = self.retrace.target - pose[:2]
+        vw = None
+        if np.hypot(*d) < self.params.retrace_tolerance or t >= self.retrace.until:
+            self.trail.clear()
+        else:
+            vw = back_out(self.params, self.local, pose, d)
+        if vw is None:
+            self.retrace = None
+            self._enter(self._goal_layer_state())
+        return vw
 
     def _give_up(self, t: float, why: str) -> None:
         self._start_retrace(t)
-        self.blacklist.append(self.goal.frontier_xy.copy())
+        self.memory.blacklist.append(self.pursuit.goal.frontier_xy.copy())
         self.stats.consecutive_failures += 1
         self._end_goal(t, "failed", why)
 
     def _end_goal(self, t: float, status: str, detail: str = "") -> None:
-        g = self.goal
-        self.stats.goals.append(
-            GoalRecord(self._goal_t0, t, float(g.goal_xy[0]), float(g.goal_xy[1]), status, detail)
-        )
-        self.goal = None
-        self.path = None
+        g = self.pursuit
+        x, y = float(g.goal.goal_xy[0]), float(g.goal.goal_xy[1])
+        self.stats.goals.append(GoalRecord(g.t0, t, x, y, status, detail))
+        self.pursuit = None
         self.dwa.set_plan(None)
         self.shim.reset()
         self._next_choice_t = t
-
-
-def _square_gap(px: np.ndarray, py: np.ndarray, x: float, y: float, th: float, half: float):
-    """[m] the least distance from the points `(K,)` to the square footprint (half side
-    `half`) at (x, y, th); 0 for a point inside."""
-    dx, dy = px - x, py - y
-    c, s = math.cos(th), math.sin(th)
-    u = np.maximum(np.abs(dx * c + dy * s) - half, 0.0)
-    v = np.maximum(np.abs(-dx * s + dy * c) - half, 0.0)
-    return float(np.min(np.hypot(u, v)))
+        if self.retrace is None:
+            self._enter(NavState.IDLE)

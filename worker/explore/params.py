@@ -41,12 +41,23 @@ class ExploreParams:
     # the inside of an obstacle whose face the beams only glanced off
     dead_frontier_looks: int = 6
     dead_frontier_radius: float = 1.0  # [m]
+    # [rad] a look counts within the laser's field of view less this (its edge beams graze)
+    look_fov_margin: float = 0.05
     goal_radius: float = 0.6  # [m] goal search radius around the frontier (goal back-off)
+    # [goal radii] the search travels this much past the first candidate cell, so that the goal
+    # can be the lowest-cost cell of that cluster, not its nearest edge
+    goal_search_extra: float = 2.0
+    sight_candidates: int = 64  # goal candidates tested for a line of sight to their frontier
     frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
     blacklist_retries: int = 1  # times the blacklist is cleared when nothing else is left
+    # arrivals near a frontier that stays there (goals "reached" within 2 blacklist_radius of
+    # it) after which it is blacklisted: the SLAM map updates only after some motion
+    blacklist_arrivals: int = 3
+    same_goal_distance: float = 1.0  # [m] a re-chosen goal this near is the same goal (kept)
     goal_switch_ratio: float = 0.5  # [-] switch goals when the new one costs < this x the rest
     progress_timeout: float = 30.0  # [s] a goal with no progress for this long is given up
+    progress_step: float = 0.1  # [m] the goal must get this much nearer to count as progress
     # --- global planner (navfn; thesis base_local_planner_params) ---
     planner_frequency: float = 0.2  # [Hz] replanning rate (also on every goal change)
     neutral_cost: float = 50.0  # [-] navfn COST_NEUTRAL: cost of a free cell step
@@ -63,6 +74,9 @@ class ExploreParams:
     # legs that the map sealed as it mapped them): before a goal or the run is given up
     pocket_escape_radius: float = 1.5
     planner_patience: float = 5.0  # [s] planning may fail this long before recovery
+    # [cells] largest goal pocket flooded to prove a goal walled in before the full search
+    # (100 m^2 at 5 cm); only the time to find no plan depends on it, never the plans
+    sealed_pocket_cells: int = 40_000
     # --- local planner (base_local_planner TrajectoryPlannerROS with dwa: true) ---
     controller_frequency: float = 10.0  # [Hz]
     max_vel_x: float = 0.85  # [m/s]
@@ -92,24 +106,49 @@ class ExploreParams:
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
+    # --- recovery (move_base's recovery behaviours, ours: back out along the trail) ---
+    recovery_delay: float = 1.0  # [s] no legal command this long -> clear, replan, back out
     retrace_time: float = 8.0  # [s] longest back-out along the way the robot came (recovery)
+    trail_spacing: float = 0.05  # [m] the trail keeps positions of the robot this far apart
+    trail_cap: int = 200  # trail points kept at most; past it the oldest trail_trim are dropped
+    trail_trim: int = 100
+    retrace_min_points: int = 4  # a trail shorter than this: no back-out
+    retrace_points: int = 16  # the back-out aims this many trail points back (0.8 m)
+    retrace_tolerance: float = 0.1  # [m] the back-out ends this near its target
+    # [rad] the back-out reverses only while the rear points within this of its target
+    retrace_max_heading_error: float = 0.6
+    # backing out (the retrace, or getting room to turn) at this x escape_vel [-]; turning at
+    # back_out_gain [1/s] x the heading error [rad]; each motion is collision-checked
+    # back_out_check_time [s] ahead
+    back_out_speed_ratio: float = 1.5
+    back_out_gain: float = 1.5
+    back_out_check_time: float = 0.5
+    unwedge_time: float = 1.0  # [s] an unwedging motion (footprint in contact), checked whole
     # --- safety controller (range_proximity_safety_controller) ---
     safety_distance: float = 0.2  # [m] obstacle this near the footprint's front: back off
     safety_backoff_time: float = 1.0  # [s] duration of one back-off manoeuvre
     safety_turn_vel: float = 0.4  # [rad/s] turn away from the obstacle while backing off
     # --- failure rules ---
     max_goal_failures: int = 10  # consecutive given-up goals -> run aborted as `stuck`
-    stuck_timeout: float = 180.0  # [s] no 0.5 m of motion for this long -> `stuck`
+    stuck_timeout: float = 180.0  # [s] no stuck_distance of motion for this long -> `stuck`
+    stuck_distance: float = 0.5  # [m]
     slam_divergence: float = 3.0  # [m] SLAM pose this far from ground truth -> `slam_diverged`
     # --- stop rules (thesis Sec. 4.x: g, e, m) ---
     snapshot_period: float = 300.0  # [s] g: map snapshots this often
     snapshot_mse: float = 5.0  # [-] e: stop when two snapshots differ by less (0..255 pixels)
     time_limit: float = 7200.0  # [s] m: simulated-time limit
+    # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in
+    # the map must not end the run
+    no_frontier_time: float = 1.0
     progress_period: float = 1.0  # [s] on_progress callback period
+    coverage_period: float = 10.0  # [s] the coverage on_progress reports is refreshed this often
 
     def __post_init__(self) -> None:
         signed = ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
-        may_be_zero = ("footprint_padding", "blacklist_retries", "planner_margin", "escape_radius")
+        may_be_zero = (
+            "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
+            "look_fov_margin", "goal_search_extra",
+        )  # fmt: skip
         bad = []
         for f in fields(self):
             value = getattr(self, f.name)
@@ -123,6 +162,8 @@ class ExploreParams:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")
+        if self.trail_trim > self.trail_cap:
+            raise InputError("exploration parameter trail_trim exceeds trail_cap")
 
     def with_footprint(self, side_m: float) -> ExploreParams:
         """These settings for a square robot footprint of side `side_m` [m]."""

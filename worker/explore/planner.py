@@ -73,19 +73,20 @@ class DijkstraSearch:
         escape_m: float | None = None,
     ) -> bool:
         """True when `run` from start_cell could not reach goal_cell (a goal walled into a
-        pocket of at most SEALED_BUDGET cells): proven on the goal's side, without the search
-        of everything reachable that `run` makes before it gives up."""
+        pocket of at most params.sealed_pocket_cells): proven on the goal's side, without the
+        search of everything reachable that `run` makes before it gives up."""
         if costmap.shape != self.shape:
             return False  # buffers are sized by `run`
         self.run_id += 1
-        if self.queue.shape[0] < SEALED_BUDGET:
-            self.queue = np.empty(SEALED_BUDGET, dtype=np.int64)
+        budget = params.sealed_pocket_cells
+        if self.queue.shape[0] < budget:
+            self.queue = np.empty(budget, dtype=np.int64)
         escape = params.escape_radius if escape_m is None else escape_m  # [m]
         return bool(
             pk.sealed_off(
                 costmap.inflated, costmap.unknown, goal_cell[1], goal_cell[0], start_cell[1],
                 start_cell[0], params.allow_unknown, planner_blocked_cost(params),
-                int(round(escape / costmap.resolution)), SEALED_BUDGET, self.stamp,
+                int(round(escape / costmap.resolution)), budget, self.stamp,
                 self.run_id, self.queue,
             )
         )  # fmt: skip
@@ -138,9 +139,6 @@ class GlobalPlanner:
         cells = self.search.path_to(found[0])
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
         return np.column_stack((xs, ys))
-
-
-SEALED_BUDGET = 40_000  # [cells] largest goal pocket DijkstraSearch.sealed_off floods (100 m^2)
 
 
 def planner_blocked_cost(params: ExploreParams) -> int:

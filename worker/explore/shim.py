@@ -12,6 +12,11 @@ from worker.explore.costmap import LocalCostmap
 from worker.explore.dwa import drive
 from worker.explore.params import ExploreParams
 
+# added to the end cost of a motion against the way the robot is already moving: more than
+# any costmap value, so it only decides when nothing else is legal
+_SWITCH_PENALTY = 1000
+_END_POSE_STEPS = 10  # Euler steps of a motion's end pose (_cost_after)
+
 
 class HeadingShim:
     """Like nav2's RotationShimController, in front of the DWA.
@@ -78,9 +83,9 @@ class HeadingShim:
         p = self.params
         # backing up, the rear's heading th + pi turns with w: w > 0 swings it left (ccw)
         rear_err = wrap_angle(err + math.pi)
-        w_back = max(-p.max_vel_theta, min(p.max_vel_theta, 1.5 * rear_err))
-        w_fwd = max(-p.max_vel_theta, min(p.max_vel_theta, 1.5 * err))
-        v_back, v_fwd = 1.5 * p.escape_vel, p.min_vel_x
+        w_back = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * rear_err))
+        w_fwd = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * err))
+        v_back, v_fwd = p.back_out_speed_ratio * p.escape_vel, p.min_vel_x
         best = None
         # the exact footprint first; then one half a cell smaller: the cell test is that much
         # conservative, and a robot whose edge touches a map cell must still get away from it
@@ -88,10 +93,12 @@ class HeadingShim:
             for v, w in (
                 (v_back, w_back), (v_back, 0.0), (v_back, -w_back), (v_fwd, w_fwd), (v_fwd, 0.0)
             ):  # fmt: skip
-                if not self._legal(pose, v, w, local, 0.5, padded=False, shrink=shrink):
+                horizon = p.back_out_check_time
+                if not self._legal(pose, v, w, local, horizon, padded=False, shrink=shrink):
                     continue
                 # once going one way, keep going that way while it is legal (no shuffling)
-                c = _cost_after(pose, v, w, 0.5, local) + (1000 if v * self._dir < 0 else 0)
+                turn_back = _SWITCH_PENALTY if v * self._dir < 0 else 0
+                c = _cost_after(pose, v, w, horizon, local) + turn_back
                 if best is None or c < best[0]:
                     best = (c, v, w)
             if best is not None:
@@ -138,7 +145,7 @@ def _carrot(path_xy: np.ndarray, x: float, y: float, lookahead: float) -> tuple[
 
 def _cost_after(pose: np.ndarray, v: float, w: float, duration: float, local: LocalCostmap) -> int:
     """Local costmap value [0, 255] where driving (v, w) for `duration` [s] ends."""
-    x, y, _ = drive(float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, 10)
+    x, y, _ = drive(float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, _END_POSE_STEPS)
     ix = int(math.floor((x - local.origin[0]) / local.resolution))
     iy = int(math.floor((y - local.origin[1]) / local.resolution))
     if not (0 <= ix < local.n and 0 <= iy < local.n):

@@ -1,10 +1,25 @@
-"""Stop rules of the thesis's exploration script: map snapshots compared by mean squared error."""
+"""Stop rules of the exploration loop (one interface), and the thesis's map-snapshot MSE."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
 
 import numpy as np
+
+from worker.explore.coverage import align_map_to_world
+from worker.explore.params import ExploreParams
+from worker.status import RunOutcome
+
+Outcome = RunOutcome  # completed | failed
+# completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
+# "slam_diverged"
+Reason = Literal[
+    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged"
+]
+COMPLETED_REASONS: tuple[Reason, ...] = ("no_frontier", "map_unchanged")
 
 # map_saver's grey levels: the thesis compared the saved map images pixel by pixel
 _OCCUPIED, _FREE, _UNKNOWN = 0, 254, 205
@@ -60,3 +75,174 @@ class SnapshotRule:
             return False
         self.last_mse = snapshot_mse(last[0], last[1], img, origin, resolution)
         return self.last_mse < self.mse
+
+
+@dataclass(frozen=True)
+class StopReason:
+    """Why a run ends: the reason and one human-readable line."""
+
+    reason: Reason
+    detail: str
+
+    @property
+    def outcome(self) -> Outcome:
+        return RunOutcome.COMPLETED if self.reason in COMPLETED_REASONS else RunOutcome.FAILED
+
+
+@dataclass(frozen=True)
+class LoopState:
+    """What the stop rules see after one control period. The harness may look at the ground
+    truth (pose_gt, the simulator's collisions); the robot may not."""
+
+    t: float  # [s] simulated time
+    dt: float  # [s] control period
+    pose_gt: np.ndarray  # (3,) [x, y, theta] world frame
+    pose_est: np.ndarray  # (3,) [x, y, theta] SLAM map frame
+    status: str  # the navigation stack's, this period
+    goal_failures: int  # goals given up in a row
+    collisions: Sequence  # the simulator's collisions so far (worker.sim Collision)
+    occupancy: Callable[[], object]  # the current SLAM map (OccupancyGrid), read on demand
+
+
+class StopRule(Protocol):
+    """One stop rule: asked once per control period, in order, until one fires."""
+
+    def check(self, s: LoopState) -> StopReason | None: ...
+
+
+class CollisionRule:
+    """failed, collision: the simulator reports a contact (the first since the start)."""
+
+    def __init__(self, n_before: int):
+        self.n_before = n_before  # collisions the simulator had when the run began
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if len(s.collisions) <= self.n_before:
+            return None
+        c = s.collisions[self.n_before]
+        return StopReason("collision", f"hit an obstacle at t={c.t:.1f} s, ({c.x:.2f}, {c.y:.2f})")
+
+
+class DivergenceRule:
+    """failed, slam_diverged: the SLAM pose, mapped into the world as at the start, is more
+    than `limit` [m] from the ground truth."""
+
+    def __init__(self, limit: float):
+        self.limit = limit
+        self.T0: np.ndarray | None = None  # (3,) T_world_map from the first period
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if self.T0 is None:
+            self.T0 = align_map_to_world(s.pose_est[None, :], s.pose_gt[None, :])
+        if _pose_error(self.T0, s.pose_est, s.pose_gt) <= self.limit:
+            return None
+        return StopReason(
+            "slam_diverged", f"SLAM pose more than {self.limit:g} m off at t={s.t:.1f} s"
+        )
+
+
+class GoalFailuresRule:
+    """failed, stuck: `limit` goals given up in a row."""
+
+    def __init__(self, limit: int):
+        self.limit = limit
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if s.goal_failures < self.limit:
+            return None
+        return StopReason("stuck", f"{self.limit} goals given up in a row")
+
+
+class NoFrontierRule:
+    """completed, no_frontier: no reachable frontier for `hold` [s] (a transient gap in the
+    map must not end the run)."""
+
+    def __init__(self, hold: float):
+        self.hold = hold
+        self.since: float | None = None  # [s] no frontier since
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if s.status != "no_frontier":
+            self.since = None
+        elif self.since is None:
+            self.since = s.t
+        elif s.t - self.since >= self.hold - 1e-9:
+            return StopReason("no_frontier", "no reachable frontier left")
+        return None
+
+
+class NotMovingRule:
+    """failed, stuck: the robot (ground truth) moved less than `distance` [m] in `timeout` [s]."""
+
+    def __init__(self, start_xy: np.ndarray, distance: float, timeout: float):
+        self.distance = distance
+        self.timeout = timeout
+        self.ref_xy = np.array(start_xy[:2], dtype=float)  # (2,) [m] where it last was
+        self.ref_t = 0.0  # [s] when
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if np.hypot(*(s.pose_gt[:2] - self.ref_xy)) > self.distance:
+            self.ref_xy, self.ref_t = s.pose_gt[:2].copy(), s.t
+        elif s.t - self.ref_t >= self.timeout:
+            return StopReason("stuck", f"moved less than {self.distance:g} m in {self.timeout:g} s")
+        return None
+
+
+class MapUnchangedRule:
+    """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
+    a mean squared error below `mse`."""
+
+    def __init__(self, period: float, mse: float):
+        self.snapshots = SnapshotRule(period, mse)
+
+    def check(self, s: LoopState) -> StopReason | None:
+        rule = self.snapshots
+        if not rule.due(s.t):
+            return None
+        grid = s.occupancy()
+        if not rule.check(s.t, grid.prob, grid.origin, grid.resolution, grid.occ_thresh):
+            return None
+        detail = f"map snapshots {rule.period:g} s apart: MSE {rule.last_mse:.2f}"
+        return StopReason("map_unchanged", detail)
+
+
+class TimeLimitRule:
+    """failed, time_limit (thesis m): the next period would pass `limit` [s] of simulated time."""
+
+    def __init__(self, limit: float):
+        self.limit = limit
+
+    def check(self, s: LoopState) -> StopReason | None:
+        if s.t + s.dt <= self.limit + 1e-9:
+            return None
+        return StopReason("time_limit", f"time limit {self.limit:g} s reached")
+
+
+def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> list[StopRule]:
+    """The loop's stop rules in the order they are asked: the first to fire ends the run."""
+    return [
+        CollisionRule(n_collisions),
+        DivergenceRule(p.slam_divergence),
+        GoalFailuresRule(p.max_goal_failures),
+        NoFrontierRule(p.no_frontier_time),
+        NotMovingRule(start_xy, p.stuck_distance, p.stuck_timeout),
+        MapUnchangedRule(p.snapshot_period, p.snapshot_mse),
+        TimeLimitRule(p.time_limit),
+    ]
+
+
+def first_stop(rules: Sequence[StopRule], s: LoopState) -> StopReason | None:
+    """Ask the rules in order; the first answer, or None when none fires."""
+    for rule in rules:
+        stop = rule.check(s)
+        if stop is not None:
+            return stop
+    return None
+
+
+def _pose_error(T0: np.ndarray, pose_est: np.ndarray, pose_gt: np.ndarray) -> float:
+    """[m] distance between the ground truth and the estimate mapped by T0 into the world."""
+    c, s = math.cos(T0[2]), math.sin(T0[2])
+    x = T0[0] + c * pose_est[0] - s * pose_est[1]
+    y = T0[1] + s * pose_est[0] + c * pose_est[1]
+    return math.hypot(x - pose_gt[0], y - pose_gt[1])

@@ -9,6 +9,7 @@ import pytest
 
 from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
+from worker.explore import local_kernels as lk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
 from worker.explore.params import ExploreParams
 
@@ -136,9 +137,9 @@ def test_growing_cropped_map_keeps_one_frame_and_matches_a_fresh_costmap():
 def _single_obstacle_layers(cx, cy, n=40):
     """Local layers of a window (origin 0, 0) with one obstacle cell (cx, cy)."""
     pts = np.array([[(cx + 0.5) * RES, (cy + 0.5) * RES]])
-    lethal, near, inner, _ = ck.local_layers(
+    lethal, near, inner, _ = lk.local_layers(
         pts[:, 0], pts[:, 1], 0.0, 0.0, RES, n,
-        ck.disc_half_widths(5 * math.sqrt(2) + 0.01), ck.disc_half_widths(4.0),
+        lk.disc_half_widths(5 * math.sqrt(2) + 0.01), lk.disc_half_widths(4.0),
         np.zeros((1, 1), bool), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), n,
         0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
@@ -239,14 +240,14 @@ def test_local_layers_equal_a_disc_dilation():
     rng = np.random.default_rng(4)
     n, radius = 60, 6.3
     pts = rng.uniform(0.0, n * RES, size=(40, 2))
-    lethal, near, inner, _ = ck.local_layers(
+    lethal, near, inner, _ = lk.local_layers(
         pts[:, 0].copy(), pts[:, 1].copy(), 0.0, 0.0, RES, n,
-        ck.disc_half_widths(radius), ck.disc_half_widths(2.5),
+        lk.disc_half_widths(radius), lk.disc_half_widths(2.5),
         np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8), -(10**6), -(10**6), 0,
         0.0, 0.0, 0.0, -1.0,
     )  # fmt: skip
     for layer, r in ((near, radius), (inner, 2.5)):
-        off = ck.disc_offsets(r)
+        off = lk.disc_offsets(r)
         R = int(np.abs(off).max())
         disc = np.zeros((2 * R + 1, 2 * R + 1), dtype=bool)
         disc[off[:, 0] + R, off[:, 1] + R] = True
@@ -257,6 +258,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     # The footprint's front edge 1 cm into the cell of a wall the scans and the map both hold
     # (the cells are 5 cm): every motion "collides" at the start pose; the way out backs off.
     from worker.explore.navigator import Navigator
+    from worker.explore.recovery import unwedge
 
     p = ExploreParams()
     angles = np.linspace(-2.35, 2.35, 541)
@@ -265,7 +267,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     face = np.column_stack((np.full(21, 2.0), np.linspace(1.0, 2.0, 21)))
     nav.local.add_points(0.0, face)
     pose = np.array([1.81, 1.5, 0.0])  # front edge at x = 2.01
-    v, w = nav._unwedge(pose)
+    v, w = unwedge(p, nav.local, nav.costmap, pose)
     assert v < 0
     # independent check: one second of it leaves the 0.4 m square clear of the face by more
     x, y, th = 1.81, 1.5, 0.0
@@ -275,13 +277,16 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     u = np.abs((face[:, 0] - x) * c + (face[:, 1] - y) * s) - 0.2
     q = np.abs(-(face[:, 0] - x) * s + (face[:, 1] - y) * c) - 0.2
     assert np.min(np.hypot(np.maximum(u, 0), np.maximum(q, 0))) > 0.05
-    assert nav._unwedge(np.array([1.5, 1.5, 0.0])) is None  # clear of it: nothing to do
+    assert (
+        unwedge(p, nav.local, nav.costmap, np.array([1.5, 1.5, 0.0])) is None
+    )  # clear of it: nothing to do
 
 
 def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     # office_b_furnitures: a table edge under the footprint's right side, a chair 6 cm ahead;
     # no turn is legal and backing off leaves the side gap as it is, but gets the robot out
     from worker.explore.navigator import Navigator
+    from worker.explore.recovery import unwedge
 
     p = ExploreParams()
     nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
@@ -291,7 +296,7 @@ def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     ahead = np.column_stack((np.full(11, 1.86), np.linspace(1.35, 1.65, 11)))
     pts = np.concatenate([side, ahead])
     nav.local.add_points(0.0, pts)
-    v, w = nav._unwedge(np.array([1.6, 1.5, 0.0]))
+    v, w = unwedge(p, nav.local, nav.costmap, np.array([1.6, 1.5, 0.0]))
     assert v < 0
     # independent check: a second of it takes the 0.4 m square no nearer any obstacle point
     x, y, th = 1.6, 1.5, 0.0

@@ -1,12 +1,30 @@
-"""The thesis's snapshot stop rule: map images compared by mean squared error (hand-derived)."""
+"""Stop rules: each on hand-made loop states, their order, and the thesis's snapshot MSE."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from tests.worker.explore.test_loop import _dead_end_world, _run
-from worker.explore.stop_rules import SnapshotRule, map_image, snapshot_mse
+from worker.explore.params import ExploreParams
+from worker.explore.stop_rules import (
+    CollisionRule,
+    DivergenceRule,
+    GoalFailuresRule,
+    LoopState,
+    MapUnchangedRule,
+    NoFrontierRule,
+    NotMovingRule,
+    SnapshotRule,
+    StopReason,
+    TimeLimitRule,
+    default_rules,
+    first_stop,
+    map_image,
+    snapshot_mse,
+)
 
 
 def test_map_image_uses_map_savers_grey_levels():
@@ -51,3 +69,116 @@ def test_exploration_ends_completed_when_the_rule_fires():
     assert result.outcome == "completed" and result.reason == "map_unchanged"
     assert abs(result.t[-1] - 6.0) < 0.15
     assert "MSE" in result.stop_detail
+
+
+def _state(t=0.0, pose_gt=(0.0, 0.0, 0.0), pose_est=None, status="driving", **kw):
+    pose_gt = np.array(pose_gt, dtype=float)
+    pose_est = pose_gt.copy() if pose_est is None else np.array(pose_est, dtype=float)
+    fields = {"dt": 0.1, "goal_failures": 0, "collisions": [], "occupancy": None} | kw
+    return LoopState(
+        t, fields["dt"], pose_gt, pose_est, status, fields["goal_failures"],
+        fields["collisions"], fields["occupancy"],
+    )  # fmt: skip
+
+
+def test_no_frontier_must_hold_for_its_whole_time():
+    rule = NoFrontierRule(hold=1.0)
+    assert rule.check(_state(0.0, status="no_frontier")) is None  # since 0.0
+    assert rule.check(_state(0.9, status="no_frontier")) is None
+    assert rule.check(_state(1.0, status="driving")) is None  # a frontier again: reset
+    assert rule.check(_state(1.1, status="no_frontier")) is None  # since 1.1
+    assert rule.check(_state(2.0, status="no_frontier")) is None  # 0.9 s
+    stop = rule.check(_state(2.1, status="no_frontier"))  # 1.0 s
+    assert stop == StopReason("no_frontier", "no reachable frontier left")
+    assert stop.outcome == "completed"
+
+
+def test_not_moving_counts_from_the_last_place_the_robot_left():
+    rule = NotMovingRule(np.array([0.0, 0.0, 0.0]), distance=0.5, timeout=10.0)
+    assert rule.check(_state(9.9, pose_gt=(0.4, 0.3, 0.0))) is None  # 0.5 m away: not more
+    assert rule.check(_state(10.0, pose_gt=(0.3, 0.4, 0.0))) == StopReason(
+        "stuck", "moved less than 0.5 m in 10 s"
+    )
+    rule = NotMovingRule(np.array([0.0, 0.0, 0.0]), distance=0.5, timeout=10.0)
+    assert rule.check(_state(5.0, pose_gt=(0.6, 0.0, 0.0))) is None  # moved: the clock restarts
+    assert rule.check(_state(14.9, pose_gt=(0.9, 0.0, 0.0))) is None
+    assert rule.check(_state(15.0, pose_gt=(0.9, 0.0, 0.0))).reason == "stuck"
+
+
+def test_time_limit_fires_when_the_next_period_would_pass_it():
+    rule = TimeLimitRule(10.0)
+    assert rule.check(_state(9.9)) is None  # 9.9 + 0.1 = 10: the last period is still run
+    stop = rule.check(_state(10.0))
+    assert stop == StopReason("time_limit", "time limit 10 s reached")
+    assert stop.outcome == "failed"
+
+
+def test_collision_rule_reports_the_first_new_contact():
+    @dataclass
+    class Hit:
+        t: float
+        x: float
+        y: float
+
+    rule = CollisionRule(n_before=1)
+    old = [Hit(0.0, 9.0, 9.0)]
+    assert rule.check(_state(1.0, collisions=old)) is None
+    stop = rule.check(_state(2.0, collisions=[*old, Hit(1.94, 1.234, -0.5), Hit(2.0, 0, 0)]))
+    assert stop == StopReason("collision", "hit an obstacle at t=1.9 s, (1.23, -0.50)")
+
+
+def test_divergence_is_measured_in_the_frame_of_the_first_period():
+    rule = DivergenceRule(limit=3.0)
+    # the SLAM map frame: the world turned by 90 degrees and shifted by (1, 2)
+    assert rule.check(_state(0.0, pose_gt=(1.0, 2.0, np.pi / 2), pose_est=(0, 0, 0))) is None
+    # est (2, 0) in the map is (1, 4) in the world: 2.9 m from (1, 6.9)
+    assert rule.check(_state(5.0, pose_gt=(1.0, 6.9, 0.0), pose_est=(2.0, 0.0, 0.0))) is None
+    stop = rule.check(_state(6.0, pose_gt=(1.0, 7.1, 0.0), pose_est=(2.0, 0.0, 0.0)))
+    assert stop == StopReason("slam_diverged", "SLAM pose more than 3 m off at t=6.0 s")
+
+
+def test_goal_failures_rule():
+    rule = GoalFailuresRule(limit=10)
+    assert rule.check(_state(goal_failures=9)) is None
+    assert rule.check(_state(goal_failures=10)) == StopReason("stuck", "10 goals given up in a row")
+
+
+def test_map_unchanged_rule_reads_the_map_only_when_a_snapshot_is_due():
+    reads = []
+
+    @dataclass
+    class Grid:
+        prob: np.ndarray
+        origin: tuple = (0.0, 0.0)
+        resolution: float = 0.05
+        occ_thresh: float = 0.25
+
+    def occupancy():
+        reads.append(1)
+        return Grid(np.full((4, 4), 0.1, dtype=np.float32))
+
+    rule = MapUnchangedRule(period=300.0, mse=5.0)
+    assert rule.check(_state(299.9, occupancy=occupancy)) is None and not reads
+    assert rule.check(_state(300.0, occupancy=occupancy)) is None and len(reads) == 1
+    stop = rule.check(_state(600.0, occupancy=occupancy))  # the same map: MSE 0
+    assert stop == StopReason("map_unchanged", "map snapshots 300 s apart: MSE 0.00")
+    assert stop.outcome == "completed"
+
+
+def test_rules_are_asked_in_order_and_the_first_answer_wins():
+    @dataclass
+    class Hit:
+        t: float = 1.0
+        x: float = 0.0
+        y: float = 0.0
+
+    p = ExploreParams(no_frontier_time=0.1, max_goal_failures=2)
+    rules = default_rules(p, np.zeros(3), n_collisions=0)
+    assert first_stop(rules, _state(0.0, status="no_frontier")) is None
+    # no frontier for 0.1 s, two goals given up and a collision, all at once: the collision
+    s = _state(0.1, status="no_frontier", goal_failures=2, collisions=[Hit()])
+    assert first_stop(rules, s).reason == "collision"
+    rules = default_rules(p, np.zeros(3), n_collisions=0)
+    first_stop(rules, _state(0.0, status="no_frontier"))
+    s = _state(0.1, status="no_frontier", goal_failures=2)
+    assert first_stop(rules, s) == StopReason("stuck", "2 goals given up in a row")

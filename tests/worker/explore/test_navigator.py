@@ -1,0 +1,98 @@
+"""The navigator's state machine: its first states by hand, and a whole run's transitions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tests.worker.explore.test_loop import _box, _cells
+from worker.explore.loop import Exploration
+from worker.explore.nav_state import TRANSITIONS, NavState
+from worker.explore.navigator import Navigator
+from worker.explore.params import ExploreParams
+from worker.sim.simulator import SimParams, Simulator
+from worker.slam.base import make_slam
+from worker.slam.params import SlamParams
+from worker.world.world import World
+
+RES = 0.05
+ANGLES = np.linspace(-2.35, 2.35, 541)
+NO_HITS = np.full(541, 30.0)  # every beam at range_max
+
+
+def test_without_a_map_the_navigator_waits():
+    nav = Navigator(ExploreParams(), ANGLES, 30.0)
+    cmd = nav.step(0.0, np.array([1.0, 1.0, 0.0]), 0.0, 0.0, NO_HITS)
+    assert (cmd.v, cmd.w, cmd.status) == (0.0, 0.0, "planning")
+    assert nav.state is NavState.WAITING and not nav.stats.transitions
+
+
+def test_a_map_with_nothing_unknown_leaves_nothing_to_explore():
+    nav = Navigator(ExploreParams(), ANGLES, 30.0)
+    prob = np.full((60, 60), 0.05, dtype=np.float32)  # all known free, walled in
+    prob[:2, :] = prob[-2:, :] = prob[:, :2] = prob[:, -2:] = 0.9
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    cmd = nav.step(0.0, np.array([1.5, 1.5, 0.0]), 0.0, 0.0, NO_HITS)
+    assert (cmd.v, cmd.w, cmd.status) == (0.0, 0.0, "no_frontier")
+    assert nav.state is NavState.EXHAUSTED and nav.goal is None
+    S = NavState
+    assert nav.stats.transitions == {(S.WAITING, S.IDLE): 1, (S.IDLE, S.EXHAUSTED): 1}
+
+
+def test_a_frontier_in_view_becomes_the_goal_and_the_robot_drives_to_it():
+    nav = Navigator(ExploreParams(), ANGLES, 30.0)
+    prob = np.full((60, 100), np.nan, dtype=np.float32)
+    prob[:, :50] = 0.05  # the left 2.5 m known free, the rest unknown: a frontier at x = 2.5
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    cmd = nav.step(0.0, np.array([1.0, 1.5, 0.0]), 0.0, 0.0, NO_HITS)
+    assert nav.state is NavState.DRIVING
+    assert nav.goal.frontier_xy[0] == 2.475  # the frontier column's cell centre
+    assert nav.goal.goal_xy[0] < 2.5 and nav.path is not None
+    assert cmd.v > 0.0 and cmd.status == "driving"  # straight ahead: no turning first
+    S = NavState
+    assert nav.stats.transitions == {(S.WAITING, S.IDLE): 1, (S.IDLE, S.DRIVING): 1}
+
+
+def test_transitions_table_names_each_state_once_and_no_self_loops():
+    assert set(TRANSITIONS) == set(NavState)
+    for state, nexts in TRANSITIONS.items():
+        assert state not in nexts and all(isinstance(s, NavState) for s in nexts)
+        assert all(why for why in nexts.values())
+
+
+def _unreachable_world() -> World:
+    # as test_loop's: a room behind a slit narrower than the robot, which it glimpses (its
+    # goals there fail, the robot backs out), furniture-free otherwise
+    occ = _box(5.0, 9.0)
+    occ[:, _cells(5.0) : _cells(5.1)] = True
+    occ[_cells(2.4) : _cells(2.65), _cells(5.0) : _cells(5.1)] = False
+    occ[_cells(3.5) : _cells(3.6), _cells(5.1) :] = True
+    return World.from_array(occ, RES, start_pose=(1.5, 1.5, 0.0), name="unreachable")
+
+
+def test_a_whole_run_changes_state_only_as_the_table_says():
+    world = _unreachable_world()
+    rng = np.random.default_rng(3)
+    sim = Simulator(world, SimParams(), rng)
+    slam = make_slam("odometry", SimParams().laser, SlamParams(), rng)
+    run = Exploration(world, sim, slam, ExploreParams(time_limit=900.0), True, None)
+    nav = run.nav
+    S = NavState
+    visited = set()
+    stop = None
+    while stop is None:
+        stop = run.step()
+        visited.add(nav.state)
+        # each state's data is there, and only there
+        assert (nav.state is S.RETRACING) == (nav.retrace is not None)
+        if nav.state in (S.IDLE, S.EXHAUSTED):
+            assert nav.pursuit is None
+        if nav.state in (S.PLANNING, S.DRIVING, S.ESCAPING, S.RECOVERING):
+            assert (nav.pursuit.path is None) == (nav.state is S.PLANNING)
+        if nav.state is S.RECOVERING:
+            assert nav.pursuit.ctrl_fail_since is not None
+    assert stop.reason == "no_frontier"
+    for (a, b), n in nav.stats.transitions.items():
+        assert b in TRANSITIONS[a], (a, b, n)
+    # the run went through its goals, gave some up and backed out, and met the safety stop
+    assert {S.DRIVING, S.RETRACING, S.SAFETY, S.EXHAUSTED} <= visited
+    assert nav.stats.transitions[(S.DRIVING, S.SAFETY)] == run.result(stop).safety_triggers

@@ -1,0 +1,90 @@
+"""Recovery: the trail kept for backing out, the back-out command, the footprint's gap."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from worker.explore.navigator import Navigator
+from worker.explore.params import ExploreParams
+from worker.explore.recovery import Trail, back_out, square_gap
+
+RES = 0.05
+
+
+def test_trail_keeps_points_spaced_and_drops_the_oldest_past_its_cap():
+    # binary fractions of a metre, exact in floating point: a point every 4th step
+    trail = Trail(ExploreParams(trail_spacing=1 / 16, trail_cap=10, trail_trim=4))
+    for i in range(13):
+        trail.grow(np.array([i / 64, 0.0, 0.0]))
+    assert [float(q[0]) for q in trail.points] == [0.0, 1 / 16, 2 / 16, 3 / 16]
+    trail = Trail(ExploreParams(trail_spacing=0.05, trail_cap=10, trail_trim=4))
+    for i in range(11):  # the 11th point passes the cap: the 4 oldest go, 7 remain
+        trail.grow(np.array([0.1 * i, 0.0, 0.0]))
+    assert len(trail.points) == 7
+    assert trail.points[0][0] == pytest.approx(0.4)
+
+
+def test_back_target_lies_retrace_points_back_on_the_trail():
+    p = ExploreParams(retrace_min_points=4, retrace_points=16)
+    trail = Trail(p)
+    for i in range(3):
+        trail.grow(np.array([0.1 * i, 0.0, 0.0]))
+    assert trail.back_target() is None  # 3 points: too short
+    for i in range(3, 20):
+        trail.grow(np.array([0.1 * i, 0.0, 0.0]))
+    # 20 points, the newest at index 19: 16 back is index 3
+    assert trail.back_target()[0] == pytest.approx(0.3)
+    trail = Trail(p)
+    for i in range(5):
+        trail.grow(np.array([0.1 * i, 0.0, 0.0]))
+    assert trail.back_target()[0] == 0.0  # fewer than 16 back: the trail's start
+
+
+def _free_local(pose):
+    p = ExploreParams()
+    nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
+    nav.update_map(np.full((80, 80), 0.05, dtype=np.float32), RES, (0.0, 0.0), True)
+    nav.local.build(pose[0], pose[1], nav.costmap, pose[2])
+    return p, nav.local
+
+
+def test_back_out_reverses_straight_to_a_target_behind():
+    pose = np.array([2.0, 2.0, 0.0])
+    p, local = _free_local(pose)
+    # target 1 m behind: the rear already points at it, so reverse at 1.5 x escape_vel
+    v, w = back_out(p, local, pose, np.array([-1.0, 0.0]))
+    assert (v, w) == (pytest.approx(-0.15), 0.0)
+
+
+def test_back_out_first_turns_the_rear_towards_a_target_at_the_side():
+    pose = np.array([2.0, 2.0, 0.0])
+    p, local = _free_local(pose)
+    # target to the left (+y): the rear (pointing -x) must turn by -90 degrees, clockwise;
+    # 1.5 x 90 degrees is past max_vel_theta, and the error is past 0.6 rad: turn only
+    v, w = back_out(p, local, pose, np.array([0.0, 1.0]))
+    assert (v, w) == (0.0, -p.max_vel_theta)
+
+
+def test_back_out_into_an_obstacle_is_not_legal():
+    pose = np.array([2.0, 2.0, 0.0])
+    p, local = _free_local(pose)
+    # scan hits 3 cm behind the footprint's rear edge (x = 1.8): 7.5 cm of reversing hit them
+    local.add_points(0.0, np.column_stack((np.full(21, 1.77), np.linspace(1.5, 2.5, 21))))
+    local.build(pose[0], pose[1], None, pose[2], use_map=False)
+    assert back_out(p, local, pose, np.array([-1.0, 0.0])) is None
+
+
+def test_square_gap_is_the_distance_to_the_footprints_edge():
+    px = np.array([0.5, 0.3, 0.1])
+    py = np.array([0.0, 0.3, 0.0])
+    # unit test by hand: half side 0.2 at the origin; (0.5, 0) is 0.3 from the edge x = 0.2
+    assert square_gap(px[:1], py[:1], 0.0, 0.0, 0.0, 0.2) == pytest.approx(0.3)
+    # (0.3, 0.3) is 0.1 off in x and y: from the corner sqrt(0.02)
+    assert square_gap(px[1:2], py[1:2], 0.0, 0.0, 0.0, 0.2) == pytest.approx(math.sqrt(0.02))
+    assert square_gap(px, py, 0.0, 0.0, 0.0, 0.2) == 0.0  # (0.1, 0) is inside
+    # turned by 45 degrees the corner points along x: (0.5, 0) is 0.5 - 0.2 sqrt(2) away
+    gap = square_gap(px[:1], py[:1], 0.0, 0.0, math.pi / 4, 0.2)
+    assert gap == pytest.approx(0.5 - 0.2 * math.sqrt(2))

@@ -1,0 +1,140 @@
+"""Ways out of trouble: back out along the trail, unwedge from contact, make a back-off safe."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.explore import costmap_kernels as ck
+from worker.explore import dwa_kernels as dk
+from worker.explore.costmap import GlobalCostmap, LocalCostmap
+from worker.explore.dwa import DwaPlanner, drive, wrap_angle
+from worker.explore.params import ExploreParams
+
+_UNWEDGE_STEPS = 20  # Euler steps of an unwedging motion's end pose
+
+
+class Trail:
+    """The robot's recent positions `(2,)` [m] (map frame), trail_spacing apart, newest last:
+    the way it came, which was free."""
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        self.points: list[np.ndarray] = []
+
+    def grow(self, pose: np.ndarray) -> None:
+        p = self.params
+        if not self.points or np.hypot(*(pose[:2] - self.points[-1])) >= p.trail_spacing:
+            self.points.append(pose[:2].copy())
+            if len(self.points) > p.trail_cap:
+                del self.points[: p.trail_trim]
+
+    def back_target(self) -> np.ndarray | None:
+        """The point retrace_points back along the trail; None when it is too short."""
+        p = self.params
+        if len(self.points) < p.retrace_min_points:
+            return None
+        return self.points[max(0, len(self.points) - 1 - p.retrace_points)].copy()
+
+    def clear(self) -> None:
+        self.points.clear()
+
+
+def _legal(p: ExploreParams, L: LocalCostmap, pose, v: float, w: float, duration: float, half):
+    """Driving (v, w) for `duration` [s] from pose keeps a footprint of half side `half` clear."""
+    return dk.motion_legal(
+        float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, L.lethal, L.near,
+        L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution, half, p.sim_granularity,
+    )  # fmt: skip
+
+
+def back_out(
+    p: ExploreParams, L: LocalCostmap, pose: np.ndarray, d: np.ndarray
+) -> tuple[float, float] | None:
+    """Reverse along `d (2,)` [m] (towards the target, map frame), checked against the local
+    costmap: turning the rear towards it, and reversing once it about points there; None when
+    no such motion is legal."""
+    # backwards: the robot's rear points at the target
+    err = wrap_angle(math.atan2(d[1], d[0]) + math.pi - pose[2])
+    w = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * err))
+    v = p.escape_vel * p.back_out_speed_ratio if abs(err) < p.retrace_max_heading_error else 0.0
+    for vv, ww in ((v, w), (0.0, w), (v, 0.0)):
+        if (vv, ww) != (0.0, 0.0) and _legal(
+            p, L, pose, vv, ww, p.back_out_check_time, p.footprint_half_m
+        ):
+            return vv, ww
+    return None
+
+
+def unwedge(
+    p: ExploreParams, L: LocalCostmap, costmap: GlobalCostmap, pose: np.ndarray
+) -> tuple[float, float] | None:
+    """Out of contact: the footprint overlaps an obstacle cell (the scan's or the map's) at
+    the robot's own pose, so every motion collides, backing away included (in clutter the
+    DWA's unpadded pass can end a few centimetres from furniture, and a cell is 5 cm).
+    The slow motion (back, forward, turn, for unwedge_time) that takes the footprint
+    farthest from the cells it touches without touching any other, backwards first on
+    ties (sliding along an obstacle at its side is a way out too); None when it touches
+    nothing, or every such motion would take it nearer to them."""
+    x, y, th = (float(v) for v in pose)
+    half = p.footprint_half_m
+    L.build(x, y, costmap, th)
+    if not ck.footprint_collides(
+        L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
+        x, y, th, half,
+    ):  # fmt: skip
+        return None
+    blocked = L.lethal.copy()
+    L.build(x, y, costmap, th, clear_touching=True)  # same window: same origin
+    iy, ix = np.nonzero(blocked & ~L.lethal)
+    if iy.size == 0:
+        return None
+    cx = L.origin[0] + (ix + 0.5) * L.resolution
+    cy = L.origin[1] + (iy + 0.5) * L.resolution
+    best, best_gap = None, square_gap(cx, cy, x, y, th, half) - 1e-6
+    duration = p.unwedge_time
+    for v in (p.escape_vel, 0.0, p.min_vel_x):
+        for w in (-p.min_in_place_vel_theta, 0.0, p.min_in_place_vel_theta):
+            if (v, w) == (0.0, 0.0) or not _legal(p, L, (x, y, th), v, w, duration, half):
+                continue
+            ex, ey, eth = drive(x, y, th, v, w, duration, _UNWEDGE_STEPS)
+            gap = square_gap(cx, cy, ex, ey, eth, half)
+            if gap > best_gap:
+                best, best_gap = (v, w), gap
+    return best
+
+
+def safe_override(
+    p: ExploreParams,
+    L: LocalCostmap,
+    dwa: DwaPlanner,
+    pose: np.ndarray,
+    vw: tuple[float, float],
+    v0: float,
+    w0: float,
+    planned: tuple[float, float] = (0.0, 0.0),
+) -> tuple[float, float]:
+    """The safety controller backs off blind (the laser does not see behind): check the
+    manoeuvre `vw` against the local costmap, which holds the map's obstacles; if it would
+    hit something, only turn; if that too, let the local planner turn or back off its way;
+    if it cannot either, its own (collision-checked) `planned` command, as the only way
+    out of the corner."""
+    for v, w in (vw, (0.0, vw[1])):
+        if _legal(p, L, pose, v, w, p.safety_backoff_time, p.footprint_half_m):
+            return v, w
+    if dwa.path_xy is not None:
+        cmd = dwa.command(pose, v0, w0, L, None, no_forward=True)
+        if cmd.legal:
+            return cmd.v, cmd.w
+    return planned
+
+
+def square_gap(px: np.ndarray, py: np.ndarray, x: float, y: float, th: float, half: float):
+    """[m] the least distance from the points `(K,)` to the square footprint (half side
+    `half`) at (x, y, th); 0 for a point inside."""
+    dx, dy = px - x, py - y
+    c, s = math.cos(th), math.sin(th)
+    u = np.maximum(np.abs(dx * c + dy * s) - half, 0.0)
+    v = np.maximum(np.abs(-dx * s + dy * c) - half, 0.0)
+    return float(np.min(np.hypot(u, v)))
