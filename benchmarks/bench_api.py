@@ -258,7 +258,9 @@ def _side_by_side(args, other: Path) -> None:
     figures: dict[str, dict[str, list[float]]] = {name: {} for name in trees}
     print(f"side by side: this = {ROOT}, other = {other}; {args.rounds} rounds")
     for r in range(args.rounds):
-        for name, (python, tree) in trees.items():
+        # which tree goes first alternates too: the machine's drift within a round then
+        # favours neither
+        for name, (python, tree) in sorted(trees.items(), reverse=r % 2 == 1):
             with scratch_database("mapqual_bench") as db_url:
                 env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url, **_quotas(args))
                 redis.Redis.from_url(redis_url).flushdb()
