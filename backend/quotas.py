@@ -12,7 +12,7 @@ from datetime import timedelta
 from typing import Any
 
 from fastapi import HTTPException, status
-from sqlalchemy import func, select, update
+from sqlalchemy import bindparam, func, select, update
 from sqlalchemy.orm import Session
 
 from backend.core.config import Settings
@@ -22,6 +22,22 @@ from worker.status import RunStatus
 
 ACTIVE = (RunStatus.QUEUED, RunStatus.RUNNING)
 DEFAULT_TIME_LIMIT_S = ExploreParams.time_limit  # [s] what a run without the parameter gets
+
+
+# An owner's runs queued or running: how many, and the simulated seconds they may take. At most
+# one run past the limit is read (:n_max): past it the answer is 429 whatever the rest, so the
+# check costs O(limit), not O(runs the owner has queued). Built once: SQLAlchemy reuses its
+# compiled form.
+_MINE = (
+    select(Run.time_limit_s)
+    .where(Run.owner_id == bindparam("owner_id"), Run.status.in_(ACTIVE))
+    .limit(bindparam("n_max"))
+    .subquery()
+)
+_ACTIVE = select(
+    func.count(),
+    func.coalesce(func.sum(func.coalesce(_MINE.c.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
+).select_from(_MINE)
 
 
 def check_runs(
@@ -39,20 +55,11 @@ def check_runs(
     the transaction holds the owner's lock already (`lock_owner`, or a statement of its own)."""
     if not locked:
         lock_owner(session, owner_id)
-    # at most one run past the limit is read: past it the answer is 429 whatever the rest, so
-    # the check costs O(limit), not O(runs the owner has queued)
-    mine = (
-        select(Run.time_limit_s)
-        .where(Run.owner_id == owner_id, Run.status.in_(ACTIVE))
-        .limit(settings.quota_active_runs + 1)
-        .subquery()
+    active, seconds = (
+        session.connection()
+        .execute(_ACTIVE, {"owner_id": owner_id, "n_max": settings.quota_active_runs + 1})
+        .one()
     )
-    active, seconds = session.execute(
-        select(
-            func.count(),
-            func.coalesce(func.sum(func.coalesce(mine.c.time_limit_s, DEFAULT_TIME_LIMIT_S)), 0.0),
-        ).select_from(mine)
-    ).one()
     if active + n_new > settings.quota_active_runs:
         _refuse(
             f"{active} runs queued or running and {n_new} more asked for exceed the limit "

@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import gc
-import io
 import os
 import signal
 import subprocess
@@ -49,94 +47,12 @@ from pathlib import Path
 
 import httpx
 import numpy as np
-from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.bench_api_load import check, cpu_s, measure, png  # noqa: E402
 from tests.services import ensure_redis, scratch_database  # noqa: E402
-
-
-def _png(rooms: tuple[int, int] = (1, 1), room_px: int = 80) -> bytes:
-    """rooms[0] x rooms[1] square rooms of room_px pixels joined by 1 m doors (0.05 m/px)."""
-    nx, ny = rooms
-    img = np.full((ny * room_px + 1, nx * room_px + 1), 255, np.uint8)
-    img[::room_px, :] = 0
-    img[:, ::room_px] = 0
-    door = np.arange(room_px // 2 - 10, room_px // 2 + 10)  # 1 m in the middle of a wall
-    for i in range(1, nx):
-        for j in range(ny):
-            img[j * room_px + door, i * room_px] = 255
-    for j in range(1, ny):
-        for i in range(nx):
-            img[j * room_px, i * room_px + door] = 255
-    buf = io.BytesIO()
-    Image.fromarray(img).save(buf, format="PNG")
-    return buf.getvalue()
-
-
-async def _closed(client, n_requests, n_clients, make_request):
-    """n_clients back to back until n_requests are done: (latencies in ms, requests/s)."""
-    latencies: list[float] = []
-    queue: asyncio.Queue[int] = asyncio.Queue()
-    for i in range(n_requests):
-        queue.put_nowait(i)
-
-    async def worker():
-        while True:
-            try:
-                i = queue.get_nowait()
-            except asyncio.QueueEmpty:
-                return
-            t0 = time.perf_counter()
-            _check(await make_request(client, i))
-            latencies.append((time.perf_counter() - t0) * 1000)
-
-    t0 = time.perf_counter()
-    await asyncio.gather(*(worker() for _ in range(n_clients)))
-    return np.array(latencies), n_requests / (time.perf_counter() - t0)
-
-
-async def _open(client, n_requests, n_clients, period, make_request, seed=0):
-    """n_clients, each due to send one request every `period` s (random phase): latency in ms
-    from the moment each request was due, so a backlog counts (no coordinated omission)."""
-    latencies: list[float] = []
-    per_client = max(1, n_requests // n_clients)
-    phase = np.random.default_rng(seed).uniform(0, period, n_clients)
-    start = time.perf_counter() + 0.05
-
-    async def worker(c):
-        for k in range(per_client):
-            due = start + phase[c] + k * period
-            delay = due - time.perf_counter()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            _check(await make_request(client, c * per_client + k))
-            latencies.append((time.perf_counter() - due) * 1000)
-
-    await asyncio.gather(*(worker(c) for c in range(n_clients)))
-    return np.array(latencies)
-
-
-def _check(r) -> None:
-    if r.status_code >= 400:
-        raise RuntimeError(f"{r.status_code} {r.text}")
-
-
-async def _measure(base, key, args, make_request):
-    """The three figures of one endpoint: sequential, open-loop 50 clients, saturation."""
-    limits = httpx.Limits(max_connections=args.clients, max_keepalive_connections=args.clients)
-    # The client's own heap out of its garbage collector's sight: a full collection of it pauses
-    # the clients for 50-100 ms, which the open loop would count as server latency.
-    gc.collect()
-    gc.freeze()
-    async with httpx.AsyncClient(
-        base_url=base, headers={"Authorization": f"Bearer {key}"}, limits=limits, timeout=30
-    ) as client:
-        seq, _ = await _closed(client, min(args.requests, 300), 1, make_request)
-        opn = await _open(client, args.requests, args.clients, args.period, make_request)
-        _, rate = await _closed(client, args.requests, args.clients, make_request)
-    return seq, opn, rate
 
 
 def _wait_done(base, hdr, job_id, timeout=1800.0) -> None:
@@ -285,18 +201,8 @@ def _upload(base: str, hdr: dict, name: str, png: bytes) -> dict:
         data={"resolution": "0.05"},
         timeout=60,
     )
-    _check(r)
+    check(r)
     return r.json()
-
-
-def _cpu_s(pid: int) -> float:
-    """CPU time [s] (user + system) of a process and its children so far, from /proc."""
-    pids = [pid] + [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
-    ticks = 0
-    for p in pids:
-        fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
-        ticks += int(fields[11]) + int(fields[12])
-    return ticks / os.sysconf("SC_CLK_TCK")
 
 
 def _latencies(base: str, keys: list[str], args, pid: int | None = None) -> dict[str, tuple]:
@@ -308,7 +214,7 @@ def _latencies(base: str, keys: list[str], args, pid: int | None = None) -> dict
     # 14 h, within the default quota of 100 simulated hours
     params = {"explore": {"time_limit": 600.0}}
     bodies = [
-        {"world_id": _upload(base, hdr, "b.png", _png())["id"], "runs": 1, "slam": "odometry",
+        {"world_id": _upload(base, hdr, "b.png", png())["id"], "runs": 1, "slam": "odometry",
          "params": params}
         for hdr in auth
     ]  # fmt: skip
@@ -317,18 +223,24 @@ def _latencies(base: str, keys: list[str], args, pid: int | None = None) -> dict
         k = i % len(keys)
         return await client.post("/api/v1/jobs", json=bodies[k], headers=auth[k])
 
+    # warm-up, outside the CPU count: one POST per owner and a GET, so what a server does once
+    # on its first requests (e.g. importing the pipeline's parameters) is not spread over them
+    for body, hdr in zip(bodies, auth, strict=True):
+        job = httpx.post(f"{base}/api/v1/jobs", json=body, headers=hdr, timeout=60)
+        check(job)
+    check(httpx.get(f"{base}/api/v1/jobs/{job.json()['id']}", headers=hdr))
     n_requests = min(args.requests, 300) + 2 * args.requests  # what _measure sends
-    c0 = _cpu_s(pid) if pid else 0.0
-    post = asyncio.run(_measure(base, keys[0], args, post_job))
-    c1 = _cpu_s(pid) if pid else 0.0
+    c0 = cpu_s(pid) if pid else 0.0
+    post = asyncio.run(measure(base, keys[0], args, post_job))
+    c1 = cpu_s(pid) if pid else 0.0
     page = httpx.get(f"{base}/api/v1/jobs", headers=auth[0], params={"limit": 200}).json()
     job_ids = [j["id"] for j in page["items"]]
 
     async def get_job(client, i):
         return await client.get(f"/api/v1/jobs/{job_ids[i % len(job_ids)]}")
 
-    get = asyncio.run(_measure(base, keys[0], args, get_job))
-    c2 = _cpu_s(pid) if pid else 0.0
+    get = asyncio.run(measure(base, keys[0], args, get_job))
+    c2 = cpu_s(pid) if pid else 0.0
     per = 1000.0 / n_requests
     return {
         "POST /jobs": (*post, (c1 - c0) * per),
@@ -346,7 +258,9 @@ def _side_by_side(args, other: Path) -> None:
     figures: dict[str, dict[str, list[float]]] = {name: {} for name in trees}
     print(f"side by side: this = {ROOT}, other = {other}; {args.rounds} rounds")
     for r in range(args.rounds):
-        for name, (python, tree) in trees.items():
+        # which tree goes first alternates too: the machine's drift within a round then
+        # favours neither
+        for name, (python, tree) in sorted(trees.items(), reverse=r % 2 == 1):
             with scratch_database("mapqual_bench") as db_url:
                 env = dict(os.environ, DATABASE_URL=db_url, REDIS_URL=redis_url, **_quotas(args))
                 redis.Redis.from_url(redis_url).flushdb()
@@ -410,7 +324,7 @@ def _bench(args, db_url: str) -> None:
             import redis
 
             redis.Redis.from_url(redis_url).flushdb()  # the latency phase's runs stay unrun
-            rooms = _upload(base, hdr, "rooms.png", _png((3, 2), 120))
+            rooms = _upload(base, hdr, "rooms.png", png((3, 2), 120))
 
             def body_for(n):
                 return {

@@ -26,11 +26,12 @@ from backend.api.deps import (
 from backend.core.config import Settings
 from backend.db.models import Job, Run, User, World
 from backend.lifecycle import cancel_run
+from backend.new_job import insert_job
 from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
-from backend.store import create_job, mark_run_failed
+from backend.store import mark_run_failed
 from worker.run_params import RunParams  # light: no numba in the API process
-from worker.status import JobStatus, RunStatus, WorldStatus
+from worker.status import JobStatus, WorldStatus
 
 router = APIRouter(tags=["jobs"])
 
@@ -100,12 +101,12 @@ def submit(
         raise _queue_down() from None
     n_new, run_params = len(body.seed_list()), json.loads(params_json)
     quotas.check_runs(session, user.id, settings, n_new, run_params, locked=locked)
-    job = create_job(
+    job = insert_job(
         session,
         owner_id=user.id,
         world_id=body.world_id,
         slam=algorithm,
-        params=json.loads(params_json),
+        params=run_params,
         seeds=body.seed_list(),
         idempotency_key=idempotency_key,
         broker_epoch=epoch,
@@ -114,9 +115,8 @@ def submit(
     try:
         send_runs(settings.redis_url, [run.id for run in job.runs])
     except Exception as exc:
-        for run in job.runs:
-            if run.status == RunStatus.QUEUED:
-                mark_run_failed(session, run.id, f"could not enqueue: {type(exc).__name__}")
+        for run in job.runs:  # still queued: nothing could take them from a queue they missed
+            mark_run_failed(session, run.id, f"could not enqueue: {type(exc).__name__}")
         session.commit()
         raise _queue_down() from None
     return JobOut.of(job)
