@@ -19,8 +19,19 @@ T = TypeVar("T")
 
 
 def to_dict(obj: Any) -> dict[str, Any]:
-    """A parameter dataclass as plain JSON-serialisable data (tuples become lists)."""
-    return json.loads(json.dumps(dataclasses.asdict(obj)))
+    """A parameter dataclass as plain JSON-serialisable data (tuples become lists); a field
+    whose metadata says `omit_if_none` is left out while it is None."""
+    return json.loads(json.dumps(_omit_none(obj, dataclasses.asdict(obj))))
+
+
+def _omit_none(obj: Any, data: dict[str, Any]) -> dict[str, Any]:
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if value is None and f.metadata.get("omit_if_none"):
+            del data[f.name]
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            _omit_none(value, data[f.name])
+    return data
 
 
 def from_dict(cls: type[T], data: Any, where: str = "") -> T:

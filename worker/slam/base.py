@@ -10,8 +10,8 @@ from worker.errors import InputError
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams
 
-SlamName = Literal["rbpf", "odometry"]
-SLAM_NAMES: tuple[str, ...] = ("rbpf", "odometry")
+SlamName = Literal["rbpf", "odometry", "graph"]
+SLAM_NAMES: tuple[str, ...] = ("rbpf", "odometry", "graph")
 
 
 class LaserGeometry(Protocol):
@@ -75,7 +75,7 @@ def make_slam(
     params: SlamParams | None = None,
     rng: np.random.Generator | None = None,
 ) -> SlamAlgorithm:
-    """The SLAM algorithm `name` ("rbpf" or "odometry") for this laser.
+    """The SLAM algorithm `name` ("rbpf", "odometry" or "graph") for this laser.
 
     params: None = the thesis defaults; rng: the run's generator (None = seed 0).
     """
@@ -89,4 +89,8 @@ def make_slam(
         from worker.slam.rbpf import RbpfSlam
 
         return RbpfSlam(laser, params, rng)
+    if name == "graph":
+        from worker.slam.graph.slam import GraphSlam
+
+        return GraphSlam(laser, params)
     raise InputError(f"unknown SLAM algorithm {name!r}; choose one of: {', '.join(SLAM_NAMES)}")
