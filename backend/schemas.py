@@ -71,7 +71,7 @@ class JobIn(BaseModel):
     seeds: list[Annotated[int, Field(ge=0, le=MAX_SEED)]] | None = Field(
         default=None, min_length=1, max_length=MAX_RUNS_PER_JOB
     )
-    slam: Literal["rbpf", "odometry", "oracle"] | None = None
+    slam: Literal["rbpf", "odometry", "oracle", "graph"] | None = None
     params: dict[str, Any] = Field(
         default_factory=dict,
         description="Overrides by section: sim, slam, explore, eval (see RunParams).",

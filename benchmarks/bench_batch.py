@@ -51,7 +51,7 @@ def _batch(specs, workers: int) -> tuple[float, float, float, list[dict]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="odometry", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="odometry", choices=["rbpf", "odometry", "oracle", "graph"])
     ap.add_argument("--runs", type=int, default=8)
     ap.add_argument("--time-limit", type=float, default=600.0, help="[s] simulated, per run")
     ap.add_argument("--repeats", type=int, default=2)

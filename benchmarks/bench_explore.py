@@ -119,7 +119,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--proof", action="store_true", help="whole explorations, outcomes")
     ap.add_argument("--worlds", default="", help="comma-separated list for --proof")
-    ap.add_argument("--slam", default="oracle", choices=("oracle", "rbpf", "odometry"))
+    ap.add_argument("--slam", default="oracle", choices=("oracle", "rbpf", "odometry", "graph"))
     ap.add_argument("--time-limit", type=float, default=3600.0, help="per run in --proof [s]")
     ap.add_argument("--png", default="", help="folder for one PNG per --proof run")
     args = ap.parse_args()

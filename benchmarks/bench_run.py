@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle", "graph"])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
     ap.add_argument("--slam-threads", type=int, default=1, help="scan-matching threads")

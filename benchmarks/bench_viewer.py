@@ -100,7 +100,7 @@ def _timed(world, params, seed, reporter) -> tuple[tuple[float, ...], dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle"])
+    ap.add_argument("--slam", default="rbpf", choices=["rbpf", "odometry", "oracle", "graph"])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=120.0, help="[s] simulated")
     ap.add_argument("--repeats", type=int, default=3)

@@ -34,11 +34,11 @@ from worker.params import from_dict, to_dict
 from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import SimParams, Simulator
 from worker.slam.base import make_slam
-from worker.slam.params import SlamParams
+from worker.slam.params import SlamParams, with_defaults_for
 from worker.world.world import World
 
-Algorithm = Literal["rbpf", "odometry", "oracle"]
-ALGORITHMS: tuple[str, ...] = ("rbpf", "odometry", "oracle")
+Algorithm = Literal["rbpf", "odometry", "oracle", "graph"]
+ALGORITHMS: tuple[str, ...] = ("rbpf", "odometry", "oracle", "graph")
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,10 @@ class RunParams:
     slam: SlamParams = field(default_factory=SlamParams)
     explore: ExploreParams = field(default_factory=ExploreParams)
     eval: EvalParams = field(default_factory=EvalParams)
+
+    def __post_init__(self) -> None:
+        # a graph run stores the graph SLAM settings it ran with (defaults filled in)
+        object.__setattr__(self, "slam", with_defaults_for(self.slam, self.algorithm))
 
     def to_json(self) -> dict[str, Any]:
         """Plain JSON data (`from_json` reads it back to an equal object)."""

@@ -130,7 +130,7 @@ def batch(
     ] = None,
     runs: Annotated[int | None, typer.Option(min=1, help="Seeds 1..N per condition.")] = None,
     seeds: Annotated[str | None, typer.Option(help="Seeds: A-B or a list, e.g. 1-10.")] = None,
-    slam: Annotated[str | None, typer.Option(help="Algorithms, e.g. rbpf,odometry.")] = None,
+    slam: Annotated[str | None, typer.Option(help="Algorithms, e.g. rbpf,graph,odometry.")] = None,
     laser_noise: Annotated[
         str | None, typer.Option(help="Laser noise sigmas [m], e.g. 0,0.1,0.3.")
     ] = None,

@@ -96,7 +96,7 @@ def run(
     ],
     seed: Annotated[int, typer.Option(min=0, help="Random seed: same seed, same run.")] = 1,
     slam: Annotated[
-        str | None, typer.Option(help="rbpf | odometry | oracle (default rbpf).")
+        str | None, typer.Option(help="rbpf | odometry | oracle | graph (default rbpf).")
     ] = None,
     laser_noise: Annotated[
         float | None, typer.Option(min=0.0, help="Laser range noise sigma [m].")

@@ -16,6 +16,7 @@ from mapqual.cli import app
 class Algorithm(StrEnum):
     rbpf = "rbpf"
     odometry = "odometry"
+    graph = "graph"
 
 
 def _opt(help_text: str):
@@ -110,7 +111,7 @@ def slam(
         "wall_s": round(result.wall_s, 3),
         "real_time_factor": round(result.real_time_factor, 1),
         "map_cells": list(result.grid.shape),
-        "params": to_dict(params),
+        "params": to_dict(result.params),
     }
     (out / "slam.json").write_text(json.dumps(summary, indent=2) + "\n")
     if as_json:

@@ -235,7 +235,7 @@ def _group(spec: dict[str, Any], base_dir: Path | None, base_params: dict) -> Gr
     return Group(
         worlds=tuple(resolve_worlds(worlds, base_dir)),
         seeds=spec["seeds"],
-        slam=parse_list(slam, "slam (rbpf, odometry, oracle)", _slam),
+        slam=parse_list(slam, "slam (rbpf, odometry, oracle, graph)", _slam),
         laser_noise=parse_list(noise, "laser noise [m] (>= 0)", _noise),
         params=params,
     )
