@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from worker.errors import InputError
 from worker.params import to_dict
 from worker.pipeline import RunParams
 from worker.slam.graph.params import GraphSlamParams
@@ -44,6 +46,29 @@ def test_rbpf_params_json_has_no_graph_key_and_graph_runs_store_theirs():
     graph = RunParams(algorithm="graph").to_json()
     assert graph["slam"]["graph"] == to_dict(GraphSlamParams())
     assert RunParams.from_json(graph) == RunParams(algorithm="graph")
+
+
+@pytest.mark.parametrize(
+    ("graph", "needle"),
+    [
+        ({"minimum_travel_distance": -1.0}, "minimum_travel_distance must be a positive"),
+        ({"loop_ambiguity_ratio": 1.5}, "loop_ambiguity_ratio must be in [0, 1]"),
+        ({"scan_buffer_size": 0}, "scan_buffer_size must be in [1, 1000]"),
+        ({"no_such_key": 1}, "unknown parameter slam.graph.no_such_key"),
+    ],
+)
+def test_bad_graph_parameters_are_one_line_errors(graph, needle):
+    with pytest.raises(InputError, match=re.escape(needle)):
+        RunParams.from_json({"algorithm": "graph", "slam": {"graph": graph}})
+
+
+def test_bad_graph_parameter_file_exits_2(tmp_path):
+    world = _rooms(tmp_path)
+    (tmp_path / "p.yaml").write_text("slam:\n  graph:\n    huber_delta: 0\n")
+    r = _mapqual(tmp_path, "run", str(world), "--slam", "graph", "--params", "p.yaml")
+    assert r.returncode == 2
+    assert "huber_delta must be a positive number" in r.stderr
+    assert "Traceback" not in r.stderr
 
 
 def test_closed_loop_run_with_graph_completes(tmp_path):
