@@ -23,8 +23,12 @@ class NodeMap:
         sin_a: np.ndarray,
         usable: float,
         max_range: float,
+        tolerance: tuple[float, float] = (0.0, 0.0),
     ):
+        """tolerance: (xy [m], theta [rad]) a registered node may have moved by before the
+        map is rebuilt (0, 0: any move rebuilds it)."""
         self.res, self.margin, self.occ_thresh = res, margin, occ_thresh
+        self.tolerance = tolerance
         self._cos_a, self._sin_a = cos_a, sin_a
         self._usable, self._max_range = usable, max_range
         self._hits = np.zeros((0, 0), dtype=np.float32)
@@ -56,9 +60,10 @@ class NodeMap:
     def update(self, poses: np.ndarray, ranges: np.ndarray, reach: np.ndarray) -> None:
         """Bring the counts to the scans ranges (N, B) at poses (N, 3); reach (N,) [m] is how
         far each scan's cells lie from its pose. The first nodes registered before must be the
-        same nodes: if any of them moved, everything is registered again."""
+        same nodes: if any of them moved past the tolerance since it was registered,
+        everything is registered again at the current poses."""
         n_done = self._poses.shape[0]
-        moved = n_done > 0 and not np.array_equal(self._poses, poses[:n_done])
+        moved = n_done > 0 and self._moved(poses[:n_done])
         lo = (poses[:, :2] - reach[:, None]).min(axis=0)
         hi = (poses[:, :2] + reach[:, None]).max(axis=0)
         if moved or not self._covers(lo, hi):
@@ -80,7 +85,18 @@ class NodeMap:
             self._usable,
             self._max_range,
         )
-        self._poses = np.array(poses, copy=True)
+        self._poses = np.concatenate([self._poses[:n_done], poses[n_done:]])
+
+    def _moved(self, poses: np.ndarray) -> bool:
+        d = poses - self._poses
+        dth = np.abs((d[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+        tol_xy, tol_th = self.tolerance
+        return bool((np.hypot(d[:, 0], d[:, 1]) > tol_xy).any() or (dth > tol_th).any())
+
+    @property
+    def registered_poses(self) -> np.ndarray:
+        """(N, 3) the poses the counts were made with."""
+        return self._poses.copy()
 
     def occupancy(self) -> OccupancyGrid:
         """The map as hit / visit ratios (NaN = never seen)."""

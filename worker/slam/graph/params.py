@@ -77,6 +77,9 @@ class GraphSlamParams:
     huber_delta: float = 1.0  # [sigma] Huber kernel on loop edges (slam_toolbox's Ceres HuberLoss)
     loop_max_chi2: float = 16.27  # a closure whose edge keeps more than this (chi^2 3 dof, 0.999)
     # after optimisation is undone: it disagrees with the rest of the graph
+    # the map is rebuilt when an optimisation moved a node past these since it was drawn
+    map_rebuild_tolerance_xy: float = 0.025  # [m] half a 5 cm cell
+    map_rebuild_tolerance_theta: float = 0.0025  # [rad] half a cell at 10 m
     # back end (Levenberg-Marquardt, slam_toolbox's Ceres solver)
     optimizer_iterations: int = 20
     optimizer_tolerance: float = 1e-6  # stop when the cost falls by less than this fraction
@@ -92,7 +95,8 @@ class GraphSlamParams:
             "odom_sigma_theta_per_rad", "loop_search_maximum_distance",
             "loop_search_space_dimension", "loop_search_space_smear_deviation",
             "loop_angular_search_window", "loop_ambiguity_radius", "loop_optimize_min_correction",
-            "loop_optimize_min_rotation", "loop_gate_xy",
+            "loop_optimize_min_rotation", "map_rebuild_tolerance_xy",
+            "map_rebuild_tolerance_theta", "loop_gate_xy",
             "loop_gate_theta", "loop_sigma_xy",
             "loop_sigma_theta", "huber_delta", "loop_max_chi2", "optimizer_tolerance",
         )  # fmt: skip

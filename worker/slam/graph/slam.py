@@ -47,6 +47,7 @@ class GraphSlam:
         self.map = NodeMap(
             params.delta, params.map_margin, params.occ_thresh,
             self._cos_a, self._sin_a, self._usable, self._max_range,
+            (g.map_rebuild_tolerance_xy, g.map_rebuild_tolerance_theta),
         )  # fmt: skip
         self.closures: list[LoopClosure] = []
         self.rejected_closures = 0  # matched, then undone by the chi^2 check
