@@ -1,1 +1,1 @@
-"""SLAM behind one interface: `make_slam("rbpf" | "odometry", laser, params, rng)`."""
+"""SLAM behind one interface: `make_slam("rbpf" | "odometry" | "graph", laser, params, rng)`."""
