@@ -41,8 +41,19 @@ def adapter(cls: type[T]) -> TypeAdapter[T]:
 
 
 def to_dict(obj: Any) -> dict[str, Any]:
-    """A parameter dataclass as plain JSON-serialisable data (tuples become lists)."""
-    return adapter(type(obj)).dump_python(obj, mode="json")
+    """A parameter dataclass as plain JSON-serialisable data (tuples become lists); a field
+    whose metadata says `omit_if_none` is left out while it is None."""
+    return _omit_none(obj, adapter(type(obj)).dump_python(obj, mode="json"))
+
+
+def _omit_none(obj: Any, data: dict[str, Any]) -> dict[str, Any]:
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if value is None and f.metadata.get("omit_if_none"):
+            del data[f.name]
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            _omit_none(value, data[f.name])
+    return data
 
 
 def from_dict(cls: type[T], data: Any, where: str = "") -> T:

@@ -18,7 +18,7 @@ from worker.explore.params import ExploreParams
 from worker.params import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
 from worker.slam import registry
-from worker.slam.params import SlamParams
+from worker.slam.params import SlamParams, with_defaults_for
 
 # A registered SLAM algorithm's name: checked against the registry when it is read, listed as
 # an enum in the JSON Schema.
@@ -56,6 +56,8 @@ class RunParams:
             raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
         if self.explore.footprint_half_m != 0.5 * self.sim.footprint:
             object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
+        # a graph run stores the graph SLAM settings it ran with (defaults filled in)
+        object.__setattr__(self, "slam", with_defaults_for(self.slam, self.algorithm))
 
     def to_json(self) -> dict[str, Any]:
         """Plain JSON data (`from_json` reads it back to an equal object)."""

@@ -124,7 +124,7 @@ def _run(
         "wall_s": round(result.wall_s, 3),
         "real_time_factor": round(result.real_time_factor, 1),
         "map_cells": list(result.grid.shape),
-        "params": to_dict(params),
+        "params": to_dict(result.params),
     }
     return summary, result
 

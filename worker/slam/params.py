@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 from worker.errors import InputError
+from worker.slam.graph.params import GraphSlamParams
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,9 @@ class SlamParams:
     srt: float = 0.2  # [rad/m] rotation noise from translation
     str_: float = 0.1  # [m/rad] translation noise from rotation (GMapping's `str`)
     stt: float = 0.2  # [rad/rad] rotation noise from rotation
+    # graph SLAM's own settings; None = its defaults, and no key in the stored JSON (so rbpf
+    # runs keep their JSON and run keys); a graph run stores them (`with_defaults_for`)
+    graph: GraphSlamParams | None = field(default=None, metadata={"omit_if_none": True})
 
     def __post_init__(self) -> None:
         positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
@@ -76,3 +80,11 @@ class SlamParams:
             raise InputError(f"SLAM parameter occ_thresh must be in (0, 1), got {self.occ_thresh}")
         if self.max_range is not None and not (self.max_range > 0):
             raise InputError(f"SLAM parameter max_range must be positive, got {self.max_range}")
+
+
+def with_defaults_for(params: SlamParams, algorithm: str) -> SlamParams:
+    """params with the graph settings filled in when the algorithm is graph SLAM, so that they
+    are stored with the run."""
+    if algorithm == "graph" and params.graph is None:
+        return replace(params, graph=GraphSlamParams())
+    return params

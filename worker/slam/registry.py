@@ -104,3 +104,12 @@ def _odometry(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator
 register("rbpf", _rbpf, "rbpf (GMapping)", "slam")
 register("odometry", _odometry, "odometry only", "baseline")
 register("oracle", _odometry, "oracle (ground truth)", "oracle", ground_truth=True)
+
+
+def _graph(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.graph.slam import GraphSlam
+
+    return GraphSlam(laser, params)
+
+
+register("graph", _graph, "graph SLAM (pose graph, loop closure)", "slam")

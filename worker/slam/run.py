@@ -12,7 +12,7 @@ from worker.errors import InputError
 from worker.evaluate.trajectory import Trajectory
 from worker.slam.base import LaserGeometry, SlamName, make_slam
 from worker.slam.grid import OccupancyGrid
-from worker.slam.params import SlamParams
+from worker.slam.params import SlamParams, with_defaults_for
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,7 +58,7 @@ def run_slam(
     if n == 0:
         raise InputError("the log holds no laser scans")
     pose_odom = np.asarray(pose_odom, dtype=np.float64).reshape(n, 3)
-    params = SlamParams() if params is None else params
+    params = with_defaults_for(SlamParams() if params is None else params, algorithm)
     slam = make_slam(algorithm, laser, params, rng)
     est = np.empty((n, 3))
     updates = 0

@@ -1,0 +1,1 @@
+"""Graph-based SLAM (the Karto / slam_toolbox and Cartographer family) behind the Slam protocol."""

@@ -1,0 +1,217 @@
+"""GraphSlam: Karto / slam_toolbox-style pose-graph SLAM behind the Slam protocol."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.slam.base import LaserGeometry, beam_angles, beam_limits
+from worker.slam.gating import UpdateGate, check_scan
+from worker.slam.graph.mapping import NodeMap, scan_reach
+from worker.slam.graph.match_kernels import point_normals, scan_points
+from worker.slam.graph.matcher import PointMap
+from worker.slam.graph.nodes import EdgeList, LoopClosure, NodeStore, find_candidate, search_window
+from worker.slam.graph.optimize import edge_errors, optimize
+from worker.slam.graph.params import GraphSlamParams
+from worker.slam.grid import OccupancyGrid
+from worker.slam.motion import compose3, relative3
+from worker.slam.params import SlamParams
+
+NORMAL_GAP = 0.3  # [m] scan points farther apart are not neighbours when estimating normals
+
+
+class GraphSlam:
+    """A node every minimum_travel_distance / heading; each matched against a local map of
+    the recent nodes (correlative search around the odometry prior) and tied to the previous
+    node by the match (or by odometry alone when the match is poor). Every loop_attempt_every
+    nodes an earlier chain near the estimate is searched for a loop closure; an accepted one
+    adds a robust edge and the graph is optimised. The estimate is the latest node's optimised
+    pose composed with the odometry since; the map is rebuilt from the optimised poses.
+    """
+
+    name = "graph"
+
+    def __init__(self, laser: LaserGeometry, params: SlamParams):
+        self.params = params
+        self.graph_params = params.graph if params.graph is not None else GraphSlamParams()
+        g = self.graph_params
+        angles = beam_angles(laser)
+        self._n_beams = angles.shape[0]
+        self._cos_a, self._sin_a = np.cos(angles), np.sin(angles)
+        self._max_range, self._usable = beam_limits(laser, params)
+        self._match_max = min(g.match_range, self._usable)
+        self._gate = UpdateGate(g.minimum_travel_distance, g.minimum_travel_heading, -1.0)
+        self.nodes = NodeStore(self._n_beams)
+        self.edges = EdgeList()
+        self.map = NodeMap(
+            params.delta, params.map_margin, params.occ_thresh,
+            self._cos_a, self._sin_a, self._usable, self._max_range,
+            (g.map_rebuild_tolerance_xy, g.map_rebuild_tolerance_theta),
+        )  # fmt: skip
+        self.closures: list[LoopClosure] = []
+        self.rejected_closures = 0  # matched, then undone by the chi^2 check
+        self.ambiguous_closures = 0  # matched, but as well somewhere else
+        self.match_failures = 0  # nodes tied by odometry alone
+        self.optimisations = 0
+        self.updates = 0
+        self._path_m = 0.0
+        self._odom_prev: np.ndarray | None = None
+        self._pose_odom = np.zeros(3)
+        self._T_map_odom = np.zeros(3)
+        self._grid: OccupancyGrid | None = None
+
+    def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
+        if self._odom_prev is not None:
+            self._path_m += math.hypot(pose[0] - self._odom_prev[0], pose[1] - self._odom_prev[1])
+        self._odom_prev = pose
+        self._pose_odom = pose
+        if not self._gate.step(t, pose):
+            return False
+        k = self._add_node(t, pose, ranges)
+        g = self.graph_params
+        if g.do_loop_closing and k % g.loop_attempt_every == 0:
+            self._try_loop_closure(k)
+        self._T_map_odom = compose3(self.nodes.poses[k], _inverse3(pose))
+        self.updates += 1
+        self._grid = None
+        return True
+
+    def _add_node(self, t: float, pose_odom: np.ndarray, ranges: np.ndarray) -> int:
+        g, nodes = self.graph_params, self.nodes
+        pts = scan_points(ranges, self._cos_a, self._sin_a, self._match_max, g.point_spacing)
+        nrm = point_normals(pts, NORMAL_GAP)
+        reach = scan_reach(ranges, self._usable, self._max_range)
+        if nodes.n == 0:  # the map frame is the odometry frame of the first scan
+            return nodes.add(pose_odom, pose_odom, t, self._path_m, ranges, pts, nrm, reach)
+        prev = nodes.n - 1
+        odo = relative3(nodes.odom[prev], pose_odom)
+        prior = compose3(nodes.poses[prev], odo)
+        match = self._local_map(prev, prior).match(
+            pts,
+            prior,
+            0.5 * g.correlation_search_space_dimension,
+            g.coarse_search_angle_offset,
+            g.link_match_minimum_response_fine,
+            (g.distance_variance_penalty, g.minimum_distance_penalty),
+            (g.angle_variance_penalty, g.minimum_angle_penalty),
+        )
+        if match.score >= g.link_match_minimum_response_fine:
+            pose = match.pose
+            z = relative3(nodes.poses[prev], pose)
+            sigma = (g.match_sigma_xy, g.match_sigma_xy, g.match_sigma_theta)
+        else:
+            self.match_failures += 1
+            pose, z = prior, odo
+            s_xy = max(0.01, g.odom_sigma_xy_per_m * math.hypot(odo[0], odo[1]))
+            sigma = (s_xy, s_xy, 0.01 + g.odom_sigma_theta_per_rad * abs(odo[2]))
+        k = nodes.add(pose, pose_odom, t, self._path_m, ranges, pts, nrm, reach)
+        self.edges.add(prev, k, z, sigma, robust=False)
+        return k
+
+    def _local_map(self, last: int, prior: np.ndarray) -> PointMap:
+        """The smeared map of the last scan_buffer_size nodes within
+        scan_buffer_maximum_scan_distance of the prior, cut to what the scan can reach."""
+        g, nodes = self.graph_params, self.nodes
+        idx = np.arange(max(0, last - g.scan_buffer_size + 1), last + 1)
+        d = np.hypot(nodes.poses[idx, 0] - prior[0], nodes.poses[idx, 1] - prior[1])
+        idx = idx[(d <= g.scan_buffer_maximum_scan_distance) | (idx == last)]
+        reach = self._match_max + 0.5 * g.correlation_search_space_dimension
+        bounds = (prior[0] - reach, prior[1] - reach, prior[0] + reach, prior[1] + reach)
+        pts, nrm = nodes.map_points(idx)
+        return PointMap(
+            pts, self.params.delta, g.correlation_search_space_smear_deviation,
+            g.branch_and_bound_depth, _clip_bounds(pts, bounds), nrm,
+        )  # fmt: skip
+
+    def _try_loop_closure(self, k: int) -> None:
+        g, nodes = self.graph_params, self.nodes
+        cand = find_candidate(nodes.poses[: nodes.n], nodes.path_m[: nodes.n], k, g)
+        if cand is None:
+            return
+        lin, ang = search_window(cand.path_m, g)
+        cur = nodes.poses[k].copy()
+        reach = self._match_max + lin
+        bounds = (cur[0] - reach, cur[1] - reach, cur[0] + reach, cur[1] + reach)
+        pts, nrm = nodes.map_points(cand.chain)
+        chain_map = PointMap(
+            pts, self.params.delta, g.loop_search_space_smear_deviation,
+            g.loop_branch_and_bound_depth, _clip_bounds(pts, bounds), nrm,
+        )  # fmt: skip
+        min_score = g.loop_match_minimum_response_fine
+        match = chain_map.match(nodes.points[k], cur, lin, ang, min_score)
+        if match.score < min_score:
+            return
+        excl = (float(match.pose[0]), float(match.pose[1]), g.loop_ambiguity_radius)
+        other = chain_map.match(nodes.points[k], cur, lin, ang, min_score, exclude=excl)
+        if other.score >= g.loop_ambiguity_ratio * match.score:
+            self.ambiguous_closures += 1
+            return
+        z = relative3(nodes.poses[cand.node], match.pose)
+        sigma = (g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_theta)
+        self.edges.add(cand.node, k, z, sigma, robust=True)
+        moved = relative3(cur, match.pose)
+        small = (
+            math.hypot(moved[0], moved[1]) < g.loop_optimize_min_correction
+            and abs(moved[2]) < g.loop_optimize_min_rotation
+        )
+        if not self._optimise_and_check(optimise=not small):
+            self.edges.pop()
+            self.rejected_closures += 1
+            return
+        self.closures.append(
+            LoopClosure(k, cand.node, float(nodes.t[k]), match.score, cur, nodes.poses[k].copy())
+        )
+
+    def _optimise_and_check(self, optimise: bool) -> bool:
+        """Optimise with the newest (loop) edge (or not, for a small correction); keep the
+        result only if that edge's chi^2 stays under loop_max_chi2 (it agrees with the rest
+        of the graph)."""
+        g, nodes = self.graph_params, self.nodes
+        edges = self.edges.arrays()
+        poses = nodes.poses[: nodes.n]
+        if optimise:
+            poses = optimize(
+                poses, edges, g.huber_delta, g.optimizer_iterations, g.optimizer_tolerance
+            ).poses
+            self.optimisations += 1
+        err, _, _ = edge_errors(poses, edges)
+        if float((err[-1] ** 2).sum()) > g.loop_max_chi2:
+            return False
+        nodes.poses[: nodes.n] = poses
+        return True
+
+    def pose_estimate(self) -> np.ndarray:
+        return compose3(self._T_map_odom, self._pose_odom)
+
+    def T_map_odom(self) -> np.ndarray:
+        return self._T_map_odom.copy()
+
+    def node_poses(self) -> np.ndarray:
+        """(N, 3) [x, y, theta] the nodes' current (optimised) poses."""
+        return self.nodes.poses[: self.nodes.n].copy()
+
+    def occupancy(self) -> OccupancyGrid:
+        # incremental while the poses stay; a closure moved them: rebuilt from every node
+        if self._grid is None:
+            n = self.nodes.n
+            if n:
+                self.map.update(self.nodes.poses[:n], self.nodes.ranges[:n], self.nodes.reach[:n])
+            self._grid = self.map.occupancy()
+        return self._grid
+
+
+def _inverse3(a: np.ndarray) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):
+    """bounds cut to the points' extent (the grid need not cover empty space)."""
+    if len(pts) == 0:
+        return bounds
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    x0, y0 = max(bounds[0], lo[0]), max(bounds[1], lo[1])
+    x1, y1 = min(bounds[2], hi[0]), min(bounds[3], hi[1])
+    return (x0, y0, max(x0, x1), max(y0, y1))
