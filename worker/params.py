@@ -80,8 +80,14 @@ def _hint_at(cls: type, loc: tuple) -> Any:
     for name in loc:
         if not (isinstance(name, str) and dataclasses.is_dataclass(hint)):
             return None
-        hint = get_type_hints(hint).get(name)
+        hint = _dataclass_of(get_type_hints(hint).get(name))
     return hint
+
+
+def _dataclass_of(hint: Any) -> Any:
+    """The dataclass inside an optional hint (`GraphSlamParams | None`), else the hint."""
+    inner = [a for a in get_args(hint) if dataclasses.is_dataclass(a) and isinstance(a, type)]
+    return inner[0] if len(inner) == 1 and type(None) in get_args(hint) else hint
 
 
 def _message(cls: type, err: Any, where: str) -> str:
