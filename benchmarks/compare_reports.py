@@ -9,14 +9,18 @@ Each checkout runs with its own `.venv/bin/mapqual run` and a throwaway SQLite d
 are compared byte for byte, except what measures the wall clock and cannot repeat:
 `summary.json`'s wall-clock timings (`*_wall_s`, `wall_time_s`, `real_time_factor`) are masked
 in the text before the comparison (so key order and number formatting still count), and a zip
-is compared member by member (its member timestamps are the wall clock too). Prints one line per
-run and a summary; exit 0 when every run's folder matches, 1 when one differs, 2 on bad input.
+is compared member by member (its member timestamps are the wall clock too). With
+`--allow-new-params`, parameters that this checkout stores and the other does not (a setting
+that was a constant in the code before) are listed, not counted as a difference: the rest of
+summary.json must still match, key order included. Prints one line per run and a summary; exit
+0 when every run's folder matches, 1 when one differs, 2 on bad input.
 """
 
 from __future__ import annotations
 
 import argparse
 import io
+import json
 import re
 import subprocess
 import sys
@@ -41,8 +45,29 @@ def zip_members(data: bytes) -> dict[str, bytes]:
         return {n: masked(n, z.read(n)) for n in sorted(z.namelist())}
 
 
-def compare_folders(a: Path, b: Path) -> list[str]:
-    """Differences between report folders a and b, one line each (empty when they match)."""
+def _prune(this: dict, that: dict, where: str, added: list[str]) -> dict:
+    """`this` without the keys `that` lacks (recursively), their dotted names put in `added`."""
+    out = {}
+    for k, v in this.items():
+        if k not in that:
+            added.append(f"{where}{k}")
+        elif isinstance(v, dict) and isinstance(that[k], dict):
+            out[k] = _prune(v, that[k], f"{where}{k}.", added)
+        else:
+            out[k] = v
+    return out
+
+
+def same_summary(da: bytes, db: bytes, added: list[str]) -> bool:
+    """summary.json alike but for the parameters only `da` has (listed in `added`)."""
+    a, b = (json.loads(masked("summary.json", d)) for d in (da, db))
+    a["params"] = _prune(a.get("params", {}), b.get("params", {}), "params.", added)
+    return json.dumps(a) == json.dumps(b)
+
+
+def compare_folders(a: Path, b: Path, new_params: list[str] | None = None) -> list[str]:
+    """Differences between report folders a and b, one line each (empty when they match);
+    with `new_params` (a list), summary.json parameters only `a` has are put there instead."""
     names_a = {p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file()}
     names_b = {p.relative_to(b).as_posix() for p in b.rglob("*") if p.is_file()}
     diffs = [f"only in {a}: {n}" for n in sorted(names_a - names_b)]
@@ -54,6 +79,9 @@ def compare_folders(a: Path, b: Path) -> list[str]:
             if za != zb:
                 bad = sorted(k for k in za.keys() | zb.keys() if za.get(k) != zb.get(k))
                 diffs.append(f"differs: {n} (members {', '.join(bad)})")
+        elif n.endswith("summary.json") and new_params is not None:
+            if not same_summary(da, db, new_params):
+                diffs.append(f"differs: {n} (beyond the parameters only this checkout stores)")
         elif masked(n, da) != masked(n, db):
             diffs.append(f"differs: {n} ({len(da)} against {len(db)} bytes)")
     return diffs
@@ -98,6 +126,10 @@ def main() -> int:
     ap.add_argument("--seeds", default="1-3")
     ap.add_argument("--time-limit", type=float, default=90.0, help="[s] simulated, per run")
     ap.add_argument("--keep", type=Path, help="keep the report folders here")
+    ap.add_argument(
+        "--allow-new-params", action="store_true",
+        help="list parameters only this checkout stores instead of counting them as differences",
+    )  # fmt: skip
     args = ap.parse_args()
     other = args.against.resolve()
     for c in (HERE, other):
@@ -116,12 +148,15 @@ def main() -> int:
         key = f"{w}-{s}-{seed}"
         t_this = one_run(HERE, w, s, seed, args.time_limit, root / "this" / key)
         t_that = one_run(other, w, s, seed, args.time_limit, root / "that" / key)
-        diffs = compare_folders(root / "this" / key, root / "that" / key)
+        new: list[str] | None = [] if args.allow_new_params else None
+        diffs = compare_folders(root / "this" / key, root / "that" / key, new)
         n = sum(1 for p in (root / "this" / key).rglob("*") if p.is_file())
         state = "same" if not diffs else f"{len(diffs)} differences"
         print(f"[{i}/{len(cases)}] {key}: {n} files, {state} ({t_this:.0f} s / {t_that:.0f} s)")
         for d in diffs:
             print(f"    {d}")
+        if new:
+            print(f"    parameters only this checkout stores: {', '.join(sorted(set(new)))}")
         failed += bool(diffs)
     print(f"{len(cases) - failed} of {len(cases)} runs give the same report folder; in {root}")
     return 1 if failed else 0
