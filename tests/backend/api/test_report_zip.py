@@ -13,6 +13,7 @@ import numpy as np
 from backend.db.session import session_scope
 from backend.store import mark_run_started, store_run_result
 from tests.backend.api.test_worlds_jobs import _png, _upload
+from tests.summaries import make_summary
 from worker.report.folder import REPORT_ZIP, write_report_zip
 
 
@@ -26,7 +27,7 @@ def _done_run(api, folder: Path) -> int:
     with session_scope(api.url) as s:
         mark_run_started(s, run_id)
         store_run_result(
-            s, run_id, summary={"outcome": "completed", "reason": None}, t=np.array([0.0, 0.1]),
+            s, run_id, summary=make_summary(), t=np.array([0.0, 0.1]),
             pose_gt=np.zeros((2, 3)), pose_est=np.zeros((2, 3)), map_ros=np.zeros((2, 2), np.int8),
             map_resolution=0.05, map_origin=(0.0, 0.0), report_dir=str(folder),
         )  # fmt: skip
