@@ -47,6 +47,11 @@ class SlamParams:
     srt: float = 0.2  # [rad/m] rotation noise from translation
     str_: float = 0.1  # [m/rad] translation noise from rotation (GMapping's `str`)
     stt: float = 0.2  # [rad/rad] rotation noise from rotation
+    # a scan step longer than this (a log that kept one scan a metre) has its noise drawn as
+    # the sum over the robot-sized steps it stands for (worker.slam.motion.draw_from_motion);
+    # no step of a 10 Hz log under 1 m/s and 1 rad/s reaches it. 0 = off: GMapping's one draw
+    motion_substep: float = 0.1  # [m]
+    motion_substep_angle: float = 0.1  # [rad]
 
     def __post_init__(self) -> None:
         positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
@@ -54,7 +59,17 @@ class SlamParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"SLAM parameter {name} must be a positive number, got {value}")
-        nonneg = ("linear_update", "angular_update", "srr", "srt", "str_", "stt", "map_margin")
+        nonneg = (
+            "linear_update",
+            "angular_update",
+            "srr",
+            "srt",
+            "str_",
+            "stt",
+            "map_margin",
+            "motion_substep",
+            "motion_substep_angle",
+        )
         for name in nonneg:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -71,7 +71,15 @@ class RbpfSlam:
             self.poses[:] = pose  # the map frame starts at the first odometry pose
         else:
             self.poses = draw_from_motion(
-                self.poses, pose, self._odom_last, p.srr, p.srt, p.str_, p.stt, self.rng
+                self.poses,
+                pose,
+                self._odom_last,
+                p.srr,
+                p.srt,
+                p.str_,
+                p.stt,
+                self.rng,
+                (p.motion_substep, p.motion_substep_angle),
             )
         self._odom_last = pose
         self._pose_odom = pose
