@@ -51,7 +51,7 @@ def _noisy_steps(poses, delta, std, noise):
     return out
 
 
-def _substeps(dist: float, turn: float, substep: tuple[float, float]) -> int:
+def motion_substeps(dist: float, turn: float, substep: tuple[float, float]) -> int:
     """How many steps of at most substep = (lmax [m], amax [rad]) make up a step (1: one)."""
     lmax, amax = substep
     k = 1.0
@@ -102,7 +102,7 @@ def draw_from_motion(
             stt * dth + srt * math.hypot(dx, dy),
         ]
     )
-    k = _substeps(math.hypot(dx, dy), dth, substep)
+    k = motion_substeps(math.hypot(dx, dy), dth, substep)
     if k > 1:
         std = std / math.sqrt(k)
     noise = rng.standard_normal((poses.shape[0], 3))
