@@ -106,8 +106,27 @@ def _carmen_line_ok(line: str) -> bool:
         return False
 
 
+def _carmen_tail_ok(text: str):
+    """The test of a last line without its newline: readable, and not shorter than the line
+    of the same message before it (a cut can leave a line that still parses)."""
+
+    def ok(line: str) -> bool:
+        if not _carmen_line_ok(line):
+            return False
+        tokens = line.split()
+        if not tokens:
+            return True
+        prev = text.rfind(f"\n{tokens[0]} ", 0, len(text) - len(line))
+        if prev < 0:
+            return True
+        end = text.find("\n", prev + 1)
+        return len(text[prev + 1 : end].split()) <= len(tokens)
+
+    return ok
+
+
 def _read_carmen(text: str, message: CarmenMessage, path: Path) -> Trajectory:
-    text = drop_truncated_tail(text, _carmen_line_ok, path)
+    text = drop_truncated_tail(text, _carmen_tail_ok(text), path)
     tag = _pick_message(text, message, path)
     lines, linenos = [], []
     for i, line in enumerate(text.splitlines(), 1):

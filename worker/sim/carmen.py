@@ -157,16 +157,21 @@ def _read_lines(path: Path) -> tuple[_Lines, list[str]]:
     lines = text.split("\n")
     out = _Lines()
     notes: list[str] = []
+    fields: dict[str, int] = {}  # fields of the latest line of each message
     for lineno, line in enumerate(lines, start=1):
         tok = line.split()
         if not tok or tok[0].startswith("#"):
             continue
+        last = lineno == len(lines)  # the last line, and it has no newline
         try:
+            if last and len(tok) < fields.get(tok[0], 0):  # cut, though it may still parse
+                raise InputError("shorter than the line before it", path=path, line=lineno)
             out.add(tok, str(path), lineno)
         except InputError:
-            if lineno != len(lines):  # not the last line, or it has its newline
+            if not last:
                 raise
             notes.append(f"line {lineno} is truncated ({tok[0]}, {len(tok)} fields): skipped")
+        fields[tok[0]] = len(tok)
     return out, notes
 
 

@@ -149,3 +149,14 @@ def test_rawlaser_without_odom_is_an_error(tmp_path):
     path.write_text(rawlaser([1.0, 2.0], 3.0))
     with pytest.raises(InputError, match="RAWLASER1 scans carry no pose"):
         read_laser_log(path)
+
+
+def test_a_cut_that_still_parses_is_found_by_its_length(tmp_path):
+    # "ODOM 1 0 0 0 0 0 12.75 h 12.75" cut to "ODOM 1 0 0 0 0 0 1": a valid-looking line
+    path = tmp_path / "cut.log"
+    path.write_text(
+        "ODOM 0 0 0 0 0 0 11.5 h 11.5\n" + flaser([1.0] * 4, [0, 0, 0], 12.0) + "ODOM 1 0 0 0 0 0 1"
+    )
+    with pytest.warns(InputWarning, match=r"line 3 is truncated \(ODOM, 8 fields\)"):
+        log = read_laser_log(path)
+    assert log.t_odom.tolist() == [11.5]
