@@ -30,7 +30,8 @@ from worker.sim.format_kernels import Fixed3Formatter
 from worker.sim.laser import LaserSpec
 
 HOSTNAME = "mapqual"
-FLASER_NO_RETURN_M = 81.91  # [m] SICK LMS no-return in cm mode (a FLASER log of no readings)
+FLASER_NO_RETURN_M = 81.91  # [m] SICK LMS no-return in cm mode
+SATURATED_SHARE = 0.001  # a FLASER log's largest reading held this often is its no-return
 LASER_TYPE_SIMULATED = 3  # CARMEN's SIMULATED_LASER
 
 HEADER = (
@@ -200,11 +201,21 @@ def _scan_arrays(kind: str, scans: list[Scan], lines: _Lines, path: Path):
         pose = np.array([s.pose for s in scans], dtype=np.float64)
     order = clock_order(t, np.column_stack([pose, ranges]))
     spec = scans[0].spec
-    if spec is None:  # FLASER: the largest reading is the sensor's maximum (no return)
-        top = float(f"{float(ranges.max()):.6g}")  # the printed value, not its float32
-        spec = flaser_spec(ranges.shape[1], top if top > 0 else FLASER_NO_RETURN_M)
+    if spec is None:
+        spec = flaser_spec(ranges.shape[1], _flaser_range_max(ranges))
     idx = order.index
     return order.t, ranges[idx], pose[idx], spec, order.notes("scans")
+
+
+def _flaser_range_max(ranges: np.ndarray) -> float:
+    """[m] The maximum of a FLASER log, which does not say it: its largest reading when at
+    least SATURATED_SHARE of all readings hold it (a sensor's no-return value: 81.91 m for a
+    SICK LMS, 50 m in ACES); else 81.91 m, or just above the largest reading if that is more
+    (so no real return is taken for a no-return)."""
+    top = float(ranges.max()) if ranges.size else 0.0
+    if top > 0 and np.count_nonzero(ranges == ranges.max()) >= SATURATED_SHARE * ranges.size:
+        return float(f"{top:.6g}")  # the printed value, not its float32
+    return max(FLASER_NO_RETURN_M, float(f"{top:.6g}") + 0.02)
 
 
 def read_laser_log(path: str | Path) -> LaserLog:

@@ -86,7 +86,7 @@ def draw_from_motion(
     that kept one scan a metre, as the corrected Radish logs) is drawn as the k equal steps
     of at most that size a robot's odometry would have given, k = ceil(max(|d| / lmax,
     |dtheta| / amax)): the k independent noises of std/k sum to std/sqrt(k). A step within
-    both (every step of a 10 Hz log of a robot under 1 m/s), or (0, 0), is drawn as GMapping
+    both (every step of a 10 Hz log of a robot under lmax / 0.1 s), or (0, 0), is drawn as GMapping
     draws it, bit for bit.
     """
     poses = np.ascontiguousarray(poses, dtype=np.float64)

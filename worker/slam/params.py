@@ -49,9 +49,10 @@ class SlamParams:
     stt: float = 0.2  # [rad/rad] rotation noise from rotation
     # a scan step longer than this (a log that kept one scan a metre) has its noise drawn as
     # the sum over the robot-sized steps it stands for (worker.slam.motion.draw_from_motion);
-    # no step of a 10 Hz log under 1 m/s and 1 rad/s reaches it. 0 = off: GMapping's one draw
-    motion_substep: float = 0.1  # [m]
-    motion_substep_angle: float = 0.1  # [rad]
+    # no step of a 10 Hz log under 1.5 m/s and 1.5 rad/s reaches it. 0 = off (one draw, as
+    # GMapping); after such a step the matcher also climbs from the noise-free prediction
+    motion_substep: float = 0.15  # [m]
+    motion_substep_angle: float = 0.15  # [rad]
 
     def __post_init__(self) -> None:
         positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
