@@ -32,6 +32,7 @@ from worker.sim.laser import LaserSpec
 HOSTNAME = "mapqual"
 FLASER_NO_RETURN_M = 81.91  # [m] SICK LMS no-return in cm mode
 SATURATED_SHARE = 0.001  # a FLASER log's largest reading held this often is its no-return
+SATURATED_MIN = 10  # ... and at least this many times
 LASER_TYPE_SIMULATED = 3  # CARMEN's SIMULATED_LASER
 
 HEADER = (
@@ -209,11 +210,12 @@ def _scan_arrays(kind: str, scans: list[Scan], lines: _Lines, path: Path):
 
 def _flaser_range_max(ranges: np.ndarray) -> float:
     """[m] The maximum of a FLASER log, which does not say it: its largest reading when at
-    least SATURATED_SHARE of all readings hold it (a sensor's no-return value: 81.91 m for a
-    SICK LMS, 50 m in ACES); else 81.91 m, or just above the largest reading if that is more
-    (so no real return is taken for a no-return)."""
+    least SATURATED_SHARE of all readings (and SATURATED_MIN) hold it (a sensor's no-return
+    value: 81.91 m for a SICK LMS, 50 m in ACES); else 81.91 m, or just above the largest
+    reading if that is more (so no real return is taken for a no-return)."""
     top = float(ranges.max()) if ranges.size else 0.0
-    if top > 0 and np.count_nonzero(ranges == ranges.max()) >= SATURATED_SHARE * ranges.size:
+    held = np.count_nonzero(ranges == ranges.max()) if ranges.size else 0
+    if top > 0 and held >= max(SATURATED_SHARE * ranges.size, SATURATED_MIN):
         return float(f"{top:.6g}")  # the printed value, not its float32
     return max(FLASER_NO_RETURN_M, float(f"{top:.6g}") + 0.02)
 

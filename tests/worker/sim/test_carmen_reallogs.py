@@ -160,3 +160,14 @@ def test_a_cut_that_still_parses_is_found_by_its_length(tmp_path):
     with pytest.warns(InputWarning, match=r"line 3 is truncated \(ODOM, 8 fields\)"):
         log = read_laser_log(path)
     assert log.t_odom.tolist() == [11.5]
+
+
+def test_a_largest_reading_held_once_is_a_real_return(tmp_path):
+    # 2 x 180 readings, the largest (12.5 m) held once: under 0.1 %, so not a no-return value
+    path = tmp_path / "room.log"
+    scan = [2.0] * 179 + [12.5]
+    path.write_text(flaser(scan, [0, 0, 0], 1.0) + flaser([2.0] * 180, [0.1, 0, 0], 2.0))
+    assert read_laser_log(path).laser.range_max == 81.91
+    far = [2.0] * 179 + [90.0]  # a longer-range laser: the maximum goes just above it
+    path.write_text(flaser(far, [0, 0, 0], 1.0) + flaser([2.0] * 180, [0.1, 0, 0], 2.0))
+    assert read_laser_log(path).laser.range_max == pytest.approx(90.02)
