@@ -19,3 +19,8 @@ class InputError(ValueError):
         if self.path is not None:
             where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
         super().__init__(f"{where}{message}")
+
+
+class InputWarning(UserWarning):
+    """Input that was read with a documented repair (out-of-order samples sorted, a truncated
+    last line skipped, a degenerate clock replaced); the message is one complete line."""

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import sys
+import warnings
 
 import typer
 
-from worker.errors import InputError
+from worker.errors import InputError, InputWarning
 
 app = typer.Typer(
     rich_markup_mode=None,
@@ -22,6 +23,7 @@ app = typer.Typer(
 # (command modules are imported here, one line each)
 from mapqual.cli import batch as _batch  # noqa: E402,F401
 from mapqual.cli import evaluate as _evaluate  # noqa: E402,F401
+from mapqual.cli import problem as _problem  # noqa: E402,F401
 from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import runs as _runs  # noqa: E402,F401
 from mapqual.cli import service as _service  # noqa: E402,F401
@@ -33,6 +35,7 @@ from mapqual.cli import world as _world  # noqa: E402,F401
 
 def main() -> None:
     """Console entry point: bad input is one line on stderr and exit code 2, never a traceback."""
+    warnings.showwarning = _show_warning
     try:
         app()
     except InputError as exc:
@@ -40,3 +43,14 @@ def main() -> None:
         sys.exit(2)
     except (BrokenPipeError, KeyboardInterrupt):
         sys.exit(130 if sys.exc_info()[0] is KeyboardInterrupt else 1)
+
+
+_default_showwarning = warnings.showwarning
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """An InputWarning (a documented repair of the input) as one line on stderr."""
+    if issubclass(category, InputWarning):
+        print(f"mapqual: warning: {message}", file=sys.stderr)
+    else:
+        _default_showwarning(message, category, filename, lineno, file, line)

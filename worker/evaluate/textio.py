@@ -5,13 +5,14 @@ from __future__ import annotations
 import gzip
 import io
 import warnings
-from collections.abc import Sequence
+import zlib
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from worker.errors import InputError
+from worker.errors import InputError, InputWarning
 
 _GZIP_MAGIC = b"\x1f\x8b"
 
@@ -28,11 +29,30 @@ def read_bytes(path: str | Path) -> bytes:
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=p) from None
     if raw[:2] == _GZIP_MAGIC:
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"corrupt gzip data: {exc}", path=p) from None
+        raw = _inflate(raw, p)
     return raw
+
+
+def _inflate(raw: bytes, path: Path) -> bytes:
+    """gzip data (one or more members) inflated. A stream that ends early (a copy cut off)
+    gives what it holds, with an InputWarning: the reader then finds a truncated last line."""
+    out = []
+    while raw:
+        inflater = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
+        try:
+            out.append(inflater.decompress(raw))
+        except zlib.error as exc:
+            raise InputError(f"corrupt gzip data: {exc}", path=path) from None
+        if not inflater.eof:
+            warnings.warn(
+                InputWarning(f"{path}: the gzip data ends early: reading what it holds"),
+                stacklevel=3,
+            )
+            break
+        raw = inflater.unused_data
+        if raw[:2] != _GZIP_MAGIC:
+            break  # trailing garbage after the last member, as gzip.decompress ignores zeros
+    return b"".join(out)
 
 
 def _decode(raw: bytes, path: Path) -> str:
@@ -94,9 +114,37 @@ def parse_table(text: str, ncols: int, what: str, path: str | Path) -> NDArray[n
     return table
 
 
+def is_row(line: str, ncols: int) -> bool:
+    """True for a blank or comment line, or one of exactly ncols finite numbers."""
+    tokens = _strip_comment(line).split()
+    if not tokens:
+        return True
+    try:
+        return len(tokens) == ncols and bool(np.isfinite([float(t) for t in tokens]).all())
+    except ValueError:
+        return False
+
+
+def drop_truncated_tail(text: str, valid: Callable[[str], bool], path: str | Path) -> str:
+    """The text without its last line when that line has no newline and is not `valid` (a
+    file cut off while it was written), with an InputWarning naming the line; else as is.
+    Any other bad line is the parser's to report."""
+    if not text or text.endswith("\n"):
+        return text
+    cut = text.rfind("\n") + 1
+    if valid(text[cut:]):
+        return text
+    lineno = text.count("\n", 0, cut) + 1
+    warnings.warn(
+        InputWarning(f"{path}:{lineno}: the last line is truncated: skipped"), stacklevel=3
+    )
+    return text[:cut]
+
+
 def load_table(path: str | Path, ncols: int, what: str) -> NDArray[np.float64]:
     """`parse_table` of a file (`.gz` transparently). Plain decimal tables, what our writers
-    emit, go through a numba byte parser (`parse_kernels`); anything else through numpy."""
+    emit, go through a numba byte parser (`parse_kernels`); anything else through numpy.
+    A truncated last line is skipped with a warning (`drop_truncated_tail`)."""
     from worker.evaluate.parse_kernels import OK, parse_decimal_table
 
     p = Path(path)
@@ -104,7 +152,8 @@ def load_table(path: str | Path, ncols: int, what: str) -> NDArray[np.float64]:
     table, status = parse_decimal_table(np.frombuffer(raw, dtype=np.uint8), ncols)
     if status == OK:
         return table
-    return parse_table(_decode(raw, p), ncols, what, p)
+    text = drop_truncated_tail(_decode(raw, p), lambda line: is_row(line, ncols), p)
+    return parse_table(text, ncols, what, p)
 
 
 def parse_columns(lines: Sequence[str], usecols: Sequence[int]) -> NDArray[np.float64] | None:

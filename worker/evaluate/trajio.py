@@ -10,9 +10,12 @@ from typing import Literal
 import numpy as np
 
 from worker.errors import InputError
+from worker.evaluate.clock import clock_order, warn_notes
 from worker.evaluate.relations import Relations
 from worker.evaluate.textio import (
+    drop_truncated_tail,
     format_rows,
+    is_row,
     load_table,
     parse_columns,
     parse_table,
@@ -91,7 +94,39 @@ def _pick_message(text: str, message: CarmenMessage, path: Path) -> str:
     raise InputError(f"no pose messages found (looked for {', '.join(CARMEN_MESSAGES)})", path=path)
 
 
+def _carmen_line_ok(line: str) -> bool:
+    """True unless the line is a known pose message that cannot be read."""
+    tokens = line.split()
+    if not tokens or tokens[0] not in CARMEN_MESSAGES:
+        return True
+    try:
+        cols, _ = _carmen_layout(tokens[0], tokens)
+        return bool(np.isfinite([float(tokens[c]) for c in cols]).all())
+    except (ValueError, IndexError):
+        return False
+
+
+def _carmen_tail_ok(text: str):
+    """The test of a last line without its newline: readable, and not shorter than the line
+    of the same message before it (a cut can leave a line that still parses)."""
+
+    def ok(line: str) -> bool:
+        if not _carmen_line_ok(line):
+            return False
+        tokens = line.split()
+        if not tokens:
+            return True
+        prev = text.rfind(f"\n{tokens[0]} ", 0, len(text) - len(line))
+        if prev < 0:
+            return True
+        end = text.find("\n", prev + 1)
+        return len(text[prev + 1 : end].split()) <= len(tokens)
+
+    return ok
+
+
 def _read_carmen(text: str, message: CarmenMessage, path: Path) -> Trajectory:
+    text = drop_truncated_tail(text, _carmen_tail_ok(text), path)
     tag = _pick_message(text, message, path)
     lines, linenos = [], []
     for i, line in enumerate(text.splitlines(), 1):
@@ -116,10 +151,19 @@ def _read_carmen(text: str, message: CarmenMessage, path: Path) -> Trajectory:
                 table = parsed[:, len(counts) :]
     if table is None:
         table = _carmen_slow(tag, lines, linenos, path)
-    return Trajectory.from_samples(table[:, 3], table[:, :3], path=path)
+    return _ordered(table[:, 3], table[:, :3], path)
+
+
+def _ordered(t: np.ndarray, poses: np.ndarray, path: Path) -> Trajectory:
+    """The trajectory of samples in the order of `worker.evaluate.clock` (warning once per
+    repair), so a log's ground truth gets the times `read_laser_log` gives its scans."""
+    order = clock_order(t, poses)
+    warn_notes(order.notes("poses"), str(path))
+    return Trajectory.from_samples(order.t, poses[order.index], path=path)
 
 
 def _read_tum(text: str, path: Path) -> Trajectory:
+    text = drop_truncated_tail(text, lambda line: is_row(line, 8), path)
     table = parse_table(text, 8, "t x y z qx qy qz qw", path)
     qx, qy, qz, qw = table[:, 4], table[:, 5], table[:, 6], table[:, 7]
     norm2 = qx * qx + qy * qy + qz * qz + qw * qw
@@ -129,7 +173,7 @@ def _read_tum(text: str, path: Path) -> Trajectory:
     # yaw of a possibly unnormalised quaternion: both atan2 arguments scale with |q|^2
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
     poses = np.column_stack([table[:, 1], table[:, 2], yaw])
-    return Trajectory.from_samples(table[:, 0], poses, path=path)
+    return _ordered(table[:, 0], poses, path)
 
 
 def _detect_format(text: str) -> Literal["carmen", "tum"]:
@@ -151,8 +195,11 @@ def read_trajectory(
 
     fmt "auto" reads a CARMEN log when the first data line starts with a message name, else
     TUM. For CARMEN, `message` chooses FLASER / ROBOTLASER1 / TRUEPOS / ODOM ("auto": the
-    first present in that order); other messages and `#` lines are skipped. Repeated
-    timestamps keep the last sample (`Trajectory.from_samples`).
+    first present in that order); other messages and `#` lines are skipped. The samples are
+    ordered by `worker.evaluate.clock` (sorted, exact duplicates dropped, a degenerate clock
+    replaced by the index clock, each with a warning); of the samples left sharing a
+    timestamp the last is kept (`Trajectory.from_samples`). A truncated last line (no
+    newline, cannot be read) is skipped with a warning.
     """
     p = Path(path)
     text = read_text(p)

@@ -1,19 +1,13 @@
-"""CARMEN log files: write ODOM / ROBOTLASER1 / TRUEPOS lines; read laser logs back.
+"""CARMEN log files: write ODOM / ROBOTLASER1 / TRUEPOS lines; read real laser logs back.
 
-Line layouts (CARMEN logger; every message ends `ipc_timestamp ipc_hostname logger_timestamp`):
-  ODOM x y theta tv rv accel
-  ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range accuracy
-      remission_mode num_readings [ranges] num_remissions [remissions] laser_x laser_y
-      laser_theta robot_x robot_y robot_theta tv rv forward_safety_dist side_safety_dist
-      turn_axis
-  FLASER num_readings [ranges] x y theta odom_x odom_y odom_theta
-  TRUEPOS true_x true_y true_theta odom_x odom_y odom_theta
+The line layouts are in `worker.sim.carmen_lines`. Reading follows what real logs hold
+(issue 17): any mix of ROBOTLASER1, FLASER, RAWLASER1, ODOM and TRUEPOS lines, comments and
+other messages skipped, the sample order of `worker.evaluate.clock`, a truncated last line
+skipped with a warning.
 """
 
 from __future__ import annotations
 
-import gzip
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -21,12 +15,25 @@ from typing import TextIO
 import numpy as np
 
 from worker.errors import InputError
+from worker.evaluate.clock import clock_order, warn_notes
+from worker.evaluate.textio import read_bytes
+from worker.sim.carmen_lines import (
+    Scan,
+    flaser_spec,
+    interpolate_poses,
+    parse_flaser,
+    parse_pose_line,
+    parse_rawlaser,
+    parse_robotlaser,
+)
 from worker.sim.format_kernels import Fixed3Formatter
 from worker.sim.laser import LaserSpec
 
 HOSTNAME = "mapqual"
+FLASER_NO_RETURN_M = 81.91  # [m] SICK LMS no-return in cm mode
+SATURATED_SHARE = 0.001  # a FLASER log's largest reading held this often is its no-return
+SATURATED_MIN = 10  # ... and at least this many times
 LASER_TYPE_SIMULATED = 3  # CARMEN's SIMULATED_LASER
-FLASER_RANGE_MAX = 81.9  # [m] SICK LMS maximum in cm mode: classic logs mark no-return with it
 
 HEADER = (
     "# CARMEN Logfile\n"
@@ -88,7 +95,8 @@ class LaserLog:
 
     `t` `(N,)` [s]; `ranges` `(N, B)` float32 [m]; `pose_odom` `(N, 3)` [x, y, theta];
     `t_gt`, `pose_gt` `(M,)`, `(M, 3)` from TRUEPOS lines, or None when the log has none;
-    `t_odom`, `odom` `(K,)`, `(K, 3)` from ODOM lines (empty when none).
+    `t_odom`, `odom` `(K,)`, `(K, 3)` from ODOM lines (empty when none); `message`: the scan
+    lines read; `notes`: the repairs made while reading (also issued as InputWarnings).
     """
 
     t: np.ndarray
@@ -100,159 +108,149 @@ class LaserLog:
     t_odom: np.ndarray
     odom: np.ndarray
     source: str
+    message: str = "ROBOTLASER1"
+    notes: tuple[str, ...] = ()
 
 
-def _open_text(path: Path):
-    """Open a log for reading, decompressing `.gz` transparently."""
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
-    return open(path, encoding="utf-8", errors="replace")
+# the scan message read when a log holds several (a ROBOTLASER1 line carries the most)
+SCAN_MESSAGES: tuple[str, ...] = ("ROBOTLASER1", "FLASER", "RAWLASER1")
+_SCAN_PARSERS = {
+    "ROBOTLASER1": parse_robotlaser,
+    "FLASER": parse_flaser,
+    "RAWLASER1": parse_rawlaser,
+}
 
 
-def _floats(tokens: list[str], path: Path, lineno: int) -> np.ndarray:
-    try:
-        values = np.array(tokens, dtype=np.float64)
-    except ValueError:
-        bad = next(tok for tok in tokens if not _is_number(tok))
-        raise InputError(f"expected a number, got {bad!r}", path=path, line=lineno) from None
-    if not np.all(np.isfinite(values)):
-        raise InputError("non-finite number", path=path, line=lineno)
-    return values
-
-
-def _is_number(tok: str) -> bool:
-    try:
-        float(tok)
-    except ValueError:
-        return False
-    return True
-
-
-def _count(tok: str, what: str, path: Path, lineno: int) -> int:
-    try:
-        n = int(tok)
-    except ValueError:
-        raise InputError(
-            f"{what} must be an integer, got {tok!r}", path=path, line=lineno
-        ) from None
-    if n < 0:
-        raise InputError(f"{what} must be >= 0, got {n}", path=path, line=lineno)
-    return n
-
-
-def _need(tokens: list[str], n: int, kind: str, path: Path, lineno: int) -> None:
-    if len(tokens) < n:
-        raise InputError(
-            f"{kind} line has {len(tokens)} fields, needs at least {n}", path=path, line=lineno
-        )
-
-
-class _Scans:
-    """Accumulates scans of one message type."""
+class _Lines:
+    """What the lines of a log hold, by message."""
 
     def __init__(self) -> None:
-        self.t: list[float] = []
-        self.ranges: list[np.ndarray] = []
-        self.pose: list[np.ndarray] = []
-        self.spec: LaserSpec | None = None
+        self.scans: dict[str, list[Scan]] = {k: [] for k in SCAN_MESSAGES}
+        self.beams: dict[str, int] = {}
+        self.poses: dict[str, tuple[list[float], list[np.ndarray]]] = {
+            "TRUEPOS": ([], []),
+            "ODOM": ([], []),
+        }
+
+    def add(self, tok: list[str], path: str, lineno: int) -> None:
+        kind = tok[0]
+        if kind in _SCAN_PARSERS:
+            scan = _SCAN_PARSERS[kind](tok, path, lineno)
+            if scan is None:
+                return
+            n0 = self.beams.setdefault(kind, scan.ranges.shape[0])
+            if scan.ranges.shape[0] != n0:
+                raise InputError(
+                    f"{kind} scan has {scan.ranges.shape[0]} readings, earlier ones {n0}",
+                    path=path,
+                    line=lineno,
+                )
+            self.scans[kind].append(scan)
+        elif kind in self.poses:
+            t, pose = parse_pose_line(tok, kind, path, lineno)
+            self.poses[kind][0].append(t)
+            self.poses[kind][1].append(pose)
 
 
-def _parse_robotlaser(tok, path, lineno, acc: _Scans) -> None:
-    _need(tok, 9, "ROBOTLASER1", path, lineno)
-    n = _count(tok[8], "num_readings", path, lineno)
-    _need(tok, 10 + n, "ROBOTLASER1", path, lineno)
-    n_rem = _count(tok[9 + n], "num_remissions", path, lineno)
-    k = 10 + n + n_rem
-    _need(tok, k + 12, "ROBOTLASER1", path, lineno)
-    head = _floats(tok[2:6], path, lineno)  # start_angle fov resolution max_range
-    ranges = _floats(tok[9 : 9 + n], path, lineno)
-    rest = _floats(tok[k : k + 12], path, lineno)  # laser pose, robot pose, 5 more, timestamp
-    if n == 0 or head[3] <= 0.0:
-        raise InputError(
-            "ROBOTLASER1 needs readings and a maximum_range > 0", path=path, line=lineno
-        )
-    spec = LaserSpec(n, float(head[0]), float(head[2]), float(head[3]))
-    _add_scan(acc, spec, float(rest[11]), ranges, rest[3:6], path, lineno)
+def _read_lines(path: Path) -> tuple[_Lines, list[str]]:
+    """Every line parsed; a malformed last line without its newline is reported and skipped,
+    any other malformed line raises InputError with its number."""
+    text = read_bytes(path).decode("utf-8", errors="replace")
+    lines = text.split("\n")
+    out = _Lines()
+    notes: list[str] = []
+    fields: dict[str, int] = {}  # fields of the latest line of each message
+    for lineno, line in enumerate(lines, start=1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        last = lineno == len(lines)  # the last line, and it has no newline
+        try:
+            if last and len(tok) < fields.get(tok[0], 0):  # cut, though it may still parse
+                raise InputError("shorter than the line before it", path=path, line=lineno)
+            out.add(tok, str(path), lineno)
+        except InputError:
+            if not last:
+                raise
+            notes.append(f"line {lineno} is truncated ({tok[0]}, {len(tok)} fields): skipped")
+        fields[tok[0]] = len(tok)
+    return out, notes
 
 
-def _parse_flaser(tok, path, lineno, acc: _Scans) -> None:
-    _need(tok, 2, "FLASER", path, lineno)
-    n = _count(tok[1], "num_readings", path, lineno)
-    _need(tok, 2 + n + 7, "FLASER", path, lineno)
-    if n == 0:
-        return  # a pose-only line (as the thesis wrote estimated poses): no scan to read
-    ranges = _floats(tok[2 : 2 + n], path, lineno)
-    rest = _floats(tok[2 + n : 2 + n + 7], path, lineno)  # x y theta odom_x odom_y odom_theta t
-    # Classic FLASER: beams spread evenly over 180 degrees from -90 degrees (181 or 361 beams
-    # include both ends; 180 or 360 beams step 180/n degrees, as GMapping reads them).
-    inc = math.pi / (n - 1) if n % 2 == 1 and n > 1 else math.pi / n
-    spec = LaserSpec(n, -math.pi / 2.0, inc, FLASER_RANGE_MAX)
-    _add_scan(acc, spec, float(rest[6]), ranges, rest[3:6], path, lineno)
+def _pose_track(lines: _Lines, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t (K,), poses (K, 3)) of the ODOM or TRUEPOS lines in the clock rule's order."""
+    t = np.asarray(lines.poses[kind][0], dtype=np.float64)
+    poses = np.asarray(lines.poses[kind][1], dtype=np.float64).reshape(-1, 3)
+    order = clock_order(t, poses)
+    return order.t, poses[order.index]
 
 
-def _add_scan(acc: _Scans, spec, t, ranges, pose, path, lineno) -> None:
-    if acc.spec is None:
-        acc.spec = spec
-    elif spec.n_beams != acc.spec.n_beams:
-        raise InputError(
-            f"scan has {spec.n_beams} readings, earlier scans {acc.spec.n_beams}",
-            path=path,
-            line=lineno,
-        )
-    acc.t.append(t)
-    acc.ranges.append(ranges)
-    acc.pose.append(pose)
+def _scan_arrays(kind: str, scans: list[Scan], lines: _Lines, path: Path):
+    """(t, ranges, pose_odom, spec, notes) of the chosen scans, in the clock rule's order."""
+    t = np.array([s.t for s in scans], dtype=np.float64)
+    ranges = np.array([s.ranges for s in scans], dtype=np.float32)
+    if kind == "RAWLASER1":
+        t_odom, odom = _pose_track(lines, "ODOM")
+        degenerate = clock_order(t, ranges).degenerate or clock_order(t_odom, odom).degenerate
+        if t_odom.shape[0] == 0 or degenerate:
+            raise InputError(
+                "RAWLASER1 scans carry no pose, and no ODOM lines on a usable clock give one",
+                path=path,
+            )
+        pose = interpolate_poses(t, t_odom, odom)
+    else:
+        pose = np.array([s.pose for s in scans], dtype=np.float64)
+    order = clock_order(t, np.column_stack([pose, ranges]))
+    spec = scans[0].spec
+    if spec is None:
+        spec = flaser_spec(ranges.shape[1], _flaser_range_max(ranges))
+    idx = order.index
+    return order.t, ranges[idx], pose[idx], spec, order.notes("scans")
+
+
+def _flaser_range_max(ranges: np.ndarray) -> float:
+    """[m] The maximum of a FLASER log, which does not say it: its largest reading when at
+    least SATURATED_SHARE of all readings (and SATURATED_MIN) hold it (a sensor's no-return
+    value: 81.91 m for a SICK LMS, 50 m in ACES); else 81.91 m, or just above the largest
+    reading if that is more (so no real return is taken for a no-return)."""
+    top = float(ranges.max()) if ranges.size else 0.0
+    held = np.count_nonzero(ranges == ranges.max()) if ranges.size else 0
+    if top > 0 and held >= max(SATURATED_SHARE * ranges.size, SATURATED_MIN):
+        return float(f"{top:.6g}")  # the printed value, not its float32
+    return max(FLASER_NO_RETURN_M, float(f"{top:.6g}") + 0.02)
 
 
 def read_laser_log(path: str | Path) -> LaserLog:
-    """Read a CARMEN log (ROBOTLASER1, else FLASER scans; ODOM; TRUEPOS), `.gz` allowed.
+    """Read a CARMEN log (`.gz` allowed): the scans of ROBOTLASER1, else FLASER, else
+    RAWLASER1 lines (posed from ODOM); ODOM; TRUEPOS.
 
-    Other message types (PARAM, SYNC, RAWLASER, ...) and `#` comments are skipped. A malformed
-    line of a known type raises InputError naming the file and line.
+    Other message types (PARAM, SYNC, NEFF, RLASER, ...) and `#` comments are skipped. A
+    malformed line of a known type raises InputError naming the file and line, unless it is
+    the last line and has no newline (a log cut off): that one is skipped with a warning.
+    Scans are ordered by `worker.evaluate.clock.clock_order` (a warning for each repair).
     """
     path = Path(path)
     if not path.is_file():
         raise InputError("no such file", path=path)
-    robot = _Scans()
-    flaser = _Scans()
-    gt_t: list[float] = []
-    gt_pose: list[np.ndarray] = []
-    odom_t: list[float] = []
-    odom_pose: list[np.ndarray] = []
-    try:
-        with _open_text(path) as fh:
-            for lineno, line in enumerate(fh, start=1):
-                tok = line.split()
-                if not tok or tok[0].startswith("#"):
-                    continue
-                kind = tok[0]
-                if kind == "ROBOTLASER1":
-                    _parse_robotlaser(tok, path, lineno, robot)
-                elif kind == "FLASER":
-                    _parse_flaser(tok, path, lineno, flaser)
-                elif kind == "ODOM":
-                    _need(tok, 8, "ODOM", path, lineno)
-                    v = _floats(tok[1:8], path, lineno)
-                    odom_t.append(float(v[6]))
-                    odom_pose.append(v[0:3])
-                elif kind == "TRUEPOS":
-                    _need(tok, 8, "TRUEPOS", path, lineno)
-                    v = _floats(tok[1:8], path, lineno)
-                    gt_t.append(float(v[6]))
-                    gt_pose.append(v[0:3])
-    except (OSError, EOFError, UnicodeError) as exc:
-        raise InputError(f"cannot read the log: {exc}", path=path) from None
-    acc = robot if robot.t else flaser
-    if not acc.t:
-        raise InputError("no ROBOTLASER1 or FLASER scans in this log", path=path)
+    lines, notes = _read_lines(path)
+    kind = next((k for k in SCAN_MESSAGES if lines.scans[k]), None)
+    if kind is None:
+        raise InputError("no ROBOTLASER1, FLASER or RAWLASER1 scans in this log", path=path)
+    t, ranges, pose, spec, scan_notes = _scan_arrays(kind, lines.scans[kind], lines, path)
+    notes += scan_notes
+    warn_notes(notes, str(path))
+    t_gt, pose_gt = _pose_track(lines, "TRUEPOS")
+    t_odom, odom = _pose_track(lines, "ODOM")
     return LaserLog(
-        t=np.asarray(acc.t, dtype=np.float64),
-        ranges=np.asarray(acc.ranges, dtype=np.float32),
-        pose_odom=np.asarray(acc.pose, dtype=np.float64).reshape(-1, 3),
-        laser=acc.spec,
-        t_gt=np.asarray(gt_t, dtype=np.float64) if gt_t else None,
-        pose_gt=np.asarray(gt_pose, dtype=np.float64).reshape(-1, 3) if gt_t else None,
-        t_odom=np.asarray(odom_t, dtype=np.float64),
-        odom=np.asarray(odom_pose, dtype=np.float64).reshape(-1, 3),
+        t=t,
+        ranges=ranges,
+        pose_odom=pose,
+        laser=spec,
+        t_gt=t_gt if t_gt.shape[0] else None,
+        pose_gt=pose_gt if t_gt.shape[0] else None,
+        t_odom=t_odom,
+        odom=odom,
         source=str(path),
+        message=kind,
+        notes=tuple(notes),
     )

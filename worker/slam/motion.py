@@ -41,6 +41,17 @@ def _noisy_steps(poses, delta, std, noise):
     return out
 
 
+def motion_substeps(dist: float, turn: float, substep: tuple[float, float]) -> int:
+    """How many steps of at most substep = (lmax [m], amax [rad]) make up a step (1: one)."""
+    lmax, amax = substep
+    k = 1.0
+    if lmax > 0.0:
+        k = max(k, dist / lmax)
+    if amax > 0.0:
+        k = max(k, turn / amax)
+    return math.ceil(k)
+
+
 def draw_from_motion(
     poses: np.ndarray,
     odom_new: np.ndarray,
@@ -50,6 +61,7 @@ def draw_from_motion(
     str_: float,
     stt: float,
     rng: np.random.Generator,
+    substep: tuple[float, float] = (0.0, 0.0),
 ) -> np.ndarray:
     """Sample new particle poses from the odometry step odom_old -> odom_new.
 
@@ -59,6 +71,13 @@ def draw_from_motion(
       y:     srr |dy| + str |dtheta| + 0.3 srr |dx|
       theta: stt |dtheta| + srt sqrt(dx^2 + dy^2)
     and is composed onto each particle. One (N, 3) standard normal draw per call.
+
+    substep (lmax [m], amax [rad]): a step longer than lmax or turning more than amax (a log
+    that kept one scan a metre, as the corrected Radish logs) is drawn as the k equal steps
+    of at most that size a robot's odometry would have given, k = ceil(max(|d| / lmax,
+    |dtheta| / amax)): the k independent noises of std/k sum to std/sqrt(k). A step within
+    both (every step of a 10 Hz log of a robot under lmax / 0.1 s), or (0, 0), is drawn as GMapping
+    draws it, bit for bit.
     """
     poses = np.ascontiguousarray(poses, dtype=np.float64)
     delta = relative3(
@@ -73,5 +92,8 @@ def draw_from_motion(
             stt * dth + srt * math.hypot(dx, dy),
         ]
     )
+    k = motion_substeps(math.hypot(dx, dy), dth, substep)
+    if k > 1:
+        std = std / math.sqrt(k)
     noise = rng.standard_normal((poses.shape[0], 3))
     return _noisy_steps(poses, delta, std, noise)

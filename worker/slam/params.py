@@ -51,6 +51,12 @@ class SlamParams:
     # graph SLAM's own settings; None = its defaults, and no key in the stored JSON (so rbpf
     # runs keep their JSON and run keys); a graph run stores them (`with_defaults_for`)
     graph: GraphSlamParams | None = field(default=None, metadata={"omit_if_none": True})
+    # a scan step longer than this (a log that kept one scan a metre) has its noise drawn as
+    # the sum over the robot-sized steps it stands for (worker.slam.motion.draw_from_motion);
+    # no step of a 10 Hz log under 1.5 m/s and 1.5 rad/s reaches it. 0 = off (one draw, as
+    # GMapping); after such a step the matcher also climbs from the noise-free prediction
+    motion_substep: float = 0.15  # [m]
+    motion_substep_angle: float = 0.15  # [rad]
 
     def __post_init__(self) -> None:
         positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
@@ -58,7 +64,17 @@ class SlamParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"SLAM parameter {name} must be a positive number, got {value}")
-        nonneg = ("linear_update", "angular_update", "srr", "srt", "str_", "stt", "map_margin")
+        nonneg = (
+            "linear_update",
+            "angular_update",
+            "srr",
+            "srt",
+            "str_",
+            "stt",
+            "map_margin",
+            "motion_substep",
+            "motion_substep_angle",
+        )
         for name in nonneg:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -10,7 +10,7 @@ from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
 from worker.slam.match_kernels import match_config, scan_match_all, scan_match_all_parallel
-from worker.slam.motion import compose3, draw_from_motion
+from worker.slam.motion import compose3, draw_from_motion, motion_substeps, relative3
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
 from worker.slam.resample import normalized_weights, systematic_indices
@@ -63,6 +63,8 @@ class RbpfSlam:
         self._T_map_odom = np.zeros(3)
         self._best = 0
         self._grid: OccupancyGrid | None = None  # cached map of the latest update
+        self._pred: np.ndarray | None = None  # (N, 3) noise-free predictions since the update
+        self._sparse = False  # a sparse step since the last update
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -70,15 +72,24 @@ class RbpfSlam:
         if self._odom_last is None:
             self.poses[:] = pose  # the map frame starts at the first odometry pose
         else:
+            self._predict(pose)
             self.poses = draw_from_motion(
-                self.poses, pose, self._odom_last, p.srr, p.srt, p.str_, p.stt, self.rng
+                self.poses,
+                pose,
+                self._odom_last,
+                p.srr,
+                p.srt,
+                p.str_,
+                p.stt,
+                self.rng,
+                (p.motion_substep, p.motion_substep_angle),
             )
         self._odom_last = pose
         self._pose_odom = pose
         if not self._gate.step(t, pose):
             return False
         if self.updates > 0:
-            self._proposal_and_weights(ranges)
+            self._proposal_and_weights(ranges, self._pred if self._sparse else None)
             same_as = self._maybe_resample()
         else:  # the first scan: every particle at the same pose, with the same empty map
             same_as = np.zeros(self.poses.shape[0], dtype=np.int64)
@@ -86,30 +97,48 @@ class RbpfSlam:
             self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range, same_as
         )
         self.updates += 1
+        self._pred = None
+        self._sparse = False
         self._grid = None
         self._best = int(np.argmax(self.log_weight_sums))
         self._T_map_odom = compose(self.poses[self._best], inverse(pose))
         return True
 
-    def _proposal_and_weights(self, ranges: np.ndarray) -> None:
+    def _predict(self, pose: np.ndarray) -> None:
+        """Note a sparse step (one the motion model draws as several, see draw_from_motion),
+        and carry each particle's noise-free prediction since the last update."""
+        p = self.params
+        step = relative3(self._odom_last, pose)
+        substep = (p.motion_substep, p.motion_substep_angle)
+        if self._pred is None:
+            self._pred = self.poses.copy()
+        self._pred = _compose_all(self._pred, step)
+        self._sparse = (
+            self._sparse
+            or motion_substeps(float(np.hypot(*step[:2])), abs(float(step[2])), substep) > 1
+        )
+
+    def _proposal_and_weights(self, ranges: np.ndarray, pred: np.ndarray | None) -> None:
+        """The improved proposal; after a sparse step (a log that kept one scan a metre) each
+        particle's climb is also started from its noise-free odometry prediction, and the
+        better-scoring of the two results is kept: a wider search where the odometry moved
+        more than a robot's step between two scans."""
         m = self.maps
         if self.params.threads > 1:
             numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
             match = scan_match_all_parallel
         else:
             match = scan_match_all
-        self.poses, _, likes = match(
-            m.mean,
-            m.bits,
-            m.tables,
-            m.tpx0,
-            m.tpy0,
-            self.poses,
-            ranges,
-            self._cos_a,
-            self._sin_a,
-            self._match_cfg,
-        )
+        args = (ranges, self._cos_a, self._sin_a, self._match_cfg)
+        poses, scores, likes = match(m.mean, m.bits, m.tables, m.tpx0, m.tpy0, self.poses, *args)
+        if pred is not None:
+            alt, alt_scores, alt_likes = match(
+                m.mean, m.bits, m.tables, m.tpx0, m.tpy0, pred, *args
+            )
+            better = alt_scores > scores
+            poses[better] = alt[better]
+            likes = np.where(better, alt_likes, likes)
+        self.poses = poses
         self.log_weights += likes
         self.log_weight_sums += likes
 
@@ -139,3 +168,16 @@ class RbpfSlam:
         if self._grid is None:
             self._grid = self.maps.occupancy(self._best)
         return self._grid
+
+
+def _compose_all(poses: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(N, 3) each pose (+) the same step (3,)."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    th = poses[:, 2] + step[2]
+    return np.column_stack(
+        [
+            poses[:, 0] + c * step[0] - s * step[1],
+            poses[:, 1] + s * step[0] + c * step[1],
+            (th + np.pi) % (2 * np.pi) - np.pi,
+        ]
+    )

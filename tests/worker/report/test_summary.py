@@ -97,7 +97,8 @@ def _two_rooms():
 
 
 def test_a_fresh_runs_summary_json_is_what_json_dumps_writes_of_it(tmp_path):
-    from worker.pipeline import RunParams, run_one
+    from worker.pipeline import run_one
+    from worker.run_params import RunParams
 
     params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 20.0}})
     result = run_one(_two_rooms(), params, seed=4)

@@ -107,7 +107,7 @@ def test_pose_only_flaser_lines_are_not_scans(tmp_path):
     # The thesis wrote estimated poses as FLASER lines with zero readings.
     path = tmp_path / "est.log"
     path.write_text("FLASER 0 0.0 0.0 0.0 1.5 2.5 0.25 12.0\n")
-    with pytest.raises(InputError, match="no ROBOTLASER1 or FLASER scans"):
+    with pytest.raises(InputError, match="no ROBOTLASER1, FLASER or RAWLASER1 scans"):
         read_laser_log(path)
 
 
@@ -138,7 +138,7 @@ def test_malformed_lines_name_file_and_line(tmp_path, line, message):
 def test_a_log_without_scans_is_an_input_error(tmp_path):
     path = tmp_path / "empty.log"
     path.write_text("# nothing\nODOM 0 0 0 0 0 0 1.0 h 1.0\n")
-    with pytest.raises(InputError, match="no ROBOTLASER1 or FLASER"):
+    with pytest.raises(InputError, match="no ROBOTLASER1, FLASER or RAWLASER1"):
         read_laser_log(path)
     with pytest.raises(InputError, match="no such file"):
         read_laser_log(tmp_path / "missing.log")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from worker.slam.motion import draw_from_motion
 
@@ -44,3 +45,30 @@ def test_scalar_helpers_equal_the_vectorised_se2(rng):
         a, b = rng.uniform(-5, 5, 3), rng.uniform(-5, 5, 3)
         assert np.allclose(compose3(a, b), compose(a, b), rtol=0, atol=1e-12)
         assert np.allclose(relative3(a, b), relative(a, b), rtol=0, atol=1e-12)
+
+
+def test_a_long_step_is_drawn_as_the_robot_sized_steps_it_stands_for():
+    # 1 m straight with substeps of 0.1 m: k = 10 steps, std srr * 1 m / sqrt(10) in x and
+    # srt * 1 m / sqrt(10) in theta (by hand from the docstring's formula)
+    rng = np.random.default_rng(3)
+    poses = np.zeros((20000, 3))
+    out = draw_from_motion(
+        poses, np.array([1.0, 0, 0]), np.zeros(3), 0.1, 0.2, 0.1, 0.2, rng, (0.1, 0.1)
+    )
+    assert out[:, 0].std() == pytest.approx(0.1 / np.sqrt(10), rel=0.03)
+    assert out[:, 2].std() == pytest.approx(0.2 / np.sqrt(10), rel=0.03)
+    # a turn of 0.5 rad with 0.1 rad substeps: k = 5
+    out = draw_from_motion(
+        poses, np.array([0, 0, 0.5]), np.zeros(3), 0.1, 0.2, 0.1, 0.2, rng, (0.1, 0.1)
+    )
+    assert out[:, 2].std() == pytest.approx(0.2 * 0.5 / np.sqrt(5), rel=0.03)
+
+
+def test_a_step_within_the_substep_is_drawn_as_gmapping_draws_it():
+    poses = np.zeros((50, 3))
+    step = np.array([0.08, 0.01, 0.06])  # a 10 Hz step under 0.85 m/s and 0.7 rad/s
+    a = draw_from_motion(poses, step, np.zeros(3), 0.1, 0.2, 0.1, 0.2, np.random.default_rng(1))
+    b = draw_from_motion(
+        poses, step, np.zeros(3), 0.1, 0.2, 0.1, 0.2, np.random.default_rng(1), (0.1, 0.1)
+    )
+    np.testing.assert_array_equal(a, b)

@@ -17,7 +17,7 @@ from PIL import Image
 
 from worker.errors import InputError
 from worker.params import to_dict
-from worker.pipeline import RunParams
+from worker.run_params import RunParams
 from worker.slam.graph.params import GraphSlamParams
 
 
