@@ -114,7 +114,7 @@ def _side_by_side(log_path: Path, other: Path, args: argparse.Namespace) -> None
     print(f"median this / other over {len(ratios)} rounds: {np.median(ratios):.3f}; {_load()}")
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default="office_a")
     ap.add_argument("--minutes", type=float, default=30.0)
@@ -127,7 +127,11 @@ def main() -> None:
     ap.add_argument("--json", action="store_true", help="only the update figures, one JSON line")
     ap.add_argument("--against", type=Path, help="another checkout to time side by side")
     ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def main() -> None:
+    args = _args()
     if args.against is not None and not (args.against / "benchmarks" / "bench_slam.py").exists():
         print(
             f"bench_slam: --against: no benchmarks/bench_slam.py under {args.against}",
@@ -167,34 +171,40 @@ def main() -> None:
         _print_updates(log, args, *_best_pass(log, args))
         if args.skip_cli:
             return
-        mapqual = Path(sys.executable).with_name("mapqual")
-        cmd = [
-            str(mapqual),
-            "slam",
-            str(tmp / "sim" / "sim.log"),
-            "-o",
-            str(tmp / "slam"),
-            "--particles",
-            str(args.particles),
-            "--json",
-        ]
-        env = dict(os.environ, NUMBA_NUM_THREADS="1")
-        t0 = time.perf_counter()
-        out = subprocess.run(cmd, capture_output=True, text=True, env=env)
-        if out.returncode != 0:
-            sys.exit(f"mapqual slam failed ({out.returncode}):\n{out.stderr}")
-        wall = time.perf_counter() - t0
-        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu_s = usage.ru_utime + usage.ru_stime
-        peak_mb = usage.ru_maxrss / 1024
-        summary = json.loads(out.stdout)
-        print(
-            f"mapqual slam over the whole log: {wall:.1f} s wall, {cpu_s:.1f} s CPU (the process "
-            f"spent {summary['wall_s']:.1f} s wall in SLAM, the rest reading the log, starting "
-            f"and writing), {summary['updates']} updates; real-time factor "
-            f"{sim.sim_time_s / wall:.1f}x on wall time, {sim.sim_time_s / cpu_s:.1f}x on CPU "
-            f"time (target >= 20x); peak memory {peak_mb:.0f} MB (target <= 1024 MB); {_load()}"
-        )
+        _whole_log_cli(tmp, args, sim.sim_time_s)
+
+
+def _whole_log_cli(tmp: Path, args: argparse.Namespace, sim_time_s: float) -> None:
+    """`mapqual slam` over the whole log in a child process: wall, CPU and peak memory."""
+    mapqual = Path(sys.executable).with_name("mapqual")
+    cmd = [
+        str(mapqual),
+        "slam",
+        str(tmp / "sim" / "sim.log"),
+        "-o",
+        str(tmp / "slam"),
+        "--particles",
+        str(args.particles),
+        "--json",
+    ]
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if out.returncode != 0:
+        sys.exit(f"mapqual slam failed ({out.returncode}):\n{out.stderr}")
+    wall = time.perf_counter() - t0
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = usage.ru_utime + usage.ru_stime
+    peak_mb = usage.ru_maxrss / 1024
+    summary = json.loads(out.stdout)
+    print(
+        f"mapqual slam over the whole log: {wall:.1f} s wall, {cpu_s:.1f} s CPU (the "
+        f"process "
+        f"spent {summary['wall_s']:.1f} s wall in SLAM, the rest reading the log, starting "
+        f"and writing), {summary['updates']} updates; real-time factor "
+        f"{sim_time_s / wall:.1f}x on wall time, {sim_time_s / cpu_s:.1f}x on CPU "
+        f"time (target >= 20x); peak memory {peak_mb:.0f} MB (target <= 1024 MB); {_load()}"
+    )
 
 
 if __name__ == "__main__":

@@ -99,7 +99,7 @@ def _timed(world, params, seed, reporter) -> tuple[tuple[float, ...], dict]:
     return (wall, cpu, *shares), result.summary
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
     ap.add_argument("--slam", default="rbpf", choices=registry.names())
@@ -115,7 +115,11 @@ def main() -> None:
         help="where the publisher stores progress (a throwaway database on 127.0.0.1:5432)",
     )  # fmt: skip
     ap.add_argument("--listen", nargs=2, metavar=("REDIS_URL", "RUN_ID"), help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def main() -> None:
+    args = _args()
     if args.listen:
         listen(args.listen[0], int(args.listen[1]))
         return
@@ -154,9 +158,13 @@ def main() -> None:
             took, stats = _watched(redis_url, url, run_id, client, world, params, args.seed)
             best["watched"] = _best(best["watched"], took)
             print(f"repeat {rep + 1}, best (wall, CPU, inside wall, CPU): {best}", flush=True)
-    sim_t = ref["timings"]["sim_time_s"]
+    _report(world.name, args, best, stats, ref.timings.sim_time_s)
+
+
+def _report(name: str, args: argparse.Namespace, best: dict, stats: dict, sim_t: float) -> None:
+    """The figures: each way of running against the run without a progress callback."""
     load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
-    print(f"{world.name}, {args.slam}, seed {args.seed}: {sim_t:.0f} s simulated, best of "
+    print(f"{name}, {args.slam}, seed {args.seed}: {sim_t:.0f} s simulated, best of "
           f"{args.repeats}, progress stored in {args.database}; load average {load}")  # fmt: skip
     w0, c0, _, _ = best["none"]
     print("changes against the run without a callback; 'inside': shares of the run's wall and")

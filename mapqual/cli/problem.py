@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -31,18 +31,10 @@ def problem(
     odometry made to drift, seeded) and DIR/gt.tum (the corrected poses at the same times),
     and DIR/problem.json. Then: `mapqual slam DIR/problem.log -o RUN` and `mapqual evaluate
     --gt DIR/gt.tum --est RUN/trajectory.tum`."""
-    import numpy as np
-
     from worker.errors import InputError
     from worker.evaluate.trajio import write_tum
     from worker.sim.carmen import read_laser_log
-    from worker.sim.drift import (
-        DriftParams,
-        drift_odometry,
-        drifting_problem,
-        log_slice,
-        write_problem_log,
-    )
+    from worker.sim.drift import DriftParams, drifting_problem, log_slice, write_problem_log
 
     params = DriftParams(scale_std=scale_std, step_noise=step_noise)
     data = read_laser_log(log)
@@ -56,14 +48,28 @@ def problem(
     comment = f"mapqual problem {log.name} --seed {seed}: odometry made to drift, TRUEPOS = log"
     write_problem_log(out / "problem.log", drifted, comment)
     write_tum(out / "gt.tum", gt)
+    summary = _summary(log, seed, first, params, data, drifted)
+    (out / "problem.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"{summary['scans']} scans, scale {summary['scale']} -> {out}")
+
+
+def _summary(
+    log: Path, seed: int, first: int, params: Any, data: Any, drifted: Any
+) -> dict[str, Any]:
+    """problem.json: where the problem comes from, the drift drawn, and the laser."""
+    import numpy as np
+
+    from worker.sim.drift import drift_odometry
+
+    # the scale errors the seed drew (drift_odometry draws them first, from the same stream)
     _, scale = drift_odometry(data.pose_odom, np.random.default_rng(seed), params)
-    summary = {
+    return {
         "log": str(log),
         "seed": seed,
         "scans": int(drifted.t.shape[0]),
         "first": first,
-        "scale_std": scale_std,
-        "step_noise": step_noise,
+        "scale_std": params.scale_std,
+        "step_noise": params.step_noise,
         "scale": [round(float(s), 6) for s in scale],
         "laser": {
             "n_beams": drifted.laser.n_beams,
@@ -73,5 +79,3 @@ def problem(
         },
         "notes": list(data.notes),
     }
-    (out / "problem.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"{summary['scans']} scans, scale {summary['scale']} -> {out}")

@@ -121,30 +121,9 @@ class PatchMaps:
         if poses.shape[0] != self.n_particles:
             raise ValueError(f"{poses.shape[0]} poses for {self.n_particles} particle maps")
         n = self.n_particles
-        if same_as is None:
-            todo = np.arange(n, dtype=np.int64)
-        else:
-            same_as = np.asarray(same_as, dtype=np.int64)
-            if (
-                same_as.shape != (n,)
-                or np.any(same_as[same_as] != same_as)
-                or not np.array_equal(poses[same_as], poses)
-                or not np.array_equal(self.tables[same_as], self.tables)
-            ):
-                raise ValueError("same_as must name, for each particle, an identical one")
-            todo = np.flatnonzero(same_as == np.arange(n)).astype(np.int64)
+        todo = self._todo(poses, same_as)
         ranges = np.ascontiguousarray(ranges_m, dtype=np.float64)
-        used = (ranges > 0) & (ranges <= max_range)
-        reach = float(min(np.max(ranges[used]), usable_range)) if used.any() else 0.0
-        reach += 2 * self.resolution
-        lo = poses[:, :2].min(axis=0) - reach
-        hi = poses[:, :2].max(axis=0) + reach
-        self._ensure_table(lo[0], lo[1], hi[0], hi[1])
-        # worst case a particle allocates every patch of its scan's bounding box
-        side = self.resolution * PATCH
-        span = np.floor((poses[:, :2] + reach) / side) - np.floor((poses[:, :2] - reach) / side) + 1
-        need = (span[:, 0] * span[:, 1]).astype(np.int64)
-        self._recount()
+        need = self._reserve(poses, ranges, usable_range, max_range)
         start = 0
         while start < todo.size:
             free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
@@ -176,8 +155,40 @@ class PatchMaps:
             )
             self.dropped += int(dropped)
         if todo.size < n:
-            self.tables = self.tables[same_as]
+            self.tables = self.tables[np.asarray(same_as, dtype=np.int64)]
             self._recount()
+
+    def _todo(self, poses: np.ndarray, same_as: np.ndarray | None) -> np.ndarray:
+        """(K,) the particles whose scan is registered: all, or one of each `same_as` group."""
+        n = self.n_particles
+        if same_as is None:
+            return np.arange(n, dtype=np.int64)
+        same_as = np.asarray(same_as, dtype=np.int64)
+        if (
+            same_as.shape != (n,)
+            or np.any(same_as[same_as] != same_as)
+            or not np.array_equal(poses[same_as], poses)
+            or not np.array_equal(self.tables[same_as], self.tables)
+        ):
+            raise ValueError("same_as must name, for each particle, an identical one")
+        return np.flatnonzero(same_as == np.arange(n)).astype(np.int64)
+
+    def _reserve(
+        self, poses: np.ndarray, ranges: np.ndarray, usable_range: float, max_range: float
+    ) -> np.ndarray:
+        """Grow the patch table over the scans' reach; (N,) the patches each particle may
+        allocate at worst (every patch of its scan's bounding box)."""
+        used = (ranges > 0) & (ranges <= max_range)
+        reach = float(min(np.max(ranges[used]), usable_range)) if used.any() else 0.0
+        reach += 2 * self.resolution
+        lo = poses[:, :2].min(axis=0) - reach
+        hi = poses[:, :2].max(axis=0) + reach
+        self._ensure_table(lo[0], lo[1], hi[0], hi[1])
+        side = self.resolution * PATCH
+        span = np.floor((poses[:, :2] + reach) / side) - np.floor((poses[:, :2] - reach) / side) + 1
+        need = (span[:, 0] * span[:, 1]).astype(np.int64)
+        self._recount()
+        return need
 
     def occupancy(self, particle: int) -> OccupancyGrid:
         """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none)."""

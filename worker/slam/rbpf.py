@@ -9,7 +9,8 @@ from worker.evaluate.se2 import compose, inverse
 from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
-from worker.slam.match_kernels import match_config, scan_match_all, scan_match_all_parallel
+from worker.slam.match_all_kernels import scan_match_all, scan_match_all_parallel
+from worker.slam.match_kernels import match_config
 from worker.slam.motion import compose3, draw_from_motion, motion_substeps, relative3
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
