@@ -5,33 +5,16 @@ one-line errors."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from mapqual.cli import main
 from worker.evaluate.trajio import read_trajectory
 from worker.sim.carmen import read_laser_log
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "carmen"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="no ../shared/data/carmen here")
-
-
-@pytest.fixture
-def run(monkeypatch, capsys):
-    def _run(*argv) -> tuple[int, str, str]:
-        monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return _run
 
 
 @needs_data

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,26 +10,10 @@ import pytest
 import yaml
 from PIL import Image
 
-from mapqual.cli import main
 from worker.evaluate.trajio import read_trajectory
 from worker.sim.carmen import read_laser_log
 from worker.sim.run import run_simulation
 from worker.world.world import World
-
-
-@pytest.fixture
-def run(monkeypatch, capsys):
-    def _run(*argv) -> tuple[int, str, str]:
-        monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return _run
 
 
 @pytest.fixture(scope="module")

@@ -3,31 +3,13 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from mapqual.cli import main
-
 WORLDS = Path(__file__).resolve().parents[2] / "worlds"
-
-
-@pytest.fixture
-def run(monkeypatch, capsys):
-    def _run(*argv) -> tuple[int, str, str]:
-        monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return _run
 
 
 @pytest.fixture
