@@ -11,25 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mapqual.cli import main
 from worker.evaluate.metric import evaluate_relations
 from worker.evaluate.trajectory import Trajectory
 from worker.evaluate.trajio import read_relations, read_trajectory, write_carmen, write_tum
-
-
-@pytest.fixture
-def run(monkeypatch, capsys):
-    def _run(*argv: str) -> tuple[int, str, str]:
-        monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return _run
 
 
 @pytest.fixture
