@@ -7,11 +7,11 @@ import subprocess
 import sys
 from typing import get_args
 
-import numpy as np
 import pytest
 from pydantic import ValidationError
 
 from tests.summaries import EXAMPLE, make_summary, relation, stats, summary_doc
+from tests.worker.test_pipeline import two_rooms
 from worker.report.folder import SUMMARY, write_report
 from worker.report.summary import SCHEMA_VERSION, RunSummary, summary_json_schema
 
@@ -84,24 +84,12 @@ def test_the_json_schema_names_every_field_and_versions_default_to_1():
     assert "slam_wall_s" not in timings["required"] and "wall_time_s" in timings["required"]
 
 
-def _two_rooms():
-    from worker.world.world import World
-
-    occ = np.zeros((120, 200), bool)
-    occ[[0, -1], :] = True
-    occ[:, [0, -1]] = True
-    occ[:, 100] = True
-    occ[50:70, 100] = False
-    occ[60, 30:60] = True
-    return World.from_array(occ, 0.05, name="two_rooms")
-
-
 def test_a_fresh_runs_summary_json_is_what_json_dumps_writes_of_it(tmp_path):
     from worker.pipeline import run_one
     from worker.run_params import RunParams
 
     params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 20.0}})
-    result = run_one(_two_rooms(), params, seed=4)
+    result = run_one(two_rooms(), params, seed=4)
     write_report(result, tmp_path)
     text = (tmp_path / SUMMARY).read_text()
     doc = json.loads(text)
