@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import os
 import shutil
 import socket
 import subprocess
@@ -12,7 +13,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 PG_HOST, PG_PORT = "127.0.0.1", 5432
-REDIS_HOST, REDIS_PORT = "127.0.0.1", 6379
+# MAPQUAL_TEST_REDIS_PORT gives a suite its own Redis (started below when none answers there),
+# so that two suites on one machine do not share databases 10-15 of the machine's server.
+REDIS_HOST = "127.0.0.1"
+REDIS_PORT = int(os.environ.get("MAPQUAL_TEST_REDIS_PORT", "6379"))
 
 
 def _port_open(host: str, port: int) -> bool:
@@ -70,10 +74,10 @@ def scratch_database(prefix: str) -> Iterator[str]:
 
 
 def ensure_redis() -> str:
-    """The URL of a running Redis on 127.0.0.1:6379, starting one if needed."""
+    """The URL of a running Redis on 127.0.0.1:REDIS_PORT, starting one if needed."""
     if not _port_open(REDIS_HOST, REDIS_PORT):
         if shutil.which("redis-server") is None:
-            raise RuntimeError("Redis is not running on 127.0.0.1:6379 and cannot be started")
+            raise RuntimeError(f"no Redis on 127.0.0.1:{REDIS_PORT} and none can be started")
         subprocess.run(
             [
                 "redis-server",
@@ -91,5 +95,5 @@ def ensure_redis() -> str:
             check=False,
         )
         if not _wait_port(REDIS_HOST, REDIS_PORT, 15):
-            raise RuntimeError("Redis did not come up on 127.0.0.1:6379")
+            raise RuntimeError(f"Redis did not come up on 127.0.0.1:{REDIS_PORT}")
     return f"redis://{REDIS_HOST}:{REDIS_PORT}/0"
