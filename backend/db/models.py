@@ -6,6 +6,7 @@ row per pose: a two-hour run has 72,000 poses per trajectory.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
@@ -55,6 +56,18 @@ class UtcDateTime(TypeDecorator):
         return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
+class _Members(dict):
+    """A StrEnum's members by value, None for NULL; a value that is none raises the enum's own
+    ValueError (from `__missing__`, which only a miss pays for)."""
+
+    def __init__(self, enum: type[StrEnum]):
+        super().__init__({None: None, **{m.value: m for m in enum}})
+        self.enum = enum
+
+    def __missing__(self, value: object) -> StrEnum:
+        return self.enum(value)  # raises: "'x' is not a valid RunStatus"
+
+
 class StatusText(TypeDecorator):
     """A status: stored as its string (VARCHAR(20), as before the enums), read back as the
     `StrEnum` member, so that rows and API answers carry the same type."""
@@ -65,12 +78,22 @@ class StatusText(TypeDecorator):
     def __init__(self, enum: type[StrEnum]):
         super().__init__()
         self.enum = enum
+        # stored string -> member (NULL -> None): read with the dict's own C `__getitem__`, no
+        # Python call per value (GET /jobs/{id} reads seven statuses a request)
+        self._members = _Members(enum)
 
     def process_bind_param(self, value: str | None, dialect: Any) -> str | None:
         return None if value is None else str(self.enum(value))
 
     def process_result_value(self, value: str | None, dialect: Any) -> StrEnum | None:
-        return None if value is None else self.enum(value)
+        return self._members[value]
+
+    def result_processor(self, dialect: Any, coltype: Any) -> Callable[[Any], Any]:
+        """The lookup itself as the row processor (String has none of its own to chain)."""
+        impl = self.impl_instance.result_processor(dialect, coltype)
+        if impl is not None:  # a driver that converts strings itself: chain the two
+            return lambda value: self._members[impl(value)]
+        return self._members.__getitem__
 
 
 class Base(DeclarativeBase):

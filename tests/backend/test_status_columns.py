@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sqlalchemy import text
+from sqlalchemy import select, text
 from sqlalchemy.exc import StatementError
 
 from backend.db.models import Job, Run, World
@@ -53,6 +53,20 @@ def test_an_unknown_status_is_refused_before_it_reaches_the_database(db_url):
         s.get_one(Run, run_id).status = "paused"
     with session_scope(db_url) as s:
         assert s.get_one(Run, run_id).status == "queued"
+
+
+def test_a_stored_string_that_is_no_status_fails_the_read_and_null_reads_as_none(db_url):
+    with session_scope(db_url) as s:
+        run_id = _job(s).runs[0].id
+    with session_scope(db_url) as s:  # written around the ORM, as a stray script might
+        s.execute(text("UPDATE runs SET status = 'paused' WHERE id = :id"), {"id": run_id})
+    unreadable = pytest.raises(ValueError, match="'paused' is not a valid RunStatus")
+    with unreadable, session_scope(db_url) as s:
+        s.get_one(Run, run_id)
+    with session_scope(db_url) as s:  # the Core read path of GET /jobs/{id} decodes alike
+        s.execute(text("UPDATE runs SET status = 'done' WHERE id = :id"), {"id": run_id})
+        row = s.execute(select(Run.status, Run.outcome).where(Run.id == run_id)).one()
+        assert row.status is RunStatus.DONE and row.outcome is None
 
 
 def test_every_legal_change_is_between_run_statuses():
