@@ -39,6 +39,7 @@ def export_cmd(
         "messages": stats.counts,
         "t_start": stats.t_start,
         "t_end": stats.t_end,
+        "time_shift": stats.time_shift,
     }
     if as_json:
         print(json.dumps(doc))
@@ -46,3 +47,5 @@ def export_cmd(
     topics = ", ".join(f"/{k} {n}" for k, n in stats.counts.items())
     span = f"{stats.t_start:.3f}..{stats.t_end:.3f} s"
     print(f"wrote {stats.format} bag {stats.path}: {topics} ({span})")
+    if stats.time_shift:
+        print(f"the log starts before t = 0: its times are shifted by +{stats.time_shift:.6f} s")

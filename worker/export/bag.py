@@ -4,14 +4,15 @@ Topics: /scan (sensor_msgs/LaserScan, frame `laser`), /odom (nav_msgs/Odometry o
 base_link), /tf (the same odom -> base_link), /tf_static (base_link -> laser, once, latched /
 transient-local), /clock (rosgraph_msgs/Clock at every scan) and /ground_truth
 (nav_msgs/Odometry of base_link in `map`, from TRUEPOS lines). Stamps are the log's own times,
-so an estimate recorded from the bag scores against the run with no clock shift. ROS 2 bags
+so an estimate recorded from the bag scores against the run with no clock shift (a log that
+starts before t = 0, which ROS time cannot hold, is shifted to start at 0, and says so). ROS 2 bags
 use the MCAP storage (rosbag2 metadata version 8), ROS 1 bags format 2.0.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +57,7 @@ class BagStats:
     counts: dict[str, int]
     t_start: float  # [s]
     t_end: float  # [s]
+    time_shift: float = 0.0  # [s] added to the log's times (a log that starts before t = 0)
 
 
 def find_sim_log(source: str | Path) -> Path:
@@ -111,13 +113,17 @@ def _streams(log: LaserLog, p: BagParams, store: Any) -> Iterator[tuple[int, int
     yield from heapq.merge(static(), scans(), odometry(), ground_truth(), key=lambda r: r[:2])
 
 
-def _check(log: LaserLog) -> None:
+def _shifted(log: LaserLog) -> tuple[LaserLog, float]:
+    """(the log, the shift [s] added to its times): none, unless it starts before t = 0, which
+    ROS time cannot hold (some CARMEN logs count from a reference inside them); then it is
+    moved to start at 0."""
     times = [log.t, log.t_odom] + ([log.t_gt] if log.t_gt is not None else [])
     first = min(float(x[0]) for x in times if x.shape[0])
-    if first < 0 or not math.isfinite(first):
-        raise InputError(
-            f"ROS time cannot be negative: the log starts at t={first}", path=log.source
-        )
+    if first >= 0:
+        return log, 0.0
+    shift = -first
+    t_gt = None if log.t_gt is None else log.t_gt + shift
+    return dataclasses.replace(log, t=log.t + shift, t_odom=log.t_odom + shift, t_gt=t_gt), shift
 
 
 def write_bag(
@@ -129,7 +135,7 @@ def write_bag(
     out = Path(out)
     if out.exists():
         raise InputError("exists already: choose a new output path", path=out)
-    _check(log)
+    log, shift = _shifted(log)
     store = m.typestore(fmt)
     writer, conns, serialize = _open_writer(out, fmt, store)
     counts = dict.fromkeys(TOPICS, 0)
@@ -144,7 +150,7 @@ def write_bag(
     spans = [log.t] + ([log.t_gt] if log.t_gt is not None else [])
     t0 = min(float(s[0]) for s in spans)
     t1 = max(float(s[-1]) for s in spans)
-    return BagStats(out, fmt, counts, t0, t1)
+    return BagStats(out, fmt, counts, t0, t1, shift)
 
 
 def _open_writer(out: Path, fmt: m.BagFormat, store: Any) -> tuple[Any, dict[str, Any], Any]:

@@ -91,6 +91,9 @@ def test_an_estimate_is_scored_on_the_runs_relations_and_listed(api, run_id, run
     page = api.client.get(f"/jobs/{_job_of(api, run_id)}", headers=api._auth("alice"))
     assert page.status_code == 200 and "odometry (this run)" in page.text and ">mine<" in page.text
     assert f"/api/v1/runs/{run_id}/bag?format=rosbag1" in page.text
+    compare = api.client.get("/compare", headers=api._auth("alice")).text
+    assert "External algorithms on the same runs" in compare and "<td>mine</td>" in compare
+    assert "<td>mine</td>" not in api.client.get("/compare", headers=api._auth("bob")).text
 
 
 def _job_of(api, run_id: int) -> int:

@@ -208,9 +208,23 @@ def test_refusals_are_one_line_input_errors(tmp_path, log_path):
         export_bag(log_path, tmp_path / "taken", "rosbag2")
     with pytest.raises(InputError, match="no sim.log"):
         export_bag(tmp_path / "taken", tmp_path / "b", "rosbag2")
+
+
+def test_a_log_starting_before_zero_is_shifted_to_zero(tmp_path, log_path):
+    """ROS time has no negative stamps: a log from t = -1 s is moved by +1 s, and says so."""
     neg = tmp_path / "neg.log"
-    neg.write_text(log_path.read_text().replace(" mapqual 0.000000", " mapqual -1.000000"))
-    text = neg.read_text().replace("0.000000 mapqual -1.000000", "-1.000000 mapqual -1.000000")
-    neg.write_text(text)
-    with pytest.raises(InputError, match="negative"):
-        export_bag(neg, tmp_path / "n.bag", "rosbag1")
+    lines = []
+    for ln in log_path.read_text().splitlines():
+        tok = ln.split()
+        if tok and not tok[0].startswith("#"):
+            t = float(tok[-1]) - 1.0
+            tok[-3], tok[-1] = f"{t:.6f}", f"{t:.6f}"
+            ln = " ".join(tok)
+        lines.append(ln)
+    neg.write_text("\n".join(lines) + "\n")
+    stats = export_bag(neg, tmp_path / "n.bag", "rosbag1")
+    assert stats.time_shift == pytest.approx(1.0)
+    assert (stats.t_start, stats.t_end) == pytest.approx((0.0, (N - 1) * DT))
+    _, msgs = _read(tmp_path / "n.bag")
+    scans = [mm for topic, _, mm in msgs if topic == "/scan"]
+    assert [_stamp(s.header) for s in scans] == pytest.approx(list(np.arange(N) * DT), abs=1e-9)
