@@ -1,6 +1,7 @@
 """Sanity checks of an estimate against the run's ground truth, each a one-line InputError:
 timestamps not covering the run (milliseconds or nanoseconds for seconds, a clock offset),
-a frame offset or rotated from the run's (first pose), a mirrored frame, degrees for radians.
+millimetres for metres (path length), a frame offset or rotated from the run's (first pose),
+a mirrored frame, degrees for radians (turning).
 
 The relations metric itself is blind to a constant frame offset (d = inv(X1) X2 cancels it),
 so an offset frame is refused only because it almost always means the wrong topic or frame;
@@ -31,16 +32,29 @@ class CheckParams:
     degrees_ratio: float = 8.0  # estimate's turning over the ground truth's above this: degrees
     min_turn: float = 0.5  # [rad] the ground truth must turn this much for the two turn checks
     frame: bool = True  # refuse an offset, rotated or mirrored frame
+    max_coordinate: float = 1e6  # [m] no building is larger: beyond it, not metres
+    units_ratio: float = 50.0  # estimate's path over the ground truth's above this: not metres
+    min_path: float = 0.5  # [m] the ground truth must travel this much for that check
 
 
 def check_estimate(est: Trajectory, gt: Trajectory, p: CheckParams, name: str = "estimate") -> None:
     """Raise InputError (one line, naming `name`) for the first problem found."""
+    far = float(np.max(np.abs(est.poses[:, :2]))) if len(est) else 0.0
+    if far > p.max_coordinate:
+        raise InputError(f"{name}: a pose {far:.6g} m from the origin: not metres, or garbage")
     _check_clock(est, gt, p, name)
     common = gt.t[(gt.t >= est.t[0]) & (gt.t <= est.t[-1])]
     if common.shape[0] < 2:
         raise InputError(f"{name}: fewer than 2 ground-truth times inside the estimate's span")
     g, _ = gt.poses_at(common, FAR_S)
     e, _ = est.poses_at(common, FAR_S)
+    path_gt = float(np.sum(np.hypot(*np.diff(g[:, :2], axis=0).T)))
+    path_est = float(np.sum(np.hypot(*np.diff(e[:, :2], axis=0).T)))
+    if path_gt > p.min_path and path_est > p.units_ratio * path_gt:
+        raise InputError(
+            f"{name}: it travels {path_est:.6g} where the ground truth travels {path_gt:.3f} m "
+            f"({path_est / path_gt:.0f} x): positions in millimetres (or centimetres) for metres?"
+        )
     if p.frame:
         _check_first_pose(e[0], g[0], float(common[0]), p, name)
     d_gt, d_est = wrap_angle(np.diff(g[:, 2])), wrap_angle(np.diff(e[:, 2]))

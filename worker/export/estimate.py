@@ -64,8 +64,13 @@ def read_bag_estimate(path: Path, topic: str | None, frames: Frames) -> Trajecto
                 (reader.deserialize(raw, c.msgtype), c.msgtype)
                 for c, _, raw in reader.messages(connections=conns)
             ]
-    except AnyReaderError as exc:
-        raise InputError(f"not a readable ROS bag ({exc})", path=path) from None
+    except InputError:
+        raise
+    except (AnyReaderError, Exception) as exc:  # noqa: BLE001 - any failure of a hostile file
+        # a damaged or forged bag fails deep in the reader (struct, sqlite3, decompression,
+        # KeyError on unknown types, ...): every one of them is the input's fault
+        reason = f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
+        raise InputError(f"not a readable ROS bag ({reason})", path=path) from None
     if conns[0].msgtype == TF:
         return _tf_estimate([msg for msg, _ in rows], frames, path)
     t, poses = [], []

@@ -7,6 +7,7 @@ import re
 import shutil
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -24,6 +25,7 @@ router = APIRouter(tags=["runs"])
 _FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,120}$")
 ZIP_MAX_MEMBERS = 64  # a rosbag2 directory: metadata.yaml and a few storage files
 ZIP_MAX_RATIO = 200  # uncompressed bytes per compressed byte past which a zip is a bomb
+ZIP_MAX_BYTES = 1 << 30  # [bytes] and never more than this unpacked
 
 
 def _estimate_out(row) -> dict[str, Any]:
@@ -80,7 +82,8 @@ def _unzip_bag(data: bytes, folder: Path) -> Path:
             infos = [i for i in zf.infolist() if not i.is_dir()]
             if not infos or len(infos) > ZIP_MAX_MEMBERS:
                 raise InputError(f"a rosbag2 zip holds 1 to {ZIP_MAX_MEMBERS} files")
-            if sum(i.file_size for i in infos) > ZIP_MAX_RATIO * max(len(data), 1):
+            total = sum(i.file_size for i in infos)
+            if total > min(ZIP_MAX_RATIO * max(len(data), 1), ZIP_MAX_BYTES):
                 raise InputError("the zip unpacks to too much (compression ratio of a zip bomb)")
             metas = [i for i in infos if Path(i.filename).name == "metadata.yaml"]
             if len(metas) != 1:
@@ -96,7 +99,11 @@ def _unzip_bag(data: bytes, folder: Path) -> Path:
                     raise InputError(f"zip member {i.filename!r}: unsafe file name")
                 (out / rel.name).write_bytes(zf.read(i))
             return out
-    except zipfile.BadZipFile:
+    except InputError:
+        raise
+    except (zipfile.BadZipFile, NotImplementedError, RuntimeError, ValueError, EOFError,
+            OSError, zlib.error):  # fmt: skip
+        # a damaged zip, an unknown compression method, an encrypted member, a bad CRC
         raise InputError("not a readable zip file") from None
 
 

@@ -138,11 +138,31 @@ def _zip(members: dict[str, bytes]) -> bytes:
         ("bomb.zip", _zip({"metadata.yaml": b"0" * 5_000_000}), {}, "zip bomb"),
         ("no.zip", b"PK\x03\x04 not really", {}, "not a readable zip"),
         ("junk.bag", b"#ROSBAG V2.0\n" + b"\x00" * 100, {}, "not a readable ROS bag"),
+        ("junk.mcap", b"\x89MCAP0\r\n" + b"\xff" * 64, {}, "not a readable ROS bag"),
+        ("junk.db3", b"SQLite format 3\x00" + b"\x01" * 200, {}, "not a readable ROS bag"),
+        (
+            "meta.zip",
+            _zip({"b/metadata.yaml": b"rosbag2_bagfile_information: 7\n"}),
+            {},
+            "not a readable ROS bag",
+        ),
         ("bad name!.tum", "ok", {}, "unsafe file name"),
         ("ok.tum", "ok", {"name": "../x"}, "estimate name"),
         ("junk.tum", b"1 2 3\n", {}, "expected 8"),
     ],
-    ids=["ms", "zip-slip", "zip-bomb", "bad-zip", "bad-bag", "path", "name", "junk"],
+    ids=[
+        "ms",
+        "zip-slip",
+        "zip-bomb",
+        "bad-zip",
+        "bad-bag",
+        "bad-mcap",
+        "bad-db3",
+        "bad-meta",
+        "path",
+        "name",
+        "junk",
+    ],
 )
 def test_bad_estimates_are_refused_in_one_line(api, run_id, run_folder, name, body, form, needle):
     est = (run_folder[0] / "est.tum").read_text()

@@ -113,8 +113,10 @@ def test_the_same_motion_passes():
         (lambda t, p: (t, p * [1.0, 1.0, 0.0] + [0.0, 0.0, 0.5]), "0.000 m, 0.500 rad apart"),
         (lambda t, p: (t, p * [1.0, 1.0, 180.0 / math.pi]), "degrees instead of radians"),
         (lambda t, p: (t, p * [1.0, -1.0, -1.0] + [0.0, 6.0, 0.0]), "mirrored frame"),
+        (lambda t, p: (t, p * [1000.0, 1000.0, 1.0]), "millimetres .or centimetres. for metres"),
+        (lambda t, p: (t, p * [1.0, 1.0, 1.0] + [1e7, 0.0, 0.0]), "not metres, or garbage"),
     ],
-    ids=["ms", "ns", "epoch", "short", "offset", "rotated", "degrees", "mirrored"],
+    ids=["ms", "ns", "epoch", "short", "offset", "rotated", "degrees", "mirrored", "mm", "far"],
 )
 def test_clock_frame_and_unit_mistakes_are_named(change, needle):
     gt = _gt()
