@@ -2,11 +2,12 @@
 
 Topics: /scan (sensor_msgs/LaserScan, frame `laser`), /odom (nav_msgs/Odometry odom ->
 base_link), /tf (the same odom -> base_link), /tf_static (base_link -> laser, once, latched /
-transient-local), /clock (rosgraph_msgs/Clock at every scan) and /ground_truth
-(nav_msgs/Odometry of base_link in `map`, from TRUEPOS lines). Stamps are the log's own times,
-so an estimate recorded from the bag scores against the run with no clock shift (a log that
-starts before t = 0, which ROS time cannot hold, is shifted to start at 0, and says so). ROS 2 bags
-use the MCAP storage (rosbag2 metadata version 8), ROS 1 bags format 2.0.
+transient-local: the mount ROBOTLASER1 lines give), /clock (rosgraph_msgs/Clock at every
+scan) and /ground_truth (nav_msgs/Odometry of base_link in `map`, from TRUEPOS lines).
+Stamps are the log's own times, so an estimate recorded from the bag scores against the run
+with no clock shift (a log that starts before t = 0, which ROS time cannot hold, is shifted
+to start at 0, and says so). ROS 2 bags use the MCAP storage (rosbag2 metadata version 8),
+ROS 1 bags format 2.0.
 """
 
 from __future__ import annotations
@@ -196,7 +197,30 @@ def _open_writer(out: Path, fmt: m.BagFormat, store: Any) -> tuple[Any, dict[str
     return writer, conns, store.serialize_ros1
 
 
+def laser_offset(path: str | Path) -> tuple[float, float, float]:
+    """[m, m, rad] The laser's mount on the robot from the log's first ROBOTLASER1 line (its
+    laser pose against its robot pose); zero for a log of other scan messages."""
+    from worker.evaluate.textio import read_bytes
+    from worker.sim.carmen_lines import parse_robotlaser
+
+    data = read_bytes(path)  # what read_laser_log reads too (a .gz inflated)
+    at = data.find(b"\nROBOTLASER1 ")
+    if at < 0 and not data.startswith(b"ROBOTLASER1 "):
+        return (0.0, 0.0, 0.0)
+    start = 0 if at < 0 else at + 1
+    end = data.find(b"\n", start)
+    line = data[start : end if end >= 0 else len(data)].decode("utf-8", errors="replace")
+    scan = parse_robotlaser(line.split(), str(path), 0)
+    off = scan.laser_offset
+    return (0.0, 0.0, 0.0) if off is None else (float(off[0]), float(off[1]), float(off[2]))
+
+
 def export_bag(source: str | Path, out: str | Path, fmt: m.BagFormat,
                params: BagParams | None = None) -> BagStats:  # fmt: skip
-    """Read the CARMEN log of `source` (a run folder or a log) and write it as a bag."""
-    return write_bag(read_laser_log(find_sim_log(source)), out, fmt, params)
+    """Read the CARMEN log of `source` (a run folder or a log) and write it as a bag; by
+    default base_link -> laser is the mount the log's ROBOTLASER1 lines give."""
+    path = find_sim_log(source)
+    log = read_laser_log(path)
+    if params is None:
+        params = BagParams(laser_offset=laser_offset(path))
+    return write_bag(log, out, fmt, params)

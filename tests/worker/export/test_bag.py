@@ -228,3 +228,27 @@ def test_a_log_starting_before_zero_is_shifted_to_zero(tmp_path, log_path):
     _, msgs = _read(tmp_path / "n.bag")
     scans = [mm for topic, _, mm in msgs if topic == "/scan"]
     assert [_stamp(s.header) for s in scans] == pytest.approx(list(np.arange(N) * DT), abs=1e-9)
+
+
+def test_the_laser_mount_of_robotlaser_lines_is_the_static_transform(tmp_path, log_path):
+    """A log whose laser sits 0.2 m ahead of the robot centre, turned by 0.1 rad: its laser
+    pose is robot pose (+) (0.2, 0, 0.1), written out by hand into every ROBOTLASER1 line."""
+    lines = []
+    for ln in log_path.read_text().splitlines():
+        tok = ln.split()
+        if tok and tok[0] == "ROBOTLASER1":
+            k = 10 + int(tok[8]) + int(tok[9 + int(tok[8])])  # the laser pose's first field
+            rx, ry, rth = (float(v) for v in tok[k + 3 : k + 6])
+            laser = (rx + 0.2 * math.cos(rth), ry + 0.2 * math.sin(rth), rth + 0.1)
+            tok[k : k + 3] = [f"{v:.6f}" for v in laser]
+            ln = " ".join(tok)
+        lines.append(ln)
+    mounted = tmp_path / "mounted.log"
+    mounted.write_text("\n".join(lines) + "\n")
+    export_bag(mounted, tmp_path / "m.bag", "rosbag1")
+    _, msgs = _read(tmp_path / "m.bag")
+    static = next(mm for topic, _, mm in msgs if topic == "/tf_static").transforms[0]
+    tr = static.transform
+    assert [tr.translation.x, tr.translation.y, _yaw(tr.rotation)] == pytest.approx(
+        [0.2, 0.0, 0.1], abs=2e-6
+    )
