@@ -121,7 +121,7 @@ def post_estimate(
     run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
-    file: Annotated[UploadFile, File(description="TUM, CARMEN, a .bag, or a rosbag2 as .zip")],
+    file: Annotated[UploadFile, File(description="TUM, CARMEN, .bag, .mcap, .db3, rosbag2 .zip")],
     name: Annotated[str, Form(description="the algorithm's name")] = "external",
     topic: Annotated[str | None, Form(max_length=200, description="bag: pose topic")] = None,
 ) -> dict[str, Any]:

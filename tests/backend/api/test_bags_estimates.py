@@ -117,6 +117,16 @@ def test_a_rosbag2_zip_with_a_topic_is_scored(api, run_id, run_folder, tmp_path)
     )
 
 
+def test_a_bare_mcap_file_is_scored(api, run_id, run_folder, tmp_path):
+    export_bag(run_folder[0], tmp_path / "bag", "rosbag2")
+    mcap = (tmp_path / "bag" / "bag.mcap").read_bytes()  # without its metadata.yaml
+    r = api.post(f"/api/v1/runs/{run_id}/estimates", files={"file": ("rec.mcap", mcap)},
+                 data={"name": "bare", "topic": "/odom"})  # fmt: skip
+    assert r.status_code == 201, r.text
+    want = run_folder[1].summary.relations["B"].translation.mean
+    assert r.json()["b_mean_t"] == pytest.approx(want, abs=1e-5)
+
+
 def _zip(members: dict[str, bytes]) -> bytes:
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
