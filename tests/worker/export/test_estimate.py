@@ -129,3 +129,22 @@ def test_clock_frame_and_unit_mistakes_are_named(change, needle):
 def test_an_offset_frame_is_scored_when_asked():
     gt = _gt()
     check_estimate(Trajectory(gt.t, gt.poses + [5.0, 0.0, 0.0]), gt, CheckParams(frame=False))
+
+
+def test_bare_storage_files_of_a_rosbag2_are_read(tmp_path):
+    """A .db3 or .mcap alone (no metadata.yaml beside it), as users often pass them around."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    gt = _gt()
+    store = m.typestore("rosbag2")
+    for plugin, suffix in ((StoragePlugin.SQLITE3, ".db3"), (StoragePlugin.MCAP, ".mcap")):
+        bag = tmp_path / f"b{suffix[1:]}"
+        with Writer(bag, version=8, storage_plugin=plugin) as writer:
+            conn = writer.add_connection("/pose", m.POSE_STAMPED, typestore=store)
+            for t, p in zip(gt.t[::10], gt.poses[::10], strict=True):
+                data = store.serialize_cdr(_pose_stamped(store, float(t), p), m.POSE_STAMPED)
+                writer.write(conn, m.nanoseconds(float(t)), data)
+        bare = tmp_path / f"alone{suffix}"
+        bare.write_bytes(next(bag.glob(f"*{suffix}")).read_bytes())
+        traj = read_estimate(bare)
+        assert np.allclose(traj.poses, gt.poses[::10], atol=1e-9), suffix
