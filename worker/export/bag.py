@@ -145,7 +145,7 @@ def write_bag(
             writer.write(conns[key], ns + tie, serialize(msg, TOPICS[key][1]))
             counts[key] += 1
     except BaseException:
-        writer.abort() if hasattr(writer, "abort") else None
+        writer.abort()  # both writers: close and leave no half-written bag open
         raise
     writer.close()
     spans = [log.t] + ([log.t_gt] if log.t_gt is not None else [])
