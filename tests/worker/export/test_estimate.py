@@ -100,6 +100,10 @@ def test_the_same_motion_passes():
         gt.t[::3], gt.poses[::3] + np.random.default_rng(1).normal(0, 0.01, (201, 3))
     )
     check_estimate(noisy, gt, CheckParams())
+    # a first pose 1 s late (the slack of a 60 s run: 0.5 s + 1 % = 1.1 s) is fine
+    check_estimate(Trajectory(gt.t[10:], gt.poses[10:]), gt, CheckParams())
+    with pytest.raises(InputError, match="does not cover"):
+        check_estimate(Trajectory(gt.t[12:], gt.poses[12:]), gt, CheckParams())
 
 
 @pytest.mark.parametrize(
