@@ -13,7 +13,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.limits import BodyLimit
-from backend.api.routes import health, jobs, runs, stats, worlds
+from backend.api.routes import bags, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from backend.world_analysis import recover_pending, world_pool
 from frontend.dashboard import install as install_dashboard
@@ -73,7 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"detail": str(exc)}, status_code=400)
 
     app.include_router(health.router)
-    for module in (worlds, jobs, runs, stats):
+    for module in (worlds, jobs, runs, bags, stats):
         app.include_router(module.router, prefix=API_PREFIX)
     install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them

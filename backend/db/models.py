@@ -317,3 +317,26 @@ class RunMap(Base):
     data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
 
     run: Mapped[Run] = relationship(back_populates="map")
+
+
+class RunEstimate(Base):
+    """An external algorithm's estimate of a run's motion, scored on the run's own relations
+    (`mapqual score`, POST /runs/{id}/estimates): one more "algorithm" of that run."""
+
+    __tablename__ = "run_estimates"
+    __table_args__ = (UniqueConstraint("run_id", "name"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    name: Mapped[str] = mapped_column(String(40))  # the algorithm's name, as given by the user
+    source: Mapped[str] = mapped_column(String(200))  # the file it was read from
+    n_poses: Mapped[int] = mapped_column(Integer)
+    # {"relations": {B, A, SM: summary}, "ate": ...}: the shape of a run's `metrics`
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    b_mean_t: Mapped[float | None] = mapped_column(Float)  # [m]
+    b_mean_r: Mapped[float | None] = mapped_column(Float)  # [rad]
+    report_dir: Mapped[str | None] = mapped_column(Text)
+    # the estimate itself, (N, 4) [t, x, y, theta] packed as the run's trajectories are
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)

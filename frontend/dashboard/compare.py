@@ -26,7 +26,40 @@ def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLR
     counts = _relation_counts(session, user)
     for row in rows:
         row["relations"] = counts.get(row["world_id"], 0)
-    return render(request, "compare.html", user=user, rows=rows)
+    paired = _estimate_rows(session, user)
+    return render(request, "compare.html", user=user, rows=rows, paired=paired)
+
+
+def _estimate_rows(session, user: Principal) -> list[dict]:
+    """Per external algorithm (`mapqual score`, POST /runs/{id}/estimates): its mean B errors
+    over the runs it was scored on, beside those of the runs' own algorithms on the very same
+    runs and relations."""
+    from backend.db.models import RunEstimate
+
+    stmt = select(RunEstimate.name, RunEstimate.b_mean_t, RunEstimate.b_mean_r, Run.slam,
+                  Run.b_mean_t, Run.b_mean_r).join(Run, Run.id == RunEstimate.run_id)  # fmt: skip
+    if not user.is_admin:
+        stmt = stmt.where(Run.owner_id == user.id)
+    groups: dict[str, list] = {}
+    for name, et, er, slam, ot, orr in session.execute(stmt):
+        groups.setdefault(name, []).append((et, er, slam, ot, orr))
+
+    def mean(values) -> float | None:
+        vals = [v for v in values if v is not None]
+        return sum(vals) / len(vals) if vals else None
+
+    return [
+        {
+            "name": name,
+            "runs": len(g),
+            "t": mean(x[0] for x in g),
+            "r": mean(x[1] for x in g),
+            "own": ", ".join(sorted({x[2] for x in g})),
+            "own_t": mean(x[3] for x in g),
+            "own_r": mean(x[4] for x in g),
+        }  # fmt: skip
+        for name, g in sorted(groups.items())
+    ]
 
 
 def _relation_counts(session, user: Principal) -> dict[int, int]:

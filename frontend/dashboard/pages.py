@@ -224,6 +224,7 @@ def job_page(
     for r in job.runs:
         token = issue(key, r.id, user.id, settings.viewer_token_ttl_s)
         runs.append(_run_row(r, run_link(settings.viewer_url, r.id, token)))
+    _add_estimates(session, runs)
     return render(
         request, "job.html", user=user, job=job, world=session.get(World, job.world_id),
         runs=runs, refresh=job.status in ACTIVE_JOB,
@@ -242,6 +243,26 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
         "viewer": viewer_link,
         "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),
     }
+
+
+def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
+    """Each run row's algorithms, (name, relation summaries by kind): its own, then the external
+    estimates scored on its relations; and whether it has a sim.log to export as a bag."""
+    from backend.store_estimates import list_estimates
+    from worker.export.bag import SIM_LOG_NAMES
+
+    by_run: dict[int, list] = {}
+    for e in list_estimates(session, [row["run"].id for row in rows]):
+        by_run.setdefault(e.run_id, []).append(e)
+    for row in rows:
+        run = row["run"]
+        own = (run.metrics or {}).get("relations") or {}
+        row["algorithms"] = [(f"{run.slam} (this run)", own)] + [
+            (e.name, (e.metrics or {}).get("relations") or {}) for e in by_run.get(run.id, [])
+        ]
+        row["bag"] = row["report"] and any(
+            (Path(run.report_dir) / n).is_file() for n in SIM_LOG_NAMES
+        )
 
 
 @router.get("/runs/{run_id}/plot/{name}.png")

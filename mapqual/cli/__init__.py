@@ -23,9 +23,11 @@ app = typer.Typer(
 # (command modules are imported here, one line each)
 from mapqual.cli import batch as _batch  # noqa: E402,F401
 from mapqual.cli import evaluate as _evaluate  # noqa: E402,F401
+from mapqual.cli import export as _export  # noqa: E402,F401
 from mapqual.cli import problem as _problem  # noqa: E402,F401
 from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import runs as _runs  # noqa: E402,F401
+from mapqual.cli import score as _score  # noqa: E402,F401
 from mapqual.cli import service as _service  # noqa: E402,F401
 from mapqual.cli import simulate as _simulate  # noqa: E402,F401
 from mapqual.cli import slam as _slam  # noqa: E402,F401

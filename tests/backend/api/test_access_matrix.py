@@ -50,6 +50,10 @@ ROUTES: dict[tuple[str, str], str] = {
     ("GET", "/api/v1/runs/{run_id}/map.{ext}"): OWNED,
     ("GET", "/api/v1/runs/{run_id}/relations"): OWNED,
     ("GET", "/api/v1/runs/{run_id}/report.zip"): OWNED,
+    ("GET", "/api/v1/runs/{run_id}/bag"): OWNED,
+    ("GET", "/api/v1/runs/{run_id}/estimates"): OWNED,
+    # owner-only too: tests/backend/api/test_bags_estimates.py calls it as each caller
+    ("POST", "/api/v1/runs/{run_id}/estimates"): OWNED,
     ("GET", "/api/v1/stats"): LIST,
     # public, like the OpenAPI document that holds it too: it describes the API, no one's data
     ("GET", "/api/v1/schemas/summary"): OPEN,
@@ -110,7 +114,8 @@ def site(tmp_path_factory):
     queued job; an admin owns nothing."""
     world = World.from_array(_rooms(), 0.05, name="two_rooms")
     params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 30.0}})
-    result = run_one(world, params, 2)
+    sim_log = tmp_path_factory.mktemp("sim") / "sim.log"
+    result = run_one(world, params, 2, sim_log=sim_log)  # its sim.log: GET /runs/{id}/bag
     import redis
 
     # a broker database no other test uses (jobs submitted here are sent, never run)
@@ -138,6 +143,7 @@ def site(tmp_path_factory):
                 owned[name] = Owned(w.id, done.id, done.runs[0].id, queued.id)
         for name in OWNERS:
             report = write_report(result, tmp_path_factory.mktemp(f"report-{name}"))
+            (Path(report) / "sim.log").write_bytes(sim_log.read_bytes())
             store_finished_run(url, owned[name].run, result, Path(report))
         settings = Settings(DATABASE_URL=url, REDIS_URL=redis_url)
         with TestClient(create_app(settings)) as client:

@@ -1,0 +1,163 @@
+"""A run's sensor data as a ROS bag (GET /runs/{id}/bag) and external estimates scored on the
+run's own relations (POST / GET /runs/{id}/estimates)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import tempfile
+import zipfile
+import zlib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile, status
+from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
+
+from backend.api.deps import CurrentUser, IdPath, SessionDep
+from backend.api.routes.runs import _report_dir, _run
+from backend.store_estimates import list_estimates, save_estimate
+from worker.errors import InputError
+
+router = APIRouter(tags=["runs"])
+
+_FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,120}$")
+ZIP_MAX_MEMBERS = 64  # a rosbag2 directory: metadata.yaml and a few storage files
+ZIP_MAX_RATIO = 200  # uncompressed bytes per compressed byte past which a zip is a bomb
+ZIP_MAX_BYTES = 1 << 30  # [bytes] and never more than this unpacked
+
+
+def _estimate_out(row) -> dict[str, Any]:
+    return {
+        "id": row.id, "run_id": row.run_id, "name": row.name, "source": row.source,
+        "n_poses": row.n_poses, "b_mean_t": row.b_mean_t, "b_mean_r": row.b_mean_r,
+        "metrics": row.metrics, "created_at": row.created_at.isoformat(),
+    }  # fmt: skip
+
+
+@router.get("/runs/{run_id}/bag")
+def get_bag(
+    run_id: IdPath,
+    session: SessionDep,
+    user: CurrentUser,
+    format: Literal["rosbag2", "rosbag1"] = Query("rosbag2", description="bag format"),
+) -> FileResponse:
+    """The run's sim.log as a bag: rosbag1 (one .bag) or rosbag2 (MCAP; its directory as a
+    zip). Written to a temporary folder and streamed from disk, then deleted."""
+    from worker.export.bag import export_bag, find_sim_log
+
+    folder = _report_dir(_run(session, user, run_id))
+    try:
+        log = find_sim_log(folder)
+    except InputError:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no sim.log") from None
+    tmp = Path(tempfile.mkdtemp(prefix="mapqual-bag-"))
+    cleanup = BackgroundTask(shutil.rmtree, tmp, ignore_errors=True)
+    try:
+        name = f"run{run_id}"
+        if format == "rosbag1":
+            path = export_bag(log, tmp / f"{name}.bag", "rosbag1").path
+            return FileResponse(path, media_type="application/octet-stream",
+                                filename=path.name, background=cleanup)  # fmt: skip
+        bag = export_bag(log, tmp / name, "rosbag2").path
+        path = tmp / f"{name}_rosbag2.zip"
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:
+            for f in sorted(bag.iterdir()):
+                zf.write(f, f"{name}/{f.name}")
+        return FileResponse(path, media_type="application/zip", filename=path.name,
+                            background=cleanup)  # fmt: skip
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _unzip_bag(data: bytes, folder: Path) -> Path:
+    """A rosbag2 directory from an uploaded zip, refusing what a hostile zip may hold: paths
+    out of the folder, too many members, a compression ratio of a zip bomb."""
+    src = folder / "upload.zip"
+    src.write_bytes(data)
+    try:
+        with zipfile.ZipFile(src) as zf:
+            infos = [i for i in zf.infolist() if not i.is_dir()]
+            if not infos or len(infos) > ZIP_MAX_MEMBERS:
+                raise InputError(f"a rosbag2 zip holds 1 to {ZIP_MAX_MEMBERS} files")
+            total = sum(i.file_size for i in infos)
+            if total > min(ZIP_MAX_RATIO * max(len(data), 1), ZIP_MAX_BYTES):
+                raise InputError("the zip unpacks to too much (compression ratio of a zip bomb)")
+            metas = [i for i in infos if Path(i.filename).name == "metadata.yaml"]
+            if len(metas) != 1:
+                raise InputError("a rosbag2 zip holds exactly one metadata.yaml")
+            base = Path(metas[0].filename).parent
+            out = folder / "bag"
+            out.mkdir()
+            for i in infos:
+                rel = Path(i.filename)
+                if rel.is_absolute() or ".." in rel.parts or rel.parent != base:
+                    raise InputError(f"zip member {i.filename!r}: not beside metadata.yaml")
+                if not _FILE_NAME.match(rel.name):
+                    raise InputError(f"zip member {i.filename!r}: unsafe file name")
+                (out / rel.name).write_bytes(zf.read(i))
+            return out
+    except InputError:
+        raise
+    except (zipfile.BadZipFile, NotImplementedError, RuntimeError, ValueError, EOFError,
+            OSError, zlib.error):  # fmt: skip
+        # a damaged zip, an unknown compression method, an encrypted member, a bad CRC
+        raise InputError("not a readable zip file") from None
+
+
+def _estimate_file(upload_name: str, data: bytes, folder: Path) -> Path:
+    """The uploaded estimate on disk: a rosbag2 directory for a zip, else the file itself."""
+    if upload_name.lower().endswith(".zip"):
+        return _unzip_bag(data, folder)
+    path = folder / upload_name
+    path.write_bytes(data)
+    return path
+
+
+@router.post("/runs/{run_id}/estimates", status_code=201)
+def post_estimate(
+    run_id: IdPath,
+    session: SessionDep,
+    user: CurrentUser,
+    file: Annotated[UploadFile, File(description="TUM, CARMEN, .bag, .mcap, .db3, rosbag2 .zip")],
+    name: Annotated[str, Form(description="the algorithm's name")] = "external",
+    topic: Annotated[str | None, Form(max_length=200, description="bag: pose topic")] = None,
+) -> dict[str, Any]:
+    """Score an estimate of the run's motion on the run's own B, A and SM relations and store
+    it as an algorithm of the run (a name again replaces the earlier one). 400 with one line
+    for an estimate that does not cover the run, is in another frame, or mixes units."""
+    from worker.export.estimate import read_estimate
+    from worker.export.score import check_name, score_estimate
+
+    check_name(name)
+    upload_name = Path(file.filename or "").name
+    if not _FILE_NAME.match(upload_name):
+        raise HTTPException(status.HTTP_400_BAD_REQUEST, f"unsafe file name {file.filename!r}")
+    run = _run(session, user, run_id)
+    folder = _report_dir(run)
+    data = file.file.read()  # the body limit (BodyLimit) bounds it
+    with tempfile.TemporaryDirectory(prefix="mapqual-est-") as tmp:
+        path = _estimate_file(upload_name, data, Path(tmp))
+        try:
+            est = read_estimate(path, "auto", topic)
+        except InputError as exc:
+            raise InputError(str(exc).replace(f"{tmp}/", "")) from None
+    try:
+        score = score_estimate(folder, est, name, upload_name)
+    except InputError as exc:
+        if "cannot create directory" in str(exc):
+            unavailable = status.HTTP_503_SERVICE_UNAVAILABLE
+            raise HTTPException(unavailable, f"run {run_id}: {exc}") from None
+        raise
+    row = save_estimate(session, run, summary=score.summary, t=est.t, poses=est.poses,
+                        report_dir=str(score.folder))  # fmt: skip
+    return _estimate_out(row)
+
+
+@router.get("/runs/{run_id}/estimates")
+def get_estimates(run_id: IdPath, session: SessionDep, user: CurrentUser) -> list[dict[str, Any]]:
+    """The external estimates scored on the run, by name."""
+    run = _run(session, user, run_id)
+    return [_estimate_out(r) for r in list_estimates(session, [run.id])]

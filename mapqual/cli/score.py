@@ -1,0 +1,107 @@
+"""`mapqual score`: an external estimate of a run's motion, scored on the run's own relations."""
+
+from __future__ import annotations
+
+import json
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mapqual.cli import app
+from worker.errors import InputError
+
+
+class EstFmt(StrEnum):
+    auto = "auto"
+    tum = "tum"
+    carmen = "carmen"
+    bag = "bag"
+
+
+def _resolve_run(run: str) -> tuple[Path, int | None]:
+    """(report folder, database run id or None) of RUN: a stored run's id, or a run folder
+    (then the database run whose report folder it is, if there is one)."""
+    from backend.db.models import Run
+    from backend.db.session import session_scope
+    from mapqual.cli.runs import _database_url
+
+    if run.isdigit():
+        with session_scope(_database_url()) as s:
+            row = s.get(Run, int(run))
+            if row is None:
+                raise InputError(f"no run {run} in the database")
+            if not row.report_dir or not Path(row.report_dir).is_dir():
+                raise InputError(f"run {run} has no report folder (yet)")
+            return Path(row.report_dir), row.id
+    folder = Path(run)
+    if not folder.is_dir():
+        raise InputError("no such run folder (or run id)", path=folder)
+    want = folder.resolve()
+    try:
+        url = _database_url()
+    except Exception:  # no database to record it in: the folder alone is scored
+        return folder, None
+    with session_scope(url) as s:
+        rows = s.query(Run.id, Run.report_dir).filter(Run.report_dir.is_not(None)).all()
+    found = [rid for rid, d in rows if Path(d).resolve() == want]
+    return folder, (found[-1] if found else None)
+
+
+def _store(run_id: int, score, est) -> None:
+    from backend.db.models import Run
+    from backend.db.session import session_scope
+    from backend.store_estimates import save_estimate
+    from mapqual.cli.runs import _database_url
+
+    with session_scope(_database_url()) as s:
+        save_estimate(s, s.get_one(Run, run_id), summary=score.summary, t=est.t, poses=est.poses,
+                      report_dir=str(score.folder.resolve()))  # fmt: skip
+
+
+@app.command("score")
+def score_cmd(
+    run: Annotated[str, typer.Argument(help="Run folder, or the id of a stored run.")],
+    est: Annotated[
+        Path, typer.Option(help="Estimate: TUM, CARMEN, or a bag (.bag / rosbag2 dir).")
+    ],
+    name: Annotated[str, typer.Option(help="The algorithm's name (its report subfolder).")] = (
+        "external"
+    ),
+    fmt: Annotated[EstFmt, typer.Option("--format", help="Format of --est.")] = EstFmt.auto,
+    topic: Annotated[str | None, typer.Option(help="Bag: the pose topic (default: found).")] = None,
+    max_gap: Annotated[
+        float | None, typer.Option(help="Interpolate only within this many s (the run's).")
+    ] = None,
+    allow_frame_offset: Annotated[
+        bool, typer.Option(help="Score an estimate whose frame is offset from the run's.")
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Score an estimate with the run's B, A and SM relations; write <run>/estimates/NAME/ and
+    store it as another algorithm of the run."""
+    from mapqual.cli.evaluate import _stats_table
+    from worker.export.checks import CheckParams
+    from worker.export.estimate import read_estimate
+    from worker.export.score import check_name, score_estimate
+
+    check_name(name)
+    if max_gap is not None and not max_gap > 0:
+        raise InputError("--max-gap must be > 0")
+    folder, run_id = _resolve_run(run)
+    traj = read_estimate(est, fmt.value, topic)
+    checks = CheckParams(frame=not allow_frame_offset)
+    score = score_estimate(folder, traj, name, est.name, max_gap=max_gap, checks=checks)
+    if run_id is not None:
+        _store(run_id, score, traj)
+    doc = dict(score.summary, report_dir=str(score.folder), run_id=run_id)
+    if as_json:
+        print(json.dumps(doc))
+        return
+    for kind, summary in score.summary["relations"].items():
+        _stats_table(
+            f"{kind} relations: {name} on run {run}", summary, ["mean", "std", "min", "max", "n"]
+        )
+    stored = f", stored as algorithm {name!r} of run {run_id}" if run_id is not None else ""
+    print(f"wrote {score.folder}{stored}")
