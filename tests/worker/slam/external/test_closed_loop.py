@@ -15,7 +15,7 @@ import pytest
 
 from tests.worker.slam.external.helpers import children, example, fake, twin
 from tests.worker.test_pipeline import two_rooms
-from worker.pipeline import run_one
+from worker.pipeline import RunCancelled, run_one
 from worker.report.folder import write_report
 from worker.run_params import RunParams
 
@@ -107,3 +107,15 @@ def test_a_program_that_cannot_start_fails_the_run_at_its_first_step(tmp_path):
     assert len(ex.t) == 1
     write_report(result, tmp_path)
     assert json.loads((tmp_path / "summary.json").read_text())["reason"] == "slam_failed"
+
+
+def test_a_cancelled_run_stops_its_program():
+    before = children()
+
+    def cancel_at_1s(p):
+        if p.t >= 1.0:
+            raise RunCancelled
+
+    with pytest.raises(RunCancelled):
+        run_one(two_rooms(), _params(example()), 1, on_progress=cancel_at_1s)
+    assert children() == before
