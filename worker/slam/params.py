@@ -103,14 +103,13 @@ class SlamParams:
 
 def with_defaults_for(params: SlamParams, algorithm: str) -> SlamParams:
     """params with the graph settings filled in when the algorithm is graph SLAM, so that they
-    are stored with the run; refuses an "external" run without its program (and a program
-    given to another algorithm)."""
-    if (algorithm == "external") != (params.external is not None):
-        raise InputError(
-            "algorithm 'external' needs slam.external {name, command}"
-            if algorithm == "external"
-            else f"slam.external is set but the algorithm is {algorithm!r}: choose 'external'"
-        )
+    are stored with the run. slam.external belongs to "external" runs: refused when one has
+    none, dropped (not stored) for the other algorithms, so that one --params file serves a
+    batch that compares `--slam rbpf,external`."""
+    if algorithm == "external" and params.external is None:
+        raise InputError("algorithm 'external' needs slam.external {name, command}")
+    if algorithm != "external" and params.external is not None:
+        params = replace(params, external=None)
     if algorithm == "graph" and params.graph is None:
         return replace(params, graph=GraphSlamParams())
     return params

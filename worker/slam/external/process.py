@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import fcntl
 import os
 import select
 import signal
@@ -16,6 +17,7 @@ from collections.abc import Sequence
 from worker.slam.external.protocol import HEADER, MAX_FRAME, ProtocolError
 
 _PR_SET_PDEATHSIG = 1
+PIPE_BYTES = 1 << 20  # [bytes] pipe buffers asked for (Linux's default maximum)
 
 
 class ChildGone(RuntimeError):
@@ -26,6 +28,12 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
     """Linux: the child gets SIGKILL if the worker dies (a hard time limit, an OOM kill)."""
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def _grow_pipe(fd: int, size: int = PIPE_BYTES) -> None:
+    """Linux: make the pipe's buffer `size` bytes (at most /proc/sys/fs/pipe-max-size)."""
+    with contextlib.suppress(OSError, AttributeError):
+        fcntl.fcntl(fd, fcntl.F_SETPIPE_SZ, size)
 
 
 class ChildProcess:
@@ -47,6 +55,8 @@ class ChildProcess:
         self._in = self.proc.stdin.fileno()  # type: ignore[union-attr]
         os.set_blocking(self._out, False)
         os.set_blocking(self._in, False)
+        for fd in (self._out, self._in):  # a map in a few wake-ups, not one per 64 KiB
+            _grow_pipe(fd)
         self._buf = bytearray()
         self.closed = False
         self._tail = ""  # the stderr tail, kept when the process is closed

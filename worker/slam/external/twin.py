@@ -1,12 +1,14 @@
 """The protocol twin of an in-process algorithm: `python -m worker.slam.external.twin odometry`
 serves worker.slam's algorithm over stdin / stdout, for benchmarks and tests of the protocol.
 
-It answers every step with the algorithm's pose and, after an update, its whole map (float32),
-so a run through the twin follows the same path as the in-process run, bit for bit.
+It answers every step with the algorithm's pose and, after an update, the cells of its map that
+changed (float32 patches; the whole map when its extent changed), so a run through the twin
+follows the same path as the in-process run, bit for bit.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from typing import BinaryIO
 
@@ -37,20 +39,38 @@ def read_frame(stream: BinaryIO) -> dict | None:
     return proto.unpack(stream.read(n))
 
 
-def map_message(slam) -> dict:
-    """The algorithm's current grid as a whole-map message (float32, NaN unknown)."""
-    grid = slam.occupancy()
-    h, w = grid.shape
-    return {
-        "resolution": grid.resolution, "origin": [float(v) for v in grid.origin],
-        "width": w, "height": h, "encoding": "float32",
-        "data": np.ascontiguousarray(grid.prob, dtype="<f4").tobytes(),
-    }  # fmt: skip
+class MapSender:
+    """Map messages: the whole grid at first and when its extent changes, else one patch of
+    the cells that changed since the last message (None when none did)."""
+
+    def __init__(self) -> None:
+        self._last = None  # the OccupancyGrid of the last message
+
+    def message(self, grid) -> dict | None:
+        h, w = grid.shape
+        m = {
+            "resolution": grid.resolution, "origin": [float(v) for v in grid.origin],
+            "width": w, "height": h, "encoding": "float32",
+        }  # fmt: skip
+        last, self._last = self._last, grid
+        same = last is not None and last.shape == grid.shape and last.resolution == grid.resolution
+        if not (same and np.array_equal(last.origin, grid.origin)):
+            m["data"] = np.ascontiguousarray(grid.prob, dtype="<f4").tobytes()
+            return m
+        changed = ~((grid.prob == last.prob) | (np.isnan(grid.prob) & np.isnan(last.prob)))
+        rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+        if rows.size == 0:
+            return None
+        r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+        data = np.ascontiguousarray(grid.prob[r0:r1, c0:c1], dtype="<f4").tobytes()
+        m["patches"] = [{"col": c0, "row": r0, "width": c1 - c0, "height": r1 - r0, "data": data}]
+        return m
 
 
 def serve(algorithm: str, stdin: BinaryIO, stdout: BinaryIO) -> int:
     """Answer mapqual until `bye` or the end of input; the exit code."""
     slam = None
+    maps = MapSender()
     while (msg := read_frame(stdin)) is not None:
         kind = msg["type"]
         if kind == "hello":
@@ -68,8 +88,8 @@ def serve(algorithm: str, stdin: BinaryIO, stdout: BinaryIO) -> int:
             T = [float(v) for v in slam.T_map_odom()]
             out = {"type": "estimate", "seq": msg["seq"], "pose": pose, "T_map_odom": T}
             out["updated"] = bool(updated)
-            if updated:
-                out["map"] = map_message(slam)
+            if updated and (m := maps.message(slam.occupancy())) is not None:
+                out["map"] = m
         elif kind == "bye":
             return 0
         else:
@@ -84,8 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) != 1:
         print("usage: python -m worker.slam.external.twin ALGORITHM", file=sys.stderr)
         return 2
-    return serve(args[0], sys.stdin.buffer, sys.stdout.buffer)
+    code = serve(args[0], sys.stdin.buffer, sys.stdout.buffer)
+    sys.stdout.flush()
+    os._exit(code)  # at once: the interpreter's own shutdown (numba, LLVM) takes a second
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -1,0 +1,136 @@
+"""The external SLAM protocol's own cost: the odometry algorithm in-process against the same
+algorithm through the protocol (its twin, `python -m worker.slam.external.twin odometry`, a
+child process answering every scan), on the same world and seed.
+
+Target (issue 20): the protocol costs at most 10 % of a run's time. The protocol's cost is the
+SLAM wall time the twin run spends beyond the in-process run's (framing, the pipe round trip
+of every 0.1 s step, the maps sent after each update, the program's start-up), over the twin
+run's whole wall time. Both runs must be the same bit for bit (checked). Wall time on a busy
+machine holds the scheduler's wake-up latency of two processes taking turns (two wake-ups a
+step), so the CPU time of both processes is printed too: the twin run's CPU (this process and
+the reaped child) beyond the in-process run's, over the twin run's CPU.
+
+    .venv/bin/python benchmarks/bench_external.py [--world worlds/bormann/office_a.yaml]
+        [--seed 1] [--time-limit 600] [--repeats 2] [--example]
+
+--example also times the plain-Python example (examples/external_slam/), for information.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TWIN = [sys.executable, "-m", "worker.slam.external.twin", "odometry"]
+EXAMPLE = [sys.executable, str(ROOT / "examples/external_slam/dead_reckoning_slam.py")]
+
+
+def _params(command: list[str] | None, time_limit: float):
+    from worker.run_params import RunParams
+
+    data: dict = {"explore": {"time_limit": time_limit}}
+    if command is None:
+        data["algorithm"] = "odometry"
+    else:
+        data["algorithm"] = "external"
+        data["slam"] = {"external": {"name": "bench", "command": command}}
+    return RunParams.from_json(data)
+
+
+def _cpu_s() -> float:
+    """[s] CPU time of this process and of its reaped children."""
+    me, kids = (
+        resource.getrusage(resource.RUSAGE_SELF),
+        resource.getrusage(resource.RUSAGE_CHILDREN),
+    )
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _timed(world, params, seed: int):
+    """(wall [s], CPU [s], result) of one run."""
+    from worker.pipeline import run_one
+
+    t0, c0 = time.perf_counter(), _cpu_s()
+    result = run_one(world, params, seed)
+    return time.perf_counter() - t0, _cpu_s() - c0, result
+
+
+def _startup_s(laser) -> float:
+    """[s] wall time from nothing to the twin's first answer (spawn, imports, handshake)."""
+    from worker.slam.base import make_slam
+    from worker.slam.params import SlamParams
+
+    ext = _params(TWIN, 1.0).slam
+    t0 = time.perf_counter()
+    slam = make_slam("external", laser, SlamParams(external=ext.external))
+    slam.process(0.0, np.zeros(3), np.full(laser.n_beams, laser.range_max))
+    took = time.perf_counter() - t0
+    slam.close()
+    return took
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--time-limit", type=float, default=600.0, help="[s] simulated")
+    ap.add_argument("--repeats", type=int, default=2, help="runs of each, alternated")
+    ap.add_argument("--example", action="store_true", help="also time the example program")
+    args = ap.parse_args()
+
+    from worker.world.loader import load_world
+
+    world = load_world(args.world)
+    local_p, twin_p = _params(None, args.time_limit), _params(TWIN, args.time_limit)
+    _timed(world, _params(None, 5.0), args.seed)  # warm the numba caches
+    _timed(world, _params(TWIN, 5.0), args.seed)
+    rows: dict[str, list[tuple[float, float, float]]] = {"in-process": [], "twin": []}
+    last = {}
+    for _ in range(args.repeats):  # alternated, so that a change of load hits both
+        for name, params in (("in-process", local_p), ("twin", twin_p)):
+            wall, cpu, last[name] = _timed(world, params, args.seed)
+            rows[name].append((wall, cpu, last[name].summary.timings.slam_wall_s))
+    twin, local = last["twin"].exploration, last["in-process"].exploration
+    same = np.array_equal(twin.pose_est, local.pose_est)
+    sim_s, steps = last["twin"].summary.timings.sim_time_s, len(twin.t)
+    print(
+        f"{world.name}, seed {args.seed}, {sim_s:.0f} s simulated ({steps} steps), medians of "
+        f"{args.repeats}; the same run bit for bit: {same}; load {os.getloadavg()[0]:.1f}"
+    )
+    med = {k: tuple(statistics.median(r[i] for r in v) for i in range(3)) for k, v in rows.items()}
+    for name, (wall, cpu, slam) in med.items():
+        print(
+            f"  {name:11s} run {wall:7.2f} s wall, {cpu:7.2f} s CPU, SLAM {slam:6.2f} s wall, "
+            f"x{sim_s / wall:.1f} real time"
+        )
+    _report("wall", med["twin"][2] - med["in-process"][2], med["twin"][0], steps)
+    _report("CPU", med["twin"][1] - med["in-process"][1], med["twin"][1], steps)
+    print(f"  twin start-up to its first answer: {_startup_s(local_p.sim.laser):.2f} s wall")
+    if args.example:
+        wall, cpu, result = _timed(world, _params(EXAMPLE, args.time_limit), args.seed)
+        s = result.summary
+        print(
+            f"  example     run {wall:7.2f} s wall, {cpu:7.2f} s CPU, SLAM "
+            f"{s.timings.slam_wall_s:6.2f} s wall, {s.outcome}, coverage {100 * s.coverage:.1f} %"
+        )
+
+
+def _report(what: str, cost: float, total: float, steps: int) -> None:
+    share = cost / total
+    verdict = "met" if share <= 0.10 else "NOT met"
+    print(
+        f"  protocol cost ({what}) {cost:.2f} s = {100 * share:.1f} % of the twin run's {what} "
+        f"({1000 * cost / steps:.2f} ms a step); target <= 10 %: {verdict}"
+    )
+
+
+if __name__ == "__main__":
+    main()
