@@ -10,15 +10,23 @@ from backend.core.config import Settings
 from worker.errors import InputError
 
 
-def resolve_external(overrides: dict[str, Any], settings: Settings) -> dict[str, Any]:
+def resolve_external(
+    overrides: dict[str, Any], settings: Settings, algorithm: str | None = None
+) -> dict[str, Any]:
     """`overrides` with slam.external.command filled in from the registered program named by
-    slam.external.name (InputError, a 400, for a command given or a name not registered)."""
+    slam.external.name (InputError, a 400, for a command given or a name not registered).
+    `algorithm`: the job's, when it is given apart from the overrides."""
     slam = overrides.get("slam")
     external = slam.get("external") if isinstance(slam, dict) else None
-    if external is None:
-        return overrides
     registered = settings.external_slam
     choices = ", ".join(map(repr, sorted(registered))) or "none are registered on this server"
+    if external is None:
+        if (algorithm or overrides.get("algorithm")) == "external":
+            raise InputError(
+                "the external algorithm runs a program the administrator registered: give "
+                f"params.slam.external.name, one of: {choices}"
+            )
+        return overrides
     if not isinstance(external, dict):
         raise InputError("slam.external must be a mapping: {name: <a registered program>}")
     if "command" in external:

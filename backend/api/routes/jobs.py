@@ -85,7 +85,7 @@ def submit(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
         )
-    data = resolve_external(dict(body.params), settings)  # no command of the user's own
+    data = resolve_external(dict(body.params), settings, body.slam)  # no command of the user's
     if body.slam is not None:
         data["algorithm"] = body.slam
     algorithm, params_json = _run_params(json.dumps(data, sort_keys=True))

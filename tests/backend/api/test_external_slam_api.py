@@ -90,7 +90,11 @@ def test_a_registered_program_is_picked_by_name_and_stored_with_its_command(api)
 def test_the_external_algorithm_needs_its_section(api):
     w = _world(api)
     r = api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1, "slam": "external"})
-    assert r.status_code == 400 and "needs slam.external" in r.json()["detail"]
+    assert r.status_code == 400
+    assert r.json()["detail"] == (
+        "the external algorithm runs a program the administrator registered: give "
+        "params.slam.external.name, one of: 'deadreck'"
+    )
 
 
 def test_the_administrator_lists_the_programs_in_the_environment(monkeypatch):

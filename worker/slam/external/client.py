@@ -22,8 +22,10 @@ from worker.slam.params import SlamParams
 
 class ExternalSlam:
     """Starts the program at the first scan, then one `step` frame and one `estimate` answer
-    per scan. Any failure (exit, time-out, bad answer) raises SlamFailed naming the step, once
-    the program is stopped; the pose and map stay those of the last good answer."""
+    per scan; the map comes with an estimate, or is asked for (`map`) when it is read after an
+    update that came without it. Any failure (exit, time-out, bad answer) raises SlamFailed
+    naming the step, once the program is stopped (a failed map request: at the next scan); the
+    pose and map stay those of the last good answer."""
 
     name = "external"
 
@@ -44,6 +46,8 @@ class ExternalSlam:
         self._child: ChildProcess | None = None
         self._seq = 0
         self._started = False  # the handshake is done
+        self._map_stale = False  # an update came without its map: ask for it when it is read
+        self._t = 0.0  # [s] of the latest step
         self._pose = np.zeros(3)
         self._T = np.zeros(3)
         empty = np.full((1, 1), np.nan, dtype=np.float32)
@@ -61,7 +65,7 @@ class ExternalSlam:
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         if self.failure is not None:
             raise self.failure
-        seq = self._seq
+        seq, self._t = self._seq, float(t)
         try:
             if self._child is None:
                 self._start()
@@ -108,6 +112,7 @@ class ExternalSlam:
         self._pose, self._T = pose, T
         if grid is not None:
             self._grid = grid
+        self._map_stale = grid is None and (updated or self._map_stale)
         return updated
 
     def _fail(self, seq: int, t: float, exc: Exception) -> SlamFailed:
@@ -131,7 +136,26 @@ class ExternalSlam:
         return self._T.copy()
 
     def occupancy(self) -> OccupancyGrid:
+        if self._map_stale and self.failure is None:
+            self._map_stale = False
+            try:
+                self._fetch_map()
+            except (ChildGone, proto.ProtocolError) as exc:  # raised at the next scan
+                self._fail(self._seq - 1, self._t, proto.ProtocolError(f"map request: {exc}"))
         return self._grid
+
+    def _fetch_map(self) -> None:
+        """Ask for the map of the latest update (None in the answer: unchanged)."""
+        child = self._child
+        assert child is not None
+        t0 = time.perf_counter()
+        deadline = time.monotonic() + self.ext.step_timeout_s
+        child.send(proto.frame({"type": "map"}), deadline)
+        answer = proto.unpack(child.recv(deadline))
+        self.protocol_wall_s += time.perf_counter() - t0
+        proto.expect(answer, "map")
+        if answer.get("map") is not None:
+            self._grid = read_map(answer["map"], self._grid, self.params.occ_thresh)
 
     def close(self) -> None:
         """Say bye and stop the program (killed past close_timeout_s); safe to call twice."""

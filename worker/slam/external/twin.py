@@ -1,9 +1,10 @@
 """The protocol twin of an in-process algorithm: `python -m worker.slam.external.twin odometry`
 serves worker.slam's algorithm over stdin / stdout, for benchmarks and tests of the protocol.
 
-It answers every step with the algorithm's pose and, after an update, the cells of its map that
-changed (float32 patches; the whole map when its extent changed), so a run through the twin
-follows the same path as the in-process run, bit for bit.
+It answers every step with the algorithm's pose and whether the map changed, and a map request
+with the cells that changed since the map it sent last (float32 patches; the whole map when
+its extent changed): the map is built only when mapqual reads it, as in-process, and a run
+through the twin follows the same path as the in-process run, bit for bit.
 """
 
 from __future__ import annotations
@@ -57,7 +58,8 @@ class MapSender:
         if not (same and np.array_equal(last.origin, grid.origin)):
             m["data"] = np.ascontiguousarray(grid.prob, dtype="<f4").tobytes()
             return m
-        changed = ~((grid.prob == last.prob) | (np.isnan(grid.prob) & np.isnan(last.prob)))
+        # bit patterns: NaN (unknown) equals NaN, and one comparison pass
+        changed = grid.prob.view(np.uint32) != last.prob.view(np.uint32)
         rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
         if rows.size == 0:
             return None
@@ -88,8 +90,8 @@ def serve(algorithm: str, stdin: BinaryIO, stdout: BinaryIO) -> int:
             T = [float(v) for v in slam.T_map_odom()]
             out = {"type": "estimate", "seq": msg["seq"], "pose": pose, "T_map_odom": T}
             out["updated"] = bool(updated)
-            if updated and (m := maps.message(slam.occupancy())) is not None:
-                out["map"] = m
+        elif kind == "map" and slam is not None:
+            out = {"type": "map", "map": maps.message(slam.occupancy())}
         elif kind == "bye":
             return 0
         else:

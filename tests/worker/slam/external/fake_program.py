@@ -2,8 +2,9 @@
 
 Dead reckoning (pose = odometry, no map) that, at step STEP, does what MODE says: garbage
 (bytes that are no msgpack), print (a stray line on stdout), stall (sleeps), crash (a message
-on stderr, exit code 3), sigkill (kills itself), seq (answers another step), nan (a NaN pose);
-mode version2 answers the hello with version 2; mode ok misbehaves never."""
+on stderr, exit code 3), sigkill (kills itself), seq (answers another step), nan (a NaN pose),
+mapreq (says the map changed, and answers the request for it with garbage); mode version2
+answers the hello with version 2; mode ok misbehaves never."""
 
 from __future__ import annotations
 
@@ -37,6 +38,8 @@ def misbehave(mode: str, out, seq: int) -> bool:
         os.kill(os.getpid(), signal.SIGKILL)
     elif mode == "seq":
         send(out, {"type": "estimate", "seq": seq + 1, "pose": [0.0, 0.0, 0.0]})
+    elif mode == "mapreq":
+        send(out, {"type": "estimate", "seq": seq, "pose": [0.0, 0.0, 0.0], "updated": True})
     elif mode == "nan":
         send(out, {"type": "estimate", "seq": seq, "pose": [0.0, float("nan"), 0.0]})
     else:
@@ -60,6 +63,9 @@ def main() -> int:
             if msg["seq"] == at and misbehave(mode, out, msg["seq"]):
                 continue
             send(out, {"type": "estimate", "seq": msg["seq"], "pose": msg["odom"]})
+        elif msg["type"] == "map" and mode == "mapreq":
+            out.write(struct.pack(">I", 1) + b"\xc1")
+            out.flush()
         elif msg["type"] == "bye":
             return 0
     return 0

@@ -112,3 +112,16 @@ def test_a_program_that_cannot_start_fails_at_start_up():
     with pytest.raises(SlamFailed, match="failed at start-up: cannot start "
                                          "'/nonexistent/slam-program': No such file"):  # fmt: skip
         slam.process(0.0, np.zeros(3), np.ones(LASER.n_beams))
+
+
+def test_a_failed_map_request_fails_the_next_scan():
+    before = children()
+    slam = _slam(fake("mapreq", 2))
+    scans = _scans(4)
+    for t, pose, ranges in scans[:3]:
+        slam.process(t, pose, ranges)
+    empty = slam.occupancy()  # asked for after step 2's update: garbage; the last map stays
+    assert empty.shape == (1, 1) and children() == before
+    with pytest.raises(SlamFailed, match=r"protocol error at step 2 \(t=0.20 s\): map request: "
+                                         "not a msgpack message"):  # fmt: skip
+        slam.process(*scans[3])
