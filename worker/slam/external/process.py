@@ -24,10 +24,21 @@ class ChildGone(RuntimeError):
     """The program exited, closed its pipes or missed a deadline (the message says which)."""
 
 
+def _libc_prctl():
+    """libc's prctl, looked up in the parent (no dynamic loading between fork and exec)."""
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _libc_prctl()
+
+
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
     """Linux: the child gets SIGKILL if the worker dies (a hard time limit, an OOM kill)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
 def _grow_pipe(fd: int, size: int = PIPE_BYTES) -> None:
@@ -46,7 +57,7 @@ class ChildProcess:
             self.proc = subprocess.Popen(
                 list(command), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                 stderr=self._stderr, bufsize=0, close_fds=True, start_new_session=True,
-                preexec_fn=_die_with_parent if os.name == "posix" else None, env=env,
+                preexec_fn=_die_with_parent if _PRCTL is not None else None, env=env,
             )  # fmt: skip
         except OSError as exc:
             self._stderr.close()

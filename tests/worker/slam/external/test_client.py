@@ -4,13 +4,16 @@ and every way a program can fail ends in one SlamFailed naming the step, the chi
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.worker.slam.external.helpers import children, fake, twin
+from tests.worker.slam.external.helpers import ROOT, children, fake, twin
 from worker.errors import SlamFailed
 from worker.sim.laser import LaserSpec
 from worker.slam.external.client import ExternalSlam
@@ -125,3 +128,39 @@ def test_a_failed_map_request_fails_the_next_scan():
     with pytest.raises(SlamFailed, match=r"protocol error at step 2 \(t=0.20 s\): map request: "
                                          "not a msgpack message"):  # fmt: skip
         slam.process(*scans[3])
+
+
+def _state(pid: int) -> str:
+    """The process's state letter (R, S, Z, ...), or "gone"."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"
+
+
+def test_the_program_dies_with_the_worker_that_started_it(tmp_path):
+    # a "worker" starts the program, which answers scan 0 and then sleeps in scan 1 (deaf to
+    # its closed stdin); the worker prints the program's pid and is killed with SIGKILL, as a
+    # hard time limit or the OOM killer would
+    script = (
+        "import sys, time, numpy as np\n"
+        "from worker.slam.external.client import ExternalSlam\n"
+        "from worker.slam.external.params import ExternalSlamParams\n"
+        "from worker.slam.params import SlamParams\n"
+        "from worker.sim.laser import LaserSpec\n"
+        f"ext = ExternalSlamParams('p', tuple({fake('stall', 1)!r}), step_timeout_s=120.0)\n"
+        "s = ExternalSlam(LaserSpec(), SlamParams(external=ext), np.random.default_rng(0))\n"
+        "s.process(0.0, np.zeros(3), np.ones(LaserSpec().n_beams))\n"
+        "print(s.pid, flush=True)\n"
+        "s.process(0.1, np.zeros(3), np.ones(LaserSpec().n_beams))\n"
+    )
+    worker = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, cwd=ROOT)
+    pid = int(worker.stdout.readline())
+    time.sleep(0.5)  # the program is asleep in step 1 now
+    assert _state(pid) in ("R", "S")
+    worker.kill()
+    worker.wait()
+    deadline = time.monotonic() + 10  # the program would sleep for 60 s
+    while _state(pid) in ("R", "S", "D") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _state(pid) in ("Z", "X", "gone")  # killed (a zombie until init reaps it)
