@@ -52,9 +52,8 @@ def _placed(
 ) -> np.ndarray:
     """(height, width) float32: the previous grid's cells moved into the new extent, NaN
     elsewhere (a map that grew keeps its resolution and moves by whole cells)."""
-    prob = np.full((height, width), np.nan, dtype=np.float32)
     if previous is None:
-        return prob
+        return np.full((height, width), np.nan, dtype=np.float32)
     if previous.resolution != resolution:
         raise ProtocolError(
             f"map patches at resolution {resolution} m over a map of {previous.resolution} m: "
@@ -66,6 +65,9 @@ def _placed(
         raise ProtocolError("map patches: the map origin moved by a fraction of a cell")
     dx, dy = int(whole[0]), int(whole[1])
     ph, pw = previous.shape
+    if (dx, dy, ph, pw) == (0, 0, height, width):  # the same extent: one copy
+        return previous.prob.copy()
+    prob = np.full((height, width), np.nan, dtype=np.float32)
     x0, y0 = max(dx, 0), max(dy, 0)
     x1, y1 = min(dx + pw, width), min(dy + ph, height)
     if x1 > x0 and y1 > y0:
