@@ -122,7 +122,8 @@ def main() -> None:
         s = result.summary
         print(
             f"  example     run {wall:7.2f} s wall, {cpu:7.2f} s CPU, SLAM "
-            f"{s.timings.slam_wall_s:6.2f} s wall, {s.outcome}, coverage {100 * s.coverage:.1f} %"
+            f"{s.timings.slam_wall_s:6.2f} s wall, {s.outcome} ({s.stop}), "
+            f"coverage {100 * s.coverage:.1f} %"
         )
 
 
