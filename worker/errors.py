@@ -24,3 +24,14 @@ class InputError(ValueError):
 class InputWarning(UserWarning):
     """Input that was read with a documented repair (out-of-order samples sorted, a truncated
     last line skipped, a degenerate clock replaced); the message is one complete line."""
+
+
+class SlamFailed(RuntimeError):
+    """The SLAM algorithm cannot go on (an external program crashed, stalled or broke the
+    protocol): the run ends failed with reason `slam_failed`. The message is one line that
+    names the step; `stderr_tail` holds the program's last stderr lines (may be empty)."""
+
+    def __init__(self, message: str, step: int | None = None, stderr_tail: str = ""):
+        self.step = step
+        self.stderr_tail = stderr_tail
+        super().__init__(message)

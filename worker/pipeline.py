@@ -31,6 +31,7 @@ from worker.run_params import EvalParams, RunParams
 from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
 from worker.slam import registry
+from worker.slam.base import closed_after
 from worker.status import RunOutcome
 from worker.world.world import World
 
@@ -159,7 +160,7 @@ def run_one(
     entry = registry.get(params.algorithm)
     slam = _TimedSlam(entry.factory(params.sim.laser, params.slam, rng_slam))
     callback = None if on_progress is None else _progress_relay(on_progress, params, wall0)
-    with _open_log(sim_log) as stream:
+    with _open_log(sim_log) as stream, closed_after(slam):
         writer = None
         if stream is not None:
             header = f"mapqual run: world {world.name}, seed {seed}, {params.algorithm}"

@@ -58,6 +58,10 @@ class Settings(BaseSettings):
     task_soft_time_limit_s: int = Field(default=7200, ge=1, alias="MAPQUAL_TASK_SOFT_TIME_LIMIT")
     task_time_limit_s: int = Field(default=7500, ge=1, alias="MAPQUAL_TASK_TIME_LIMIT")
     visibility_timeout_s: int | None = Field(default=None, ge=1, alias="MAPQUAL_VISIBILITY_TIMEOUT")
+    # External SLAM programs users may pick by name (slam.external.name, algorithm "external"):
+    # a JSON object name -> argv, e.g. {"cartographer": ["/opt/slam/bridge", "--cfg", "c.lua"]}.
+    # Only these run on the workers; a request that gives a command of its own is refused.
+    external_slam: dict[str, list[str]] = Field(default_factory=dict, alias="MAPQUAL_EXTERNAL_SLAM")
 
     def task_limits(self) -> TaskLimits:
         """The run task's time limits and visibility timeout."""

@@ -7,7 +7,7 @@ import warnings
 
 import typer
 
-from worker.errors import InputError, InputWarning
+from worker.errors import InputError, InputWarning, SlamFailed
 
 app = typer.Typer(
     rich_markup_mode=None,
@@ -43,6 +43,9 @@ def main() -> None:
     except InputError as exc:
         print(f"mapqual: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except SlamFailed as exc:  # an external SLAM program failed outside a run (mapqual slam)
+        print(f"mapqual: error: {exc}", file=sys.stderr)
+        sys.exit(1)
     except (BrokenPipeError, KeyboardInterrupt):
         sys.exit(130 if sys.exc_info()[0] is KeyboardInterrupt else 1)
 

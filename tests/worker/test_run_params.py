@@ -116,7 +116,13 @@ def test_bad_params_are_one_line_input_errors_naming_the_key(data, message):
 def test_the_schema_is_inline_and_every_key_optional():
     schema = run_params_schema()
     assert "$defs" not in json.dumps(schema) and "$ref" not in json.dumps(schema)
-    assert schema["properties"]["algorithm"]["enum"] == ["rbpf", "odometry", "oracle", "graph"]
+    assert schema["properties"]["algorithm"]["enum"] == [
+        "rbpf",
+        "odometry",
+        "oracle",
+        "graph",
+        "external",
+    ]
     assert schema["properties"]["sim"]["properties"]["odom_model"]["enum"] == ["stage", "gaussian"]
     assert "required" not in json.dumps(schema)
 

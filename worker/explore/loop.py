@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from worker.errors import SlamFailed
 from worker.explore.coverage import align_map_to_world, coverage, reachable_free
 from worker.explore.navigator import GoalRecord, Navigator
 from worker.explore.params import ExploreParams
@@ -140,7 +141,10 @@ class Exploration:
         pose_gt = sim.pose_gt
         pose_odom = sim.pose_odom
         ranges = sim.scan()
-        updated = slam.process(t, pose_gt if self.oracle else pose_odom, ranges)
+        try:
+            updated = slam.process(t, pose_gt if self.oracle else pose_odom, ranges)
+        except SlamFailed as exc:  # an external program crashed, stalled or broke the protocol
+            return self._slam_failed(t, pose_gt, pose_odom, exc)
         pose_est = np.asarray(slam.pose_estimate(), dtype=float)
         nav_s, cpu_s = self._feed_map(t, updated)
         v0, w0 = _odom_velocity(self.prev_odom, pose_odom, self.dt)
@@ -160,6 +164,14 @@ class Exploration:
         if stop is None:
             sim.step(cmd.v, cmd.w)
         return stop
+
+    def _slam_failed(self, t: float, pose_gt, pose_odom, exc: SlamFailed) -> StopReason:
+        """failed, slam_failed: this step recorded with the last estimate (the odometry at the
+        first step, where the map frame is the odometry frame), the robot stopped."""
+        rec = self.rec
+        pose_est = rec.buf[rec.n - 1, 4:7].copy() if rec.n else np.asarray(pose_odom, dtype=float)
+        rec.add(t, pose_gt, pose_est, 0.0, 0.0)
+        return StopReason("slam_failed", str(exc))
 
     def _feed_map(self, t: float, updated: bool) -> tuple[float, float]:
         """Give the navigator the SLAM map at global_costmap_rate (whole every

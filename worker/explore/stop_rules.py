@@ -15,10 +15,11 @@ from worker.status import RunOutcome
 
 Outcome = RunOutcome  # completed | failed
 # completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
-# "slam_diverged"
+# "slam_diverged" | "slam_failed" (the SLAM program crashed, stalled or broke its protocol)
 Reason = Literal[
-    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged"
-]
+    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged",
+    "slam_failed",
+]  # fmt: skip
 COMPLETED_REASONS: tuple[Reason, ...] = ("no_frontier", "map_unchanged")
 
 # map_saver's grey levels: the thesis compared the saved map images pixel by pixel

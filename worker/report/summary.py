@@ -22,10 +22,12 @@ SCHEMA_VERSION: Final = 1
 
 Outcome = Literal["completed", "failed"]
 # completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
-# "slam_diverged" (the stop rules of worker.explore.loop, which a test keeps in step with these)
+# "slam_diverged" | "slam_failed" (the stop rules of worker.explore.loop, which a test keeps in
+# step with these)
 Reason = Literal[
-    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged"
-]
+    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged",
+    "slam_failed",
+]  # fmt: skip
 RelationKind = Literal["B", "A", "SM"]
 
 

@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -84,3 +86,15 @@ def make_slam(
     params = SlamParams() if params is None else params
     rng = np.random.default_rng(0) if rng is None else rng
     return entry.factory(laser, params, rng)
+
+
+@contextmanager
+def closed_after(slam: Any) -> Iterator[Any]:
+    """`slam`, closed on the way out if it has a `close` (an external program is stopped and
+    reaped however the run ends: finished, failed, cancelled or timed out)."""
+    try:
+        yield slam
+    finally:
+        close = getattr(slam, "close", None)
+        if close is not None:
+            close()

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from worker.errors import InputError
+from worker.slam.external.params import ExternalSlamParams
 from worker.slam.graph.params import GraphSlamParams
 
 
@@ -51,6 +52,8 @@ class SlamParams:
     # graph SLAM's own settings; None = its defaults, and no key in the stored JSON (so rbpf
     # runs keep their JSON and run keys); a graph run stores them (`with_defaults_for`)
     graph: GraphSlamParams | None = field(default=None, metadata={"omit_if_none": True})
+    # the program an "external" run drives over the protocol; None (and no key) otherwise
+    external: ExternalSlamParams | None = field(default=None, metadata={"omit_if_none": True})
     # a scan step longer than this (a log that kept one scan a metre) has its noise drawn as
     # the sum over the robot-sized steps it stands for (worker.slam.motion.draw_from_motion);
     # no step of a 10 Hz log under 1.5 m/s and 1.5 rad/s reaches it. 0 = off (one draw, as
@@ -100,7 +103,13 @@ class SlamParams:
 
 def with_defaults_for(params: SlamParams, algorithm: str) -> SlamParams:
     """params with the graph settings filled in when the algorithm is graph SLAM, so that they
-    are stored with the run."""
+    are stored with the run. slam.external belongs to "external" runs: refused when one has
+    none, dropped (not stored) for the other algorithms, so that one --params file serves a
+    batch that compares `--slam rbpf,external`."""
+    if algorithm == "external" and params.external is None:
+        raise InputError("algorithm 'external' needs slam.external {name, command}")
+    if algorithm != "external" and params.external is not None:
+        params = replace(params, external=None)
     if algorithm == "graph" and params.graph is None:
         return replace(params, graph=GraphSlamParams())
     return params

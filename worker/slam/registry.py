@@ -3,12 +3,16 @@
 Light on purpose (no kernels are imported until a factory is called): the CLI's choices, the
 API's enum, the dashboard's form and the batch's validation are all read from here. Adding an
 algorithm is one `register(...)` call; the factory imports its own module when it is called.
+Installed packages add in-process algorithms through the `mapqual.slam` entry points group
+(`load_plugins`); programs in other languages run as "external" (worker.slam.external).
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
 from typing import TYPE_CHECKING, Literal
 
 from worker.errors import InputError
@@ -18,6 +22,9 @@ if TYPE_CHECKING:
     import numpy as np
 
     from worker.slam.base import LaserGeometry, SlamAlgorithm
+
+log = logging.getLogger("mapqual.slam")
+ENTRY_POINTS_GROUP = "mapqual.slam"
 
 SlamKind = Literal["slam", "baseline", "oracle"]
 SlamFactory = Callable[["LaserGeometry", SlamParams, "np.random.Generator"], "SlamAlgorithm"]
@@ -113,3 +120,45 @@ def _graph(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -
 
 
 register("graph", _graph, "graph SLAM (pose graph, loop closure)", "slam")
+
+
+def _external(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.external.client import ExternalSlam
+
+    return ExternalSlam(laser, params, rng)
+
+
+register("external", _external, "an external SLAM program (slam.external)", "slam")
+
+
+def _plugin_factory(ep: EntryPoint) -> SlamFactory:
+    """A factory that imports the entry point's object when a run first needs it."""
+
+    def factory(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator):
+        return ep.load()(laser, params, rng)
+
+    return factory
+
+
+def load_plugins(eps: tuple[EntryPoint, ...] | None = None) -> list[str]:
+    """Register the `mapqual.slam` entry points (name = the algorithm, object = a factory
+    `(laser, params, rng) -> SlamAlgorithm`), without importing them; the names added. A name
+    that is taken or not an identifier is skipped with a warning."""
+    found = tuple(entry_points(group=ENTRY_POINTS_GROUP)) if eps is None else eps
+    added = []
+    for ep in found:
+        entry = _REGISTRY.get(ep.name)
+        if entry is not None and getattr(entry.factory, "entry_point", None) == ep.value:
+            continue  # already loaded
+        try:
+            factory = _plugin_factory(ep)
+            factory.entry_point = ep.value  # type: ignore[attr-defined]
+            register(ep.name, factory, f"{ep.name} (plugin {ep.value})", "slam")
+        except ValueError as exc:
+            log.warning("SLAM plugin %s = %s skipped: %s", ep.name, ep.value, exc)
+            continue
+        added.append(ep.name)
+    return added
+
+
+load_plugins()

@@ -10,7 +10,7 @@ import numpy as np
 
 from worker.errors import InputError
 from worker.evaluate.trajectory import Trajectory
-from worker.slam.base import LaserGeometry, SlamName, make_slam
+from worker.slam.base import LaserGeometry, SlamName, closed_after, make_slam
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams, with_defaults_for
 
@@ -64,12 +64,13 @@ def run_slam(
     updates = 0
     every = max(1, n // 100)
     wall0 = time.perf_counter()
-    for k in range(n):
-        updates += bool(slam.process(t[k], pose_odom[k], ranges[k]))
-        est[k] = slam.pose_estimate()
-        if on_progress is not None and (k % every == 0 or k == n - 1):
-            on_progress(k + 1, n)
-    grid = slam.occupancy()
+    with closed_after(slam):
+        for k in range(n):
+            updates += bool(slam.process(t[k], pose_odom[k], ranges[k]))
+            est[k] = slam.pose_estimate()
+            if on_progress is not None and (k % every == 0 or k == n - 1):
+                on_progress(k + 1, n)
+        grid = slam.occupancy()
     wall = time.perf_counter() - wall0
     return SlamRunResult(
         algorithm=algorithm,

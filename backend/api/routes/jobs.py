@@ -25,6 +25,7 @@ from backend.api.deps import (
 )
 from backend.core.config import Settings
 from backend.db.models import Job, Run, User, World
+from backend.external_slam import resolve_external
 from backend.lifecycle import cancel_run
 from backend.new_job import insert_job
 from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
@@ -84,7 +85,7 @@ def submit(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
         )
-    data = dict(body.params)
+    data = resolve_external(dict(body.params), settings, body.slam)  # no command of the user's
     if body.slam is not None:
         data["algorithm"] = body.slam
     algorithm, params_json = _run_params(json.dumps(data, sort_keys=True))

@@ -90,7 +90,11 @@ def test_openapi_job_body_has_the_run_params_schema_and_the_registry_enum(api):
     doc = api.client.get("/api/v1/openapi.json").json()
     job_in = doc["components"]["schemas"]["JobIn"]["properties"]
     slam = job_in["slam"]["anyOf"][0]
-    assert slam["enum"] == list(registry.names()) == ["rbpf", "odometry", "oracle", "graph"]
+    assert (
+        slam["enum"]
+        == list(registry.names())
+        == ["rbpf", "odometry", "oracle", "graph", "external"]
+    )
     params = job_in["params"]
     assert params["additionalProperties"] is False
     assert set(params["properties"]) == {"algorithm", "sim", "slam", "explore", "eval"}

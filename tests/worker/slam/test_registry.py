@@ -17,14 +17,15 @@ def scratch_registry(monkeypatch):
 
 
 def test_the_built_in_algorithms_and_their_kinds():
-    assert registry.names() == ("rbpf", "odometry", "oracle", "graph")
-    assert registry.names(offline=True) == ("rbpf", "odometry", "graph")
+    assert registry.names() == ("rbpf", "odometry", "oracle", "graph", "external")
+    assert registry.names(offline=True) == ("rbpf", "odometry", "graph", "external")
     kinds = {e.name: (e.kind, e.ground_truth) for e in registry.entries()}
     assert kinds == {
         "rbpf": ("slam", False),
         "odometry": ("baseline", False),
         "oracle": ("oracle", True),
         "graph": ("slam", False),
+        "external": ("slam", False),
     }
     with pytest.raises(InputError, match="unknown SLAM algorithm 'ekf'; choose one of: rbpf"):
         registry.get("ekf")

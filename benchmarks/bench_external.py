@@ -1,0 +1,142 @@
+"""The external SLAM protocol's own cost: the odometry algorithm in-process against the same
+algorithm through the protocol (its twin, `python -m worker.slam.external.twin odometry`, a
+child process answering every scan), on the same world and seed.
+
+Target (issue 20): the protocol costs at most 10 % of a run's time. The protocol's cost is the
+time the twin run spends beyond the in-process run's (framing, the pipe round trip of every
+0.1 s step, the maps sent, the program's start-up), over the twin run's time: by the whole
+run's wall time, by the SLAM calls' wall time, and by CPU (this process and the reaped child).
+Both runs must be the same bit for bit (checked). Wall time on a busy machine holds the
+scheduler's wake-up latency of two processes taking turns (two wake-ups a step); CPU does not.
+
+    .venv/bin/python benchmarks/bench_external.py [--world worlds/bormann/office_a.yaml]
+        [--seed 1] [--time-limit 600] [--repeats 2] [--example]
+
+--example also times the plain-Python example (examples/external_slam/), for information.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TWIN = [sys.executable, "-m", "worker.slam.external.twin", "odometry"]
+EXAMPLE = [sys.executable, str(ROOT / "examples/external_slam/dead_reckoning_slam.py")]
+
+
+def _params(command: list[str] | None, time_limit: float):
+    from worker.run_params import RunParams
+
+    data: dict = {"explore": {"time_limit": time_limit}}
+    if command is None:
+        data["algorithm"] = "odometry"
+    else:
+        data["algorithm"] = "external"
+        data["slam"] = {"external": {"name": "bench", "command": command}}
+    return RunParams.from_json(data)
+
+
+def _cpu_s() -> float:
+    """[s] CPU time of this process and of its reaped children."""
+    me, kids = (
+        resource.getrusage(resource.RUSAGE_SELF),
+        resource.getrusage(resource.RUSAGE_CHILDREN),
+    )
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _timed(world, params, seed: int):
+    """(wall [s], CPU [s], result) of one run."""
+    from worker.pipeline import run_one
+
+    t0, c0 = time.perf_counter(), _cpu_s()
+    result = run_one(world, params, seed)
+    return time.perf_counter() - t0, _cpu_s() - c0, result
+
+
+def _startup_s(laser) -> tuple[float, float]:
+    """[s] (wall, CPU) from nothing to the twin's first answer (spawn, imports, handshake, the
+    first scan), then bye: the one-time part of the protocol's cost."""
+    from worker.slam.base import make_slam
+    from worker.slam.params import SlamParams
+
+    ext = _params(TWIN, 1.0).slam
+    t0, c0 = time.perf_counter(), _cpu_s()
+    slam = make_slam("external", laser, SlamParams(external=ext.external))
+    slam.process(0.0, np.zeros(3), np.full(laser.n_beams, laser.range_max))
+    took = time.perf_counter() - t0
+    slam.close()
+    return took, _cpu_s() - c0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--time-limit", type=float, default=600.0, help="[s] simulated")
+    ap.add_argument("--repeats", type=int, default=2, help="runs of each, alternated")
+    ap.add_argument("--example", action="store_true", help="also time the example program")
+    args = ap.parse_args()
+
+    from worker.world.loader import load_world
+
+    world = load_world(args.world)
+    local_p, twin_p = _params(None, args.time_limit), _params(TWIN, args.time_limit)
+    _timed(world, _params(None, 5.0), args.seed)  # warm the numba caches
+    _timed(world, _params(TWIN, 5.0), args.seed)
+    rows: dict[str, list[tuple[float, float, float]]] = {"in-process": [], "twin": []}
+    last = {}
+    for _ in range(args.repeats):  # alternated, so that a change of load hits both
+        for name, params in (("in-process", local_p), ("twin", twin_p)):
+            wall, cpu, last[name] = _timed(world, params, args.seed)
+            rows[name].append((wall, cpu, last[name].summary.timings.slam_wall_s))
+    twin, local = last["twin"].exploration, last["in-process"].exploration
+    same = np.array_equal(twin.pose_est, local.pose_est)
+    sim_s, steps = last["twin"].summary.timings.sim_time_s, len(twin.t)
+    print(
+        f"{world.name}, seed {args.seed}, {sim_s:.0f} s simulated ({steps} steps), medians of "
+        f"{args.repeats}; the same run bit for bit: {same}; load {os.getloadavg()[0]:.1f}"
+    )
+    med = {k: tuple(statistics.median(r[i] for r in v) for i in range(3)) for k, v in rows.items()}
+    for name, (wall, cpu, slam) in med.items():
+        print(
+            f"  {name:11s} run {wall:7.2f} s wall, {cpu:7.2f} s CPU, SLAM {slam:6.2f} s wall, "
+            f"x{sim_s / wall:.1f} real time"
+        )
+    _report("run wall", med["twin"][0] - med["in-process"][0], med["twin"][0], steps)
+    _report("SLAM wall", med["twin"][2] - med["in-process"][2], med["twin"][0], steps)
+    _report("CPU", med["twin"][1] - med["in-process"][1], med["twin"][1], steps)
+    wall, cpu = _startup_s(local_p.sim.laser)
+    once = f"{wall:.2f} s wall, {cpu:.2f} s CPU"
+    print(f"  of which once, the twin's start-up and first answer: {once}")
+    if args.example:
+        wall, cpu, result = _timed(world, _params(EXAMPLE, args.time_limit), args.seed)
+        s = result.summary
+        print(
+            f"  example     run {wall:7.2f} s wall, {cpu:7.2f} s CPU, SLAM "
+            f"{s.timings.slam_wall_s:6.2f} s wall, {s.outcome} ({s.stop}), "
+            f"coverage {100 * s.coverage:.1f} %"
+        )
+
+
+def _report(what: str, cost: float, total: float, steps: int) -> None:
+    """One line: the protocol's cost by `what`, as a share of the twin run's `total`."""
+    share = cost / total
+    verdict = "met" if share <= 0.10 else "NOT met"
+    of = "CPU" if what == "CPU" else "wall time"
+    print(
+        f"  protocol cost ({what}) {cost:6.2f} s = {100 * share:5.1f} % of the twin run's {of} "
+        f"({1000 * cost / steps:.2f} ms a step); target <= 10 %: {verdict}"
+    )
+
+
+if __name__ == "__main__":
+    main()

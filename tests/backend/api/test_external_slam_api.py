@@ -1,0 +1,104 @@
+"""External SLAM over the API: users pick the administrator's programs by name; a command in
+a request is refused (400) and nothing is stored or queued."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+
+from backend.core.config import Settings
+from backend.db.models import Run
+from backend.db.session import session_scope
+from backend.main import create_app
+from backend.store import add_user
+from tests.backend.api.conftest import Api
+from tests.backend.api.test_worlds_jobs import _world
+from tests.services import ensure_redis
+
+PROGRAMS = {"deadreck": ["/usr/bin/python3", "/opt/slam/dead_reckoning_slam.py"]}
+
+
+@pytest.fixture
+def api(db_url):
+    import redis
+
+    redis_url = ensure_redis().rsplit("/", 1)[0] + "/13"
+    broker = redis.Redis.from_url(redis_url)
+    broker.flushdb()
+    with session_scope(db_url) as s:
+        keys = {"alice": add_user(s, "alice")[1]}
+    settings = Settings(
+        DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on",
+        MAPQUAL_EXTERNAL_SLAM=PROGRAMS,
+    )  # fmt: skip
+    with TestClient(create_app(settings)) as client:
+        yield Api(client, db_url, keys, broker)
+    broker.flushdb()
+    broker.close()
+
+
+def _job(api, external, slam="external"):
+    w = _world(api)
+    body = {
+        "world_id": w["id"],
+        "runs": 1,
+        "slam": slam,
+        "params": {"slam": {"external": external}},
+    }
+    return api.post("/api/v1/jobs", json=body)
+
+
+@pytest.mark.parametrize(
+    ("external", "needle"),
+    [
+        (
+            {"name": "mine", "command": ["/bin/sh", "-c", "touch /tmp/pwned"]},
+            "cannot be given over the API: the server runs only the programs its administrator "
+            "registered; give slam.external.name, one of: 'deadreck'",
+        ),
+        ({"name": "deadreck", "command": ["/bin/sh"]}, "cannot be given over the API"),
+        ({"name": "deadreck", "command": []}, "cannot be given over the API"),
+        ({"name": "other"}, "'other' is not a registered program: 'deadreck'"),
+        ("deadreck", "slam.external must be a mapping"),
+    ],
+)
+def test_a_user_cannot_make_the_server_run_a_command(api, external, needle):
+    r = _job(api, external)
+    assert r.status_code == 400, r.text
+    assert needle in r.json()["detail"]
+    assert api.get("/api/v1/jobs").json()["total"] == 0
+    assert api.broker.llen("mapqual") == 0
+
+
+def test_a_registered_program_is_picked_by_name_and_stored_with_its_command(api):
+    r = _job(api, {"name": "deadreck", "step_timeout_s": 5.0})
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["slam"] == "external"
+    want = {"name": "deadreck", "command": PROGRAMS["deadreck"], "start_timeout_s": 30.0,
+            "step_timeout_s": 5.0, "close_timeout_s": 2.0}  # fmt: skip
+    assert job["params"]["slam"]["external"] == want
+    with session_scope(api.url) as s:  # what the worker will read
+        (params,) = s.scalars(select(Run.params)).all()
+    assert params["slam"]["external"] == want
+    assert api.broker.llen("mapqual") == 1
+
+
+def test_the_external_algorithm_needs_its_section(api):
+    w = _world(api)
+    r = api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1, "slam": "external"})
+    assert r.status_code == 400
+    assert r.json()["detail"] == (
+        "the external algorithm runs a program the administrator registered: give "
+        "params.slam.external.name, one of: 'deadreck'"
+    )
+
+
+def test_the_administrator_lists_the_programs_in_the_environment(monkeypatch):
+    monkeypatch.setenv("MAPQUAL_EXTERNAL_SLAM", json.dumps(PROGRAMS))
+    assert Settings().external_slam == PROGRAMS
+    monkeypatch.delenv("MAPQUAL_EXTERNAL_SLAM")
+    assert Settings().external_slam == {}

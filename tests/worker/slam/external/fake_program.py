@@ -1,0 +1,75 @@
+"""A misbehaving external SLAM program for the tests: `python fake_program.py MODE STEP`.
+
+Dead reckoning (pose = odometry, no map) that, at step STEP, does what MODE says: garbage
+(bytes that are no msgpack), print (a stray line on stdout), stall (sleeps), crash (a message
+on stderr, exit code 3), sigkill (kills itself), seq (answers another step), nan (a NaN pose),
+mapreq (says the map changed, and answers the request for it with garbage); mode version2
+answers the hello with version 2; mode ok misbehaves never."""
+
+from __future__ import annotations
+
+import os
+import signal
+import struct
+import sys
+import time
+
+import msgpack
+
+
+def send(out, message: dict) -> None:
+    payload = msgpack.packb(message, use_bin_type=True)
+    out.write(struct.pack(">I", len(payload)) + payload)
+    out.flush()
+
+
+def misbehave(mode: str, out, seq: int) -> bool:
+    """Do MODE's thing at the step; whether the answer is sent already."""
+    if mode == "garbage":
+        out.write(struct.pack(">I", 3) + b"\xc1\xc1\xc1")
+    elif mode == "print":
+        out.write(b"hello from a stray print\n")
+    elif mode == "stall":
+        time.sleep(60)
+    elif mode == "crash":
+        print("matcher: segmentation fault in scan 42", file=sys.stderr, flush=True)
+        sys.exit(3)
+    elif mode == "sigkill":
+        os.kill(os.getpid(), signal.SIGKILL)
+    elif mode == "seq":
+        send(out, {"type": "estimate", "seq": seq + 1, "pose": [0.0, 0.0, 0.0]})
+    elif mode == "mapreq":
+        send(out, {"type": "estimate", "seq": seq, "pose": [0.0, 0.0, 0.0], "updated": True})
+    elif mode == "nan":
+        send(out, {"type": "estimate", "seq": seq, "pose": [0.0, float("nan"), 0.0]})
+    else:
+        return False
+    out.flush()
+    return True
+
+
+def main() -> int:
+    mode, at = sys.argv[1], int(sys.argv[2])
+    stdin, out = sys.stdin.buffer, sys.stdout.buffer
+    while len(header := stdin.read(4)) == 4:
+        msg = msgpack.unpackb(stdin.read(struct.unpack(">I", header)[0]), raw=False)
+        if msg["type"] == "hello":
+            version = 2 if mode == "version2" else 1
+            send(out, {"type": "hello", "protocol": "mapqual-slam", "version": version})
+        elif msg["type"] == "config":
+            print(f"fake program: mode {mode} at step {at}", file=sys.stderr, flush=True)
+            send(out, {"type": "ready"})
+        elif msg["type"] == "step":
+            if msg["seq"] == at and misbehave(mode, out, msg["seq"]):
+                continue
+            send(out, {"type": "estimate", "seq": msg["seq"], "pose": msg["odom"]})
+        elif msg["type"] == "map" and mode == "mapreq":
+            out.write(struct.pack(">I", 1) + b"\xc1")
+            out.flush()
+        elif msg["type"] == "bye":
+            return 0
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""ExternalSlam: a SlamAlgorithm whose work is done by a child program over the protocol."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from worker.errors import InputError, SlamFailed
+from worker.params import to_dict
+from worker.slam.base import LaserGeometry
+from worker.slam.external import protocol as proto
+from worker.slam.external.mapmsg import read_map
+from worker.slam.external.process import ChildGone, ChildProcess
+from worker.slam.grid import OccupancyGrid
+from worker.slam.params import SlamParams
+
+
+class ExternalSlam:
+    """Starts the program at the first scan, then one `step` frame and one `estimate` answer
+    per scan; the map comes with an estimate, or is asked for (`map`) when it is read after an
+    update that came without it. Any failure (exit, time-out, bad answer) raises SlamFailed
+    naming the step, once the program is stopped (a failed map request: at the next scan); the
+    pose and map stay those of the last good answer."""
+
+    name = "external"
+
+    def __init__(self, laser: LaserGeometry, params: SlamParams, rng: np.random.Generator):
+        ext = params.external
+        if ext is None or not ext.command:
+            raise InputError("algorithm 'external' needs slam.external.command (the program)")
+        self.ext = ext
+        self.params = params
+        geometry = {
+            "n_beams": int(laser.n_beams), "angle_min": float(laser.angle_min),
+            "angle_increment": float(laser.angle_increment), "range_max": float(laser.range_max),
+        }  # fmt: skip
+        self._n_beams = geometry["n_beams"]
+        seed = int(rng.integers(2**63 - 1))  # for a program that draws random numbers
+        own = to_dict(replace(params, external=None))
+        self._config = {"type": "config", "laser": geometry, "params": own, "seed": seed}
+        self._child: ChildProcess | None = None
+        self._seq = 0
+        self._started = False  # the handshake is done
+        self._map_stale = False  # an update came without its map: ask for it when it is read
+        self._t = 0.0  # [s] of the latest step
+        self._pose = np.zeros(3)
+        self._T = np.zeros(3)
+        empty = np.full((1, 1), np.nan, dtype=np.float32)
+        self._grid = OccupancyGrid(empty, params.delta, np.zeros(2), params.occ_thresh)
+        self.program_name = ""  # as the program's hello gave it
+        self.updates = 0
+        self.failure: SlamFailed | None = None
+        self.protocol_wall_s = 0.0  # [s] spent waiting for, reading and writing frames
+
+    @property
+    def pid(self) -> int | None:
+        """The running program's process id (None before the first scan and once closed)."""
+        return None if self._child is None or self._child.closed else self._child.pid
+
+    def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        if self.failure is not None:
+            raise self.failure
+        seq, self._t = self._seq, float(t)
+        try:
+            if self._child is None:
+                self._start()
+            child = self._child
+            assert child is not None
+            t0 = time.perf_counter()
+            ranges = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
+            if ranges.shape[0] != self._n_beams:
+                raise InputError(f"a scan has {ranges.shape[0]} beams, not {self._n_beams}")
+            deadline = time.monotonic() + self.ext.step_timeout_s
+            child.send(proto.step(seq, t, pose_odom, ranges), deadline)
+            answer = proto.unpack(child.recv(deadline))
+            self.protocol_wall_s += time.perf_counter() - t0
+            updated = self._read_estimate(answer, seq, np.asarray(pose_odom, dtype=np.float64))
+        except (ChildGone, proto.ProtocolError) as exc:
+            raise self._fail(seq, t, exc) from None
+        self._seq += 1
+        self.updates += updated
+        return updated
+
+    def _start(self) -> None:
+        """Spawn the program; hello both ways, then the laser and parameters."""
+        self._child = child = ChildProcess(self.ext.command)
+        deadline = time.monotonic() + self.ext.start_timeout_s
+        child.send(proto.frame(proto.hello()), deadline)
+        self.program_name = proto.check_hello(proto.unpack(child.recv(deadline)))
+        child.send(proto.frame(self._config), deadline)
+        proto.expect(proto.unpack(child.recv(deadline)), "ready")
+        self._started = True
+
+    def _read_estimate(self, msg: dict[str, Any], seq: int, pose_odom: np.ndarray) -> bool:
+        """Take an estimate's pose, correction and map; whether the map changed."""
+        proto.expect(msg, "estimate")
+        if msg.get("seq") != seq:
+            raise proto.ProtocolError(f"the estimate answers seq {msg.get('seq')!r}, not {seq}")
+        pose = proto.pose3(msg, "pose")
+        T = proto.pose3(msg, "T_map_odom") if "T_map_odom" in msg else _correction(pose, pose_odom)
+        grid = None
+        if msg.get("map") is not None:
+            grid = read_map(msg["map"], self._grid, self.params.occ_thresh)
+        updated = msg.get("updated", grid is not None)
+        if not isinstance(updated, bool):
+            raise proto.ProtocolError(f"'updated' must be true or false, got {updated!r}")
+        self._pose, self._T = pose, T
+        if grid is not None:
+            self._grid = grid
+        self._map_stale = grid is None and (updated or self._map_stale)
+        return updated
+
+    def _fail(self, seq: int, t: float, exc: Exception) -> SlamFailed:
+        """Stop the program and make the one-line failure of step `seq`."""
+        tail = self._child.stderr_tail() if self._child is not None else ""
+        self.close()
+        if self._child is not None:
+            tail = self._child.stderr_tail() or tail
+        kind = "protocol error" if isinstance(exc, proto.ProtocolError) else "failed"
+        where = f"at step {seq} (t={t:.2f} s)" if self._started else "at start-up"
+        message = f"external SLAM {self.ext.name!r} {kind} {where}: {exc}"
+        if tail:
+            message += " | stderr: " + " | ".join(tail.splitlines()[-5:])
+        self.failure = SlamFailed(message, seq if self._started else None, tail)
+        return self.failure
+
+    def pose_estimate(self) -> np.ndarray:
+        return self._pose.copy()
+
+    def T_map_odom(self) -> np.ndarray:
+        return self._T.copy()
+
+    def occupancy(self) -> OccupancyGrid:
+        if self._map_stale and self.failure is None:
+            self._map_stale = False
+            try:
+                self._fetch_map()
+            except (ChildGone, proto.ProtocolError) as exc:  # raised at the next scan
+                self._fail(self._seq - 1, self._t, proto.ProtocolError(f"map request: {exc}"))
+        return self._grid
+
+    def _fetch_map(self) -> None:
+        """Ask for the map of the latest update (None in the answer: unchanged)."""
+        child = self._child
+        assert child is not None
+        t0 = time.perf_counter()
+        deadline = time.monotonic() + self.ext.step_timeout_s
+        child.send(proto.frame({"type": "map"}), deadline)
+        answer = proto.unpack(child.recv(deadline))
+        self.protocol_wall_s += time.perf_counter() - t0
+        proto.expect(answer, "map")
+        if answer.get("map") is not None:
+            self._grid = read_map(answer["map"], self._grid, self.params.occ_thresh)
+
+    def close(self) -> None:
+        """Say bye and stop the program (killed past close_timeout_s); safe to call twice."""
+        child = self._child
+        if child is None or child.closed:
+            return
+        with contextlib.suppress(ChildGone):
+            child.send(proto.frame({"type": "bye"}), time.monotonic() + 0.5)
+        child.close(self.ext.close_timeout_s)
+
+    def __enter__(self) -> ExternalSlam:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):  # interpreter shutdown: nothing left to report to
+            self.close()
+
+
+def _correction(pose_map: np.ndarray, pose_odom: np.ndarray) -> np.ndarray:
+    """T_map_odom with pose_map = T_map_odom (+) pose_odom (SE(2) composition)."""
+    th = pose_map[2] - pose_odom[2]
+    c, s = math.cos(th), math.sin(th)
+    x = pose_map[0] - (c * pose_odom[0] - s * pose_odom[1])
+    y = pose_map[1] - (s * pose_odom[0] + c * pose_odom[1])
+    return np.array([x, y, math.atan2(math.sin(th), math.cos(th))])

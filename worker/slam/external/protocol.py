@@ -1,0 +1,129 @@
+"""The mapqual-slam protocol's framing and messages: 4-byte big-endian length + one msgpack map.
+
+Version 1, specified in docs/external-slam.md. This module only encodes and checks messages;
+worker.slam.external.process moves the bytes and worker.slam.external.client drives a run.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any
+
+import msgpack
+import numpy as np
+
+PROTOCOL = "mapqual-slam"
+VERSION = 1
+HEADER = struct.Struct(">I")  # payload length [bytes]
+MAX_FRAME = 64 * 1024 * 1024  # [bytes] a longer frame is a protocol error (a 4000 x 4000 map)
+ENCODINGS = {"float32": np.dtype("<f4"), "int8": np.dtype("i1")}
+
+
+class ProtocolError(ValueError):
+    """An answer that breaks the protocol (the message says what; the client adds the step)."""
+
+
+def frame(message: dict[str, Any]) -> bytes:
+    """One frame: the length header and the msgpack payload of `message`."""
+    payload = msgpack.packb(message, use_bin_type=True)
+    return HEADER.pack(len(payload)) + payload
+
+
+def unpack(payload: bytes) -> dict[str, Any]:
+    """The message of one frame's payload: a msgpack map with a string `type`."""
+    try:
+        message = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except (ValueError, msgpack.UnpackException, TypeError) as exc:
+        raise ProtocolError(f"not a msgpack message ({type(exc).__name__}: {exc})") from None
+    if not isinstance(message, dict) or not isinstance(message.get("type"), str):
+        raise ProtocolError(f"a message must be a map with a string 'type', got {_brief(message)}")
+    return message
+
+
+def hello() -> dict[str, Any]:
+    """mapqual's opening message."""
+    return {"type": "hello", "protocol": PROTOCOL, "versions": [VERSION]}
+
+
+def check_hello(message: dict[str, Any]) -> str:
+    """The program's name from its hello; ProtocolError on another protocol or version."""
+    expect(message, "hello")
+    if message.get("protocol") != PROTOCOL:
+        raise ProtocolError(f"hello names protocol {message.get('protocol')!r}, not {PROTOCOL!r}")
+    if message.get("version") != VERSION:
+        raise ProtocolError(
+            f"the program speaks version {message.get('version')!r}; mapqual speaks {VERSION}"
+        )
+    name = message.get("name", "")
+    return name if isinstance(name, str) else ""
+
+
+def step(seq: int, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bytes:
+    """The frame of step `seq`: time [s], odometry (3,) [x, y, theta], ranges (B,) [m] float64."""
+    ranges = np.ascontiguousarray(ranges_m, dtype="<f8")
+    odom = [float(pose_odom[0]), float(pose_odom[1]), float(pose_odom[2])]
+    return frame({"type": "step", "seq": seq, "t": float(t), "odom": odom, "ranges": ranges.data})
+
+
+def expect(message: dict[str, Any], kind: str) -> None:
+    """ProtocolError unless `message` is of type `kind` (an `error` message says its own)."""
+    if message["type"] == "error":
+        raise ProtocolError(f"the program reported an error: {message.get('message', '')!s:.500}")
+    if message["type"] != kind:
+        raise ProtocolError(f"expected a {kind!r} message, got {message['type']!r}")
+
+
+def pose3(message: dict[str, Any], key: str) -> np.ndarray:
+    """(3,) [x, y, theta] from `message[key]`, three finite numbers."""
+    value = message.get(key)
+    ok = isinstance(value, list | tuple) and len(value) == 3
+    ok = ok and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    if not ok or not all(math.isfinite(v) for v in value):
+        raise ProtocolError(
+            f"'{key}' must be three finite numbers [x, y, theta], got {_brief(value)}"
+        )
+    return np.array(value, dtype=np.float64)
+
+
+def number(message: dict[str, Any], key: str, *, positive: bool = False) -> float:
+    value = message.get(key)
+    if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
+        raise ProtocolError(f"'{key}' must be a finite number, got {_brief(value)}")
+    if positive and value <= 0:
+        raise ProtocolError(f"'{key}' must be positive, got {value}")
+    return float(value)
+
+
+def count(message: dict[str, Any], key: str) -> int:
+    value = message.get(key)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise ProtocolError(f"'{key}' must be a whole number >= 0, got {_brief(value)}")
+    return value
+
+
+def cells(data: Any, encoding: str, height: int, width: int, where: str) -> np.ndarray:
+    """(height, width) float32 probabilities from a map's or patch's `data` bytes, NaN unknown:
+    float32 as is (NaN or negative = unknown), int8 as ROS's OccupancyGrid (0-100, -1)."""
+    dtype = ENCODINGS[encoding]
+    if not isinstance(data, bytes) or len(data) != height * width * dtype.itemsize:
+        size = len(data) if isinstance(data, bytes) else type(data).__name__
+        need = height * width * dtype.itemsize
+        raise ProtocolError(f"{where} 'data' must be {need} bytes of {encoding}, got {size}")
+    raw = np.frombuffer(data, dtype=dtype).reshape(height, width)
+    if encoding == "int8":
+        prob = raw.astype(np.float32) / np.float32(100.0)
+        prob[raw < 0] = np.nan
+        if np.any(raw > 100):
+            raise ProtocolError(f"{where} int8 cells must be -1 or 0..100")
+        return prob
+    with np.errstate(invalid="ignore"):
+        bad = raw > 1.0
+    if np.any(bad) or np.any(np.isinf(raw)):
+        raise ProtocolError(f"{where} float32 cells must be probabilities in [0, 1] or NaN")
+    return np.where(raw < 0, np.float32(np.nan), raw)
+
+
+def _brief(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
