@@ -114,7 +114,7 @@ def relations_cmd(
     margin: Annotated[float | None, typer.Option(help="B: margin of error E, m (0.05).")] = None,
     pilot: Annotated[int | None, typer.Option(help="B: pilot relations for s (500).")] = None,
     max_relations: Annotated[int | None, typer.Option(help="B: cap (1e6); SM: limit.")] = None,
-    min_relations: Annotated[int | None, typer.Option(help="B: floor on N (0).")] = None,
+    min_relations: Annotated[int | None, typer.Option(help="B: floor on N (500).")] = None,
     max_gap: MaxGapOpt = 0.1,
 ) -> None:
     """Generate ground-truth relations of one kind and write them (t1 t2 x y z roll pitch yaw)."""
@@ -168,7 +168,7 @@ def _stats_table(title: str, summary: dict[str, Any], fields: list[str]) -> None
     table.add_column("translation (m)", justify="right")
     table.add_column("rotation (rad)", justify="right")
     for f in fields:
-        name = "mean of squares" if f == "mean_squared" else f
+        name = {"mean_squared": "mean of squares", "ci95": "mean's 95 % CI ±"}.get(f, f)
         table.add_row(name, cell(summary["translation"][f], f), cell(summary["rotation"][f], f))
     console = Console()
     console.print(table)
@@ -212,7 +212,7 @@ def evaluate_cmd(
     if as_json:
         print(json.dumps(summary))
     else:
-        fields = ["mean", "std", "min", "max", "n", "mean_squared"]
+        fields = ["mean", "std", "min", "max", "n", "mean_squared", "ci95"]
         _stats_table(f"relations metric: {relations.name} on {est.name}", summary, fields)
 
 

@@ -192,6 +192,11 @@ def test_job_page_shows_the_finished_run(site):
     b = site["summary"]["relations"]["B"]
     assert f"{b['translation']['mean']:.3f} ± {b['translation']['std']:.3f}" in page
     assert f"{b['rotation']['mean']:.4f} ± {b['rotation']['std']:.4f}" in page
+    # the 95 % half-width of each mean, on the page and in the API's run output
+    assert f"mean ± {b['translation']['ci95']:.3f} (95 % CI)" in page
+    assert f"mean ± {b['rotation']['ci95']:.4f} (95 % CI)" in page
+    run = client.get(f"/api/v1/runs/{site['run']}").json()
+    assert run["summary"]["relations"]["B"]["translation"]["ci95"] == b["translation"]["ci95"] > 0
     assert f"{100 * site['summary']['coverage']:.0f} %" in page
     # the viewer link carries a token for this run and its owner (see test_viewer_access)
     prefix = run_link(VIEWER, site["run"], "")

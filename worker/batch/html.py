@@ -21,6 +21,7 @@ from worker.batch.tables import (
     success_rows,
     summary_of,
 )
+from worker.batch.thesis import findings, side_by_side
 from worker.status import RecordStatus, RunOutcome
 
 CAPTIONS = {
@@ -94,6 +95,7 @@ def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
         "noise": r["noise"], "cls": "good" if is_good(r) else "bad", "what": what,
         "coverage": s and s.coverage, "b_mean_t": b and b.translation.mean,
         "b_mean_r": b and b.rotation.mean, "b_n": b.translation.n if b else 0,
+        "b_ci_t": b and b.translation.ci95, "b_ci_r": b and b.rotation.ci95,
         "sim_time_s": s and s.timings.sim_time_s,
     }  # fmt: skip
 
@@ -130,6 +132,8 @@ def write_html(
         error_columns=ERROR_COLUMNS,
         figures=[_figure(name, path) for name, path in figures.items()],
         runs=[_run_row(r, out) for r in records],
+        thesis=side_by_side(records),
+        findings=findings(records),
     )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")

@@ -1,5 +1,6 @@
 """A batch's tables: runs.csv, success.csv (thesis Table 6.3), translation.csv and
-rotation.csv (Tables 6.4 and 6.5: per environment, B errors averaged over completed runs)."""
+rotation.csv (Tables 6.4 and 6.5: per environment, B errors averaged over completed runs,
+plus CI95, the runs' average 95 % half-width of their mean over the relations)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ GOOD_R = 0.03  # [rad]
 KINDS = (("B", "b"), ("A", "a"), ("SM", "sm"))
 STATS = ("mean", "std", "min", "max")
 REASONS = ("collision", "stuck", "time_limit", "slam_diverged", "error")
-ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES")
+ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES", "CI95")
 RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
 
 
@@ -66,6 +67,7 @@ def run_row(rec: dict[str, Any]) -> dict[str, Any]:
             stats = getattr(rel, axis) if rel else None
             for stat in STATS:
                 row[f"{prefix}_{stat}_{suffix}"] = getattr(stats, stat) if stats else None
+            row[f"{prefix}_ci95_{suffix}"] = stats.ci95 if stats else None
         row[f"{prefix}_n"] = rel.translation.n if rel else 0
     ate = s and s.ate
     row["ate_rmse_t"] = ate and ate.translation.rmse
@@ -115,7 +117,8 @@ def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, Any]]:
     """Thesis Tables 6.4 (axis "translation") and 6.5 ("rotation"): per environment, each B
-    statistic averaged over the completed runs; environments with none are left out."""
+    statistic averaged over the completed runs; environments with none are left out. CI95 is
+    the average of the runs' 95 % half-widths (over the runs that have one; else None)."""
     rows = []
     for (world, slam, noise), recs in _conditions(records).items():
         stats = [
@@ -126,8 +129,10 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
         if not stats:
             continue
         row = {"ENVIRONMENT": environment_label(records, world, slam, noise)}
-        for col, stat in zip(ERROR_COLUMNS[1:], (*STATS, "n"), strict=True):
+        for col, stat in zip(ERROR_COLUMNS[1:-1], (*STATS, "n"), strict=True):
             row[col] = float(np.mean([getattr(s, stat) for s in stats]))
+        ci = [s.ci95 for s in stats if s.ci95 is not None]
+        row["CI95"] = float(np.mean(ci)) if ci else None
         rows.append(row)
     return rows
 
@@ -149,7 +154,9 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]
 
 
 def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
-    """runs.csv, success.csv, translation.csv and rotation.csv in `out`."""
+    """runs.csv, success.csv, translation.csv, rotation.csv and thesis.csv in `out`."""
+    from worker.batch.thesis import THESIS_COLUMNS, side_by_side  # it imports this module
+
     runs = [run_row(r) for r in records]
     success = success_rows(records)
     run_cols = list(runs[0]) if runs else list(RUN_LABELS)
@@ -161,4 +168,5 @@ def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path
             out / "translation.csv", error_rows(records, "translation"), ERROR_COLUMNS
         ),
         "rotation": write_csv(out / "rotation.csv", error_rows(records, "rotation"), ERROR_COLUMNS),
+        "thesis": write_csv(out / "thesis.csv", side_by_side(records), THESIS_COLUMNS),
     }

@@ -7,10 +7,27 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import stdtrit
 
 from worker.evaluate.lookup_kernels import TIME_TOL_S, relation_errors
 from worker.evaluate.relations import Relations
 from worker.evaluate.trajectory import DEFAULT_MAX_GAP_S, Trajectory
+
+CONFIDENCE = 0.95  # two-sided level of the half-width printed beside every relation mean
+
+
+def mean_half_width(err: NDArray[np.float64], confidence: float = CONFIDENCE) -> float | None:
+    """Half-width of the t-based two-sided `confidence` interval of the mean of `err` (n,):
+    t_{(1+c)/2, n-1} s / sqrt(n), s the sample std (ddof 1); None below 2 errors.
+
+    It treats the relations as independent draws, which random B pairs are; consecutive
+    relations (A, S, M) overlap in time, so theirs is a lower bound on the true uncertainty.
+    """
+    n = int(err.shape[0])
+    if n < 2:
+        return None
+    t = float(stdtrit(n - 1, 0.5 + 0.5 * confidence))
+    return t * float(np.std(err, ddof=1)) / float(np.sqrt(n))
 
 
 def error_stats(err: NDArray[np.float64]) -> dict[str, float | int | None]:
@@ -55,14 +72,15 @@ class RelationErrors:
         return int(self.evaluated.shape[0] - np.count_nonzero(self.evaluated))
 
     def summary(self) -> dict[str, Any]:
-        """`{"translation": {mean, std, min, max, n, mean_squared}, "rotation": {...},
-        "skipped": int}` over the evaluated relations (metres, radians)."""
+        """`{"translation": {mean, std, min, max, n, mean_squared, ci95}, "rotation": {...},
+        "skipped": int}` over the evaluated relations (metres, radians); ci95 is the 95 %
+        half-width of the mean (`mean_half_width`), None below 2 relations."""
         ok = self.evaluated
-        return {
-            "translation": error_stats(self.translation[ok]),
-            "rotation": error_stats(self.rotation[ok]),
-            "skipped": self.skipped,
-        }
+        out: dict[str, Any] = {}
+        for axis, err in (("translation", self.translation[ok]), ("rotation", self.rotation[ok])):
+            out[axis] = {**error_stats(err), "ci95": mean_half_width(err)}
+        out["skipped"] = self.skipped
+        return out
 
 
 def evaluate_relations(

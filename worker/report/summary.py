@@ -16,7 +16,7 @@ import json
 from collections.abc import Mapping
 from typing import Any, Final, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer
 
 SCHEMA_VERSION: Final = 1
 
@@ -46,6 +46,17 @@ class ErrorStats(_Part):
     max: float | None
     n: int  # errors the statistics are over
     mean_squared: float | None
+    # [m or rad] t-based 95 % half-width of the mean over the relations (issue 17): null below
+    # 2 relations, absent from summaries written before 2026-12-02 (and left out when absent,
+    # so that their persisted form stays byte-identical)
+    ci95: float | None = None
+
+    @model_serializer(mode="wrap")
+    def _drop_absent_ci(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        out = handler(self)
+        if "ci95" in out and "ci95" not in self.model_fields_set:
+            del out["ci95"]
+        return out
 
 
 class RelationErrorsSummary(_Part):

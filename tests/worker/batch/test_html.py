@@ -78,13 +78,14 @@ def test_the_runs_table_and_headline_hold_the_records_figures(tmp_path):
     assert page.balanced and not page.stack
     runs = page.tables[-1]
     assert runs[0][:5] == ["world", "seed", "slam", "noise [m]", "outcome"]
-    # coverage to 3 decimals, B means to 4, sim time to 0; a run with no B relations: 0
+    # coverage to 3 decimals, B means to 4, sim time to 0; a run with no B relations: 0; no
+    # 95 % half-width in these summaries (written before it): a dash
     assert runs[1] == ["<i>office</i>", "1", "rbpf", "0", "completed", "0.900", "0.5000",
-                       "0.0100", "100", "123"]  # fmt: skip
+                       "0.0100", "–", "100", "123"]  # fmt: skip
     assert runs[2] == ["office", "2", "rbpf", "0.3", "failed (collision)", "0.250", "–", "–",
-                       "0", "300"]  # fmt: skip
+                       "–", "0", "300"]  # fmt: skip
     assert runs[3] == ["office", "3", "rbpf", "0", "failed (error): ValueError: <script>x & 'y'",
-                       "–", "–", "–", "0", "–"]  # fmt: skip
+                       "–", "–", "–", "–", "0", "–"]  # fmt: skip
     assert page.links == ["runs/a/map.png"]  # relative to the page, only where a map exists
     assert "l good" in page.classes and page.classes.count("l bad") == 2
     assert "3 of 4 runs finished: 1 completed, 1 visually good" in " ".join(text.split())

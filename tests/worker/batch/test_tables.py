@@ -75,7 +75,27 @@ def test_tables_match_hand_computed_figures(tmp_path, records):
     assert {k: pytest.approx(float(row[k])) for k in expect} == expect
     rot = {r["ENVIRONMENT"]: r for r in _read(files["rotation"])}["office noise 0"]
     assert float(rot["MEAN"]) == pytest.approx(0.015) and float(rot["MAX"]) == pytest.approx(0.06)
-    assert list(rot) == ["ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES"]
+    assert list(rot) == ["ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES", "CI95"]
+    assert rot["CI95"] == ""  # summaries from before the half-width: none to average
+
+
+def test_ci95_is_the_runs_average_half_width_beside_each_mean(tmp_path):
+    recs = [_rec("office", s) for s in (1, 2, 3)]
+    for rec, ci in zip(recs, (0.02, 0.04, None), strict=True):
+        b = rec["summary"].relations["B"]
+        t = b.translation.model_copy(update={"ci95": ci})
+        r = b.rotation.model_copy(update={"ci95": None if ci is None else ci / 10})
+        rel = b.model_copy(update={"translation": t, "rotation": r})
+        rec["summary"] = rec["summary"].model_copy(update={"relations": {"B": rel}})
+    files = write_results(recs, BatchDir(tmp_path), expected=3)
+    # the third run has no half-width: the average is over the two that have one
+    assert float(_read(files["translation"])[0]["CI95"]) == pytest.approx(0.03)
+    assert float(_read(files["rotation"])[0]["CI95"]) == pytest.approx(0.003)
+    runs = _read(files["runs"])
+    assert [r["b_ci95_t"] for r in runs] == ["0.02", "0.04", ""]
+    assert runs[0]["b_ci95_r"] == "0.002"
+    page = files["report"].read_text()
+    assert "0.0200, 0.0020" in page  # the runs table: the half-widths beside the means
 
 
 def test_every_figure_is_drawn_and_embedded_in_the_page(tmp_path, records):

@@ -166,7 +166,7 @@ def test_summary_shape_and_no_nan_when_nothing_is_evaluated():
     est = Trajectory(np.arange(5) * 0.1, np.zeros((5, 3)))
     s = evaluate_relations(Relations([100.0], [200.0], [[1.0, 0, 0]]), est).summary()
     assert list(s) == ["translation", "rotation", "skipped"]
-    keys = ["mean", "std", "min", "max", "n", "mean_squared"]
+    keys = ["mean", "std", "min", "max", "n", "mean_squared", "ci95"]
     assert list(s["translation"]) == keys and list(s["rotation"]) == keys
     assert s["translation"]["n"] == 0 and s["translation"]["mean"] is None and s["skipped"] == 1
     json.dumps(s, allow_nan=False)
@@ -179,6 +179,8 @@ def test_summary_by_hand():
     # true motions 3 m and 4 m, estimate 0: errors 3 and 4; rotations 0.1 and 0.3
     rel = Relations([0.0, 0.0], [1.0, 2.0], [[3.0, 0, 0.1], [0, 4.0, -0.3]])
     s = evaluate_relations(rel, est).summary()
+    # 95 % half-width of the mean of 3 and 4: t(0.975, 1) = 12.706, s = 0.7071, / sqrt(2)
+    assert s["translation"].pop("ci95") == pytest.approx(12.706 * 0.5, abs=1e-3)
     assert s["translation"] == pytest.approx(
         {"mean": 3.5, "std": 0.5, "min": 3.0, "max": 4.0, "n": 2, "mean_squared": 12.5}
     )

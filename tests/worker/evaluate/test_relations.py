@@ -191,9 +191,13 @@ def test_B_cap_warns_and_floor_applies(rng):
     with pytest.warns(RelationsCapWarning, match="capped at max_relations = 50"):
         rel = relations_B(gt, est, np.random.default_rng(7), BParams(max_relations=50))
     assert len(rel) == 50
-    # a perfect estimate has s = 0: the thesis rule gives N = 0, the floor raises it
-    assert len(relations_B(gt, gt, np.random.default_rng(7))) == 0
+    # a perfect estimate has s = 0: the thesis rule alone gives N = 0, the floor raises it
+    thesis = BParams(min_relations=0)
+    assert len(relations_B(gt, gt, np.random.default_rng(7), thesis)) == 0
     assert len(relations_B(gt, gt, np.random.default_rng(7), BParams(min_relations=30))) == 30
+    # the default floor (issue 17): 500, as many as the pilot
+    assert BParams().min_relations == 500
+    assert len(relations_B(gt, gt, np.random.default_rng(7))) == 500
 
 
 def test_B_needs_an_estimate_that_covers_the_ground_truth(rng):
