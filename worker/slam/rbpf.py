@@ -182,9 +182,10 @@ class RbpfSlam:
 
     def _proposal_and_weights(self, ranges: np.ndarray, pred: np.ndarray | None) -> None:
         """The improved proposal; after a sparse step (a log that kept one scan a metre) each
-        particle's climb is also started from its noise-free odometry prediction, and the
-        better-scoring of the two results is kept: a wider search where the odometry moved
-        more than a robot's step between two scans."""
+        particle's fine climb is also started from its noise-free odometry prediction and from
+        the end of a wide climb (WideSearch), and the best-scoring of the three results is
+        kept: a wider search where the odometry moved more than a robot's step between two
+        scans."""
         m = self.maps
         if self.params.threads > 1:
             numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
