@@ -42,8 +42,9 @@ class UpdateGate:
         self.last_update_t: float | None = None
         self.last_t: float | None = None
 
-    def step(self, t: float, pose_odom: np.ndarray) -> bool:
-        """Account for the move to pose_odom at t; True if this scan is an update."""
+    def step(self, t: float, pose_odom: np.ndarray, force: bool = False) -> bool:
+        """Account for the move to pose_odom at t; True if this scan is an update (always when
+        force: a scan of a log that kept one scan a metre, see RbpfSlam.process)."""
         if self.last_t is not None and t < self.last_t:
             raise InputError(f"scan times must not decrease: {t} after {self.last_t}")
         self.last_t = t
@@ -54,7 +55,8 @@ class UpdateGate:
             self.angular_rad += abs(wrap(theta - theta0))
         self.last_pose = pose_odom.copy()
         update = (
-            self.last_update_t is None
+            force
+            or self.last_update_t is None
             or self.linear_m >= self.linear_update
             or self.angular_rad >= self.angular_update
             or (self.temporal_update >= 0 and t - self.last_update_t > self.temporal_update)

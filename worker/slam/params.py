@@ -57,7 +57,9 @@ class SlamParams:
     # a scan step longer than this (a log that kept one scan a metre) has its noise drawn as
     # the sum over the robot-sized steps it stands for (worker.slam.motion.draw_from_motion);
     # no step of a 10 Hz log under 1.5 m/s and 1.5 rad/s reaches it. 0 = off (one draw, as
-    # GMapping); after such a step the matcher also climbs from the noise-free prediction
+    # GMapping); such a scan is always an update, the matcher also climbs from the noise-free
+    # prediction and from a wide climb (rbpf.WideSearch), and the odometry's per-axis scale
+    # is learnt and applied to such steps (worker.slam.odomcal); README "Real laser logs"
     motion_substep: float = 0.15  # [m]
     motion_substep_angle: float = 0.15  # [rad]
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
@@ -10,11 +12,31 @@ from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
 from worker.slam.match_all_kernels import scan_match_all, scan_match_all_parallel
-from worker.slam.match_kernels import match_config
+from worker.slam.match_kernels import (
+    C_ASTEP,
+    C_ITERATIONS,
+    C_KERNEL,
+    C_LSKIP,
+    C_LSTEP,
+    match_config,
+)
 from worker.slam.motion import compose3, draw_from_motion, motion_substeps, relative3
+from worker.slam.odomcal import ScaleEstimate
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PatchMaps
 from worker.slam.resample import normalized_weights, systematic_indices
+
+
+@dataclass(frozen=True)
+class WideSearch:
+    """The coarse climb tried after a sparse step (one longer than motion_substep), before the
+    fine one: a wider window around each beam end point, longer first steps."""
+
+    kernel_size: int = 3  # [cells] window half-width (0.15 m at 0.05 m cells; fine: 1)
+    lstep: float = 0.1  # [m] initial translational step (fine: lstep)
+    astep: float = 0.1  # [rad] initial angular step (fine: astep)
+    iterations: int = 3  # step halvings
+    lskip: int = 1  # beams skipped between two used ones
 
 
 class RbpfSlam:
@@ -50,6 +72,16 @@ class RbpfSlam:
             iterations=params.iterations,
             minimum_score=params.minimum_score,
         )
+        wide = WideSearch()
+        self._wide_cfg = self._match_cfg.copy()
+        for key, value in (
+            (C_KERNEL, wide.kernel_size),
+            (C_LSTEP, wide.lstep),
+            (C_ASTEP, wide.astep),
+            (C_ITERATIONS, wide.iterations),
+            (C_LSKIP, max(wide.lskip, params.lskip)),
+        ):
+            self._wide_cfg[key] = value
         self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
         n = params.particles
         self.maps = PatchMaps(n, params.delta, params.map_margin, params.occ_thresh)
@@ -66,13 +98,18 @@ class RbpfSlam:
         self._grid: OccupancyGrid | None = None  # cached map of the latest update
         self._pred: np.ndarray | None = None  # (N, 3) noise-free predictions since the update
         self._sparse = False  # a sparse step since the last update
+        self._raw_last = np.zeros(3)  # the raw odometry of the previous scan
+        self._at_update = (np.zeros(3), self.poses.copy())  # raw odometry, poses at the update
+        self._scale = ScaleEstimate()  # the odometry's learnt scale (sparse steps only)
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
-        t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
+        t, raw, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
         p = self.params
         if self._odom_last is None:
+            pose = raw
             self.poses[:] = pose  # the map frame starts at the first odometry pose
         else:
+            pose = self._calibrated(raw)
             self._predict(pose)
             self.poses = draw_from_motion(
                 self.poses,
@@ -86,11 +123,14 @@ class RbpfSlam:
                 (p.motion_substep, p.motion_substep_angle),
             )
         self._odom_last = pose
-        self._pose_odom = pose
-        if not self._gate.step(t, pose):
+        self._raw_last = raw
+        self._pose_odom = raw
+        if not self._gate.step(t, pose, self._sparse):
             return False
         if self.updates > 0:
             self._proposal_and_weights(ranges, self._pred if self._sparse else None)
+            if self._sparse:
+                self._learn_scale(raw)
             same_as = self._maybe_resample()
         else:  # the first scan: every particle at the same pose, with the same empty map
             same_as = np.zeros(self.poses.shape[0], dtype=np.int64)
@@ -102,8 +142,29 @@ class RbpfSlam:
         self._sparse = False
         self._grid = None
         self._best = int(np.argmax(self.log_weight_sums))
-        self._T_map_odom = compose(self.poses[self._best], inverse(pose))
+        self._T_map_odom = compose(self.poses[self._best], inverse(raw))
+        self._at_update = (raw, self.poses.copy())
         return True
+
+    def _calibrated(self, raw: np.ndarray) -> np.ndarray:
+        """The odometry pose the filter moves by: the raw step since the last scan, scaled per
+        axis by the learnt scale when it is a sparse step (see worker.slam.odomcal)."""
+        step = relative3(self._raw_last, raw)
+        p = self.params
+        substep = (p.motion_substep, p.motion_substep_angle)
+        if motion_substeps(float(np.hypot(*step[:2])), abs(float(step[2])), substep) > 1:
+            step = step * self._scale.scale
+        elif np.array_equal(self._odom_last, self._raw_last):
+            return raw  # no sparse step yet (a 10 Hz log): the raw odometry, bit for bit
+        return compose3(self._odom_last, step)
+
+    def _learn_scale(self, raw: np.ndarray) -> None:
+        """Add the raw odometry step since the last update and the particles' weighted mean
+        matched step (before resampling: the rows still match those of the last update)."""
+        raw_then, poses_then = self._at_update
+        weights, _ = normalized_weights(self.log_weights, self.params.ogain)
+        matched = _relative_all(poses_then, self.poses)
+        self._scale.add(relative3(raw_then, raw), weights @ matched)
 
     def _predict(self, pose: np.ndarray) -> None:
         """Note a sparse step (one the motion model draws as several, see draw_from_motion),
@@ -121,9 +182,10 @@ class RbpfSlam:
 
     def _proposal_and_weights(self, ranges: np.ndarray, pred: np.ndarray | None) -> None:
         """The improved proposal; after a sparse step (a log that kept one scan a metre) each
-        particle's climb is also started from its noise-free odometry prediction, and the
-        better-scoring of the two results is kept: a wider search where the odometry moved
-        more than a robot's step between two scans."""
+        particle's fine climb is also started from its noise-free odometry prediction and from
+        the end of a wide climb (WideSearch), and the best-scoring of the three results is
+        kept: a wider search where the odometry moved more than a robot's step between two
+        scans."""
         m = self.maps
         if self.params.threads > 1:
             numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
@@ -131,14 +193,16 @@ class RbpfSlam:
         else:
             match = scan_match_all
         args = (ranges, self._cos_a, self._sin_a, self._match_cfg)
-        poses, scores, likes = match(m.mean, m.bits, m.tables, m.tpx0, m.tpy0, self.poses, *args)
+        maps = (m.mean, m.bits, m.tables, m.tpx0, m.tpy0)
+        poses, scores, likes = match(*maps, self.poses, *args)
         if pred is not None:
-            alt, alt_scores, alt_likes = match(
-                m.mean, m.bits, m.tables, m.tpx0, m.tpy0, pred, *args
-            )
-            better = alt_scores > scores
-            poses[better] = alt[better]
-            likes = np.where(better, alt_likes, likes)
+            coarse, _, _ = match(*maps, self.poses, *args[:-1], self._wide_cfg)
+            for start in (pred, coarse):
+                alt, alt_scores, alt_likes = match(*maps, start, *args)
+                better = alt_scores > scores
+                poses[better] = alt[better]
+                scores = np.where(better, alt_scores, scores)
+                likes = np.where(better, alt_likes, likes)
         self.poses = poses
         self.log_weights += likes
         self.log_weight_sums += likes
@@ -182,3 +246,11 @@ def _compose_all(poses: np.ndarray, step: np.ndarray) -> np.ndarray:
             (th + np.pi) % (2 * np.pi) - np.pi,
         ]
     )
+
+
+def _relative_all(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, 3) inv(a_i) (+) b_i for (N, 3) poses."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    dth = (b[:, 2] - a[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])
