@@ -95,7 +95,8 @@ def test_a_fresh_runs_summary_json_is_what_json_dumps_writes_of_it(tmp_path):
     doc = json.loads(text)
     # the old writer's bytes: same keys in the same order, the json module's float formatting
     assert _dumps(doc) == text
-    assert list(doc) == list(json.loads(EXAMPLE.read_text()))
+    # the map-versus-floorplan score (issue 17) is the one section added since, at the end
+    assert list(doc) == [*json.loads(EXAMPLE.read_text()), "map_score"]
     assert list(doc["timings"])[-2:] == ["simulation_wall_s", "slam_wall_s"]
     assert doc["params"] == params.to_json() and doc["seed"] == 4
     assert RunSummary.model_validate_json(text) == result.summary
