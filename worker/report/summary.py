@@ -167,8 +167,9 @@ class RunSummary(_Part):
     # RunParams.to_json(): its schema is RunParams's own (validated by RunParams.from_json)
     params: dict[str, Any]
     versions: Versions
-    # absent from summaries stored before 2026-12-02 (issue 17), and then left out of to_dict
-    map_score: MapScoreSummary | None = None
+    # absent from summaries stored before 2026-12-02 (issue 17): such a summary is shown (API,
+    # files, database) as it was stored, without the key rather than with a null
+    map_score: MapScoreSummary | None = Field(default=None, exclude_if=lambda v: v is None)
 
     @classmethod
     def load(cls, data: Mapping[str, Any] | None) -> RunSummary | None:
@@ -183,10 +184,8 @@ class RunSummary(_Part):
 
     def to_dict(self) -> dict[str, Any]:
         """The persisted form: plain JSON data in summary.json's key order."""
-        omit = {"schema_version"} if self.schema_version == 1 else set()
-        if self.map_score is None:  # summaries written before it stay byte-identical
-            omit.add("map_score")
-        return self.model_dump(mode="python", exclude=omit or None)
+        omit = {"schema_version"} if self.schema_version == 1 else None
+        return self.model_dump(mode="python", exclude=omit)
 
     def to_json_text(self) -> str:
         """summary.json's text (json.dumps formatting, as every summary.json ever written)."""
