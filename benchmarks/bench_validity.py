@@ -3,7 +3,7 @@ their relation errors and their map-versus-floorplan scores (issue 17 section 4)
 
     .venv/bin/python benchmarks/bench_validity.py [--out out/validity] [--time-limit 90]
         [--seeds 1 2] [--worlds worlds/bormann/office_a.yaml worlds/bormann/lab_ipa.yaml]
-        [--limit N] [--report-only] [--plot docs/validity.png]
+        [--noises 0 0.1 0.3] [--limit N] [--report-only] [--plot docs/validity.png]
 
 Every run (rbpf with 40, 10, 3 and 1 particles and the odometry baseline; laser noise 0, 0.1
 and 0.3 m; each world and seed) is written to OUT/<key>.json as soon as it ends, and a run
@@ -60,12 +60,12 @@ class Spec:
         return f"rbpf-{self.particles}" if self.algorithm == "rbpf" else self.algorithm
 
 
-def specs(worlds: list[str], seeds: list[int]) -> list[Spec]:
+def specs(worlds: list[str], seeds: list[int], noises: tuple[float, ...] = NOISES) -> list[Spec]:
     """All runs, seed first (a prefix spans everything else)."""
     return [
         Spec(w, alg, n, noise, seed)
         for seed in seeds
-        for noise in NOISES
+        for noise in noises
         for w in worlds
         for alg, n in SLAMS
     ]
@@ -248,6 +248,7 @@ def main() -> None:
     ap.add_argument("--out", default="out/validity", help="one JSON per run (resumable)")
     ap.add_argument("--worlds", nargs="+", default=list(WORLDS))
     ap.add_argument("--seeds", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--noises", nargs="+", type=float, default=list(NOISES), help="[m]")
     ap.add_argument("--time-limit", type=float, default=90.0, help="[s] simulated")
     ap.add_argument("--limit", type=int, default=None, help="run only the first N runs")
     ap.add_argument("--report-only", action="store_true", help="no new runs")
@@ -256,9 +257,12 @@ def main() -> None:
     if args.time_limit <= 0 or (args.limit is not None and args.limit < 1):
         print("bench_validity: --time-limit and --limit must be positive", file=sys.stderr)
         sys.exit(2)
+    if any(n < 0 for n in args.noises):
+        print("bench_validity: --noises must be >= 0", file=sys.stderr)
+        sys.exit(2)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    todo = specs(args.worlds, args.seeds)[: args.limit]
+    todo = specs(args.worlds, args.seeds, tuple(args.noises))[: args.limit]
     if not args.report_only:
         run_all(todo, out, args.time_limit)
     rows = load(out)
