@@ -16,6 +16,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from worker.evaluate.ate import AteResult, absolute_trajectory_error
+from worker.evaluate.map_score import MapScore, MapScoreParams, score_map, start_alignment
 from worker.evaluate.metric import RelationErrors, evaluate_relations
 from worker.evaluate.relations import (
     Relations,
@@ -25,6 +26,7 @@ from worker.evaluate.relations import (
     relations_SM,
 )
 from worker.evaluate.trajectory import Trajectory
+from worker.explore.coverage import reachable_free
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
 from worker.report.summary import RunSummary
 from worker.run_params import EvalParams, RunParams
@@ -82,6 +84,7 @@ class RunResult:
     errors: dict[str, RelationErrors]
     ate: AteResult | None
     summary: RunSummary
+    map_score: MapScore | None = None  # the final map against the floorplan
 
 
 class _TimedSimulator:
@@ -175,11 +178,33 @@ def run_one(
     est = Trajectory(exploration.t, exploration.pose_est)
     relations, errors = _evaluate(gt, est, params.eval, rng_eval)
     ate = absolute_trajectory_error(gt, est, params.eval.max_gap) if len(gt) > 1 else None
+    map_score = _map_score(world, params, exploration)
     wall = time.perf_counter() - wall0
     summary = _summary(
         world, seed, params, exploration, errors, ate, wall_explore, wall, stage_wall
     )
-    return RunResult(world, seed, params, exploration, gt, est, relations, errors, ate, summary)
+    if map_score is not None:  # an additive section (issue 17), after the rest
+        doc = {**summary.to_dict(), "map_score": map_score.summary()}
+        summary = RunSummary.model_validate(doc)
+    return RunResult(
+        world, seed, params, exploration, gt, est, relations, errors, ate, summary, map_score
+    )
+
+
+def _map_score(world: World, params: RunParams, ex: ExplorationResult) -> MapScore | None:
+    """The final map against the floorplan, registered from the start pose (None: no pose)."""
+    if len(ex.pose_gt) == 0:
+        return None
+    start = ex.pose_gt[0]
+    start_cell = (
+        int(math.floor((start[0] - world.origin[0]) / world.resolution)),
+        int(math.floor((start[1] - world.origin[1]) / world.resolution)),
+    )
+    reach = reachable_free(world.occ, world.resolution, start_cell, params.explore.footprint_half_m)
+    T0 = start_alignment(ex.pose_est[0], ex.pose_gt[0])
+    return score_map(
+        world.occ, world.resolution, world.origin, reach, ex.final_map, T0, MapScoreParams()
+    )
 
 
 def _progress_relay(

@@ -240,6 +240,8 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
         "b": b,
         "report": report,
         "errors_plot": report and (Path(run.report_dir) / "errors.png").is_file(),
+        "map_score": summary.map_score if summary else None,  # issue 17: map vs floorplan
+        "overlay_plot": report and (Path(run.report_dir) / "map_overlay.png").is_file(),
         "viewer": viewer_link,
         "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),
     }
@@ -267,19 +269,20 @@ def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
 
 @router.get("/runs/{run_id}/plot/{name}.png")
 def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> Response:
-    """The run's trajectories or errors plot: the report's file, else drawn from the database."""
+    """The run's trajectories, errors or map-overlay plot: the report's file, else (trajectories
+    only) drawn from the database."""
     from backend.store import load_trajectory, world_occupancy
     from worker.report.plots import trajectories_png
 
-    if name not in ("trajectories", "errors"):
+    if name not in ("trajectories", "errors", "map_overlay"):
         raise HTTPException(404, f"no plot {name!r}")
     run = owned(user, session.get(Run, run_id), "run", run_id)
     if run.status != RunStatus.DONE:
         raise HTTPException(404, f"run {run_id} is {run.status}: no results yet")
     if run.report_dir and (Path(run.report_dir) / f"{name}.png").is_file():
         return Response((Path(run.report_dir) / f"{name}.png").read_bytes(), media_type="image/png")
-    if name == "errors":
-        raise HTTPException(404, f"run {run_id} has no report folder with its errors")
+    if name in ("errors", "map_overlay"):
+        raise HTTPException(404, f"run {run_id} has no report folder with its {name} plot")
     w = session.get_one(World, run.world_id)
     _, gt = load_trajectory(session, run_id, "gt")
     _, est = load_trajectory(session, run_id, "est")

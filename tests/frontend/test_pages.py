@@ -207,7 +207,10 @@ def test_job_page_shows_the_finished_run(site):
     assert grant.user_id == site["a_id"]
     assert 'name="mapqual-refresh"' not in page  # nothing runs: no refreshing
     srcs = re.findall(r'<img src="([^"]+)"', page)
-    assert len(srcs) == 3  # map, trajectories, errors
+    assert len(srcs) == 4  # map, trajectories, errors, map overlay (issue 17)
+    # the map-versus-floorplan figures, as the summary has them
+    m = site["summary"]["map_score"]
+    assert f"{m['distance_m']:.3f} m" in page and f"{m['precision']:.3f}" in page
     for src in srcs:
         r = client.get(src)
         assert r.status_code == 200 and r.content[:4] == b"\x89PNG", src
@@ -215,11 +218,13 @@ def test_job_page_shows_the_finished_run(site):
     # errors plot (which needs the report's error files) is neither offered nor served
     (site["report"] / "trajectories.png").unlink()
     (site["report"] / "errors.png").unlink()
+    (site["report"] / "map_overlay.png").unlink()
     page = client.get(f"/jobs/{site['job']}").text
     assert len(re.findall(r'<img src="([^"]+)"', page)) == 2
     r = client.get(f"/runs/{site['run']}/plot/trajectories.png")
     assert r.status_code == 200 and Image.open(io.BytesIO(r.content)).size[0] > 500
     assert client.get(f"/runs/{site['run']}/plot/errors.png").status_code == 404
+    assert client.get(f"/runs/{site['run']}/plot/map_overlay.png").status_code == 404
 
 
 def test_other_owners_pages_answer_404(site):

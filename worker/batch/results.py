@@ -15,8 +15,8 @@ from worker.batch.tables import write_tables
 def write_results(
     records: Sequence[dict[str, Any]], bdir: BatchDir, expected: int
 ) -> dict[str, Path | None]:
-    """runs.csv, success.csv, translation.csv, rotation.csv, the figures and report.html of
-    the finished runs (`expected`: how many runs the batch has in all)."""
+    """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv, the figures and
+    report.html of the finished runs (`expected`: how many runs the batch has in all)."""
     out = bdir.root
     files: dict[str, Path | None] = dict(write_tables(records, out))
     figures = write_plots(records, out)

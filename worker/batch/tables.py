@@ -22,6 +22,14 @@ STATS = ("mean", "std", "min", "max")
 REASONS = ("collision", "stuck", "time_limit", "slam_diverged", "error")
 ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES", "CI95")
 RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
+# runs.csv's map-versus-floorplan columns (issue 17): column <- summary.map_score field
+MAP_COLUMNS = (
+    ("map_distance_m", "distance_m"),
+    ("map_precision", "precision"),
+    ("map_recall", "recall"),
+    ("map_wall_coverage", "wall_coverage"),
+    ("map_free_share", "free_share"),
+)
 
 
 def summary_of(rec: dict[str, Any]) -> RunSummary | None:
@@ -77,6 +85,9 @@ def run_row(rec: dict[str, Any]) -> dict[str, Any]:
     row["sim_time_s"] = timings and timings.sim_time_s
     row["wall_time_s"] = timings and timings.wall_time_s
     row["real_time_factor"] = timings and timings.real_time_factor
+    score = s and s.map_score
+    for col, name in MAP_COLUMNS:
+        row[col] = getattr(score, name) if score else None
     row.update(run_id=rec.get("run_id"), key=rec["key"], error=rec.get("error") or "")
     return row
 
@@ -137,6 +148,29 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
     return rows
 
 
+def map_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """maps.csv: per environment, the map-versus-floorplan scores averaged over the completed
+    runs that have one (a score null in a run is left out of its mean)."""
+    rows = []
+    for (world, slam, noise), recs in _conditions(records).items():
+        scores = [
+            s.map_score
+            for r in recs
+            if outcome_of(r)[0] == RunOutcome.COMPLETED
+            and (s := summary_of(r)) is not None
+            and s.map_score is not None
+        ]
+        if not scores:
+            continue
+        row: dict[str, Any] = {"ENVIRONMENT": environment_label(records, world, slam, noise)}
+        for col, name in MAP_COLUMNS:
+            vals = [v for m in scores if (v := getattr(m, name)) is not None]
+            row[col.upper()] = float(np.mean(vals)) if vals else None
+        row["RUNS"] = len(scores)
+        rows.append(row)
+    return rows
+
+
 def _fmt(v: Any) -> Any:
     if isinstance(v, bool) or v is None:
         return "" if v is None else str(v).lower()
@@ -154,7 +188,7 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]
 
 
 def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
-    """runs.csv, success.csv, translation.csv, rotation.csv and thesis.csv in `out`."""
+    """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv and thesis.csv in `out`."""
     from worker.batch.thesis import THESIS_COLUMNS, side_by_side  # it imports this module
 
     runs = [run_row(r) for r in records]
@@ -168,5 +202,10 @@ def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path
             out / "translation.csv", error_rows(records, "translation"), ERROR_COLUMNS
         ),
         "rotation": write_csv(out / "rotation.csv", error_rows(records, "rotation"), ERROR_COLUMNS),
+        "maps": write_csv(
+            out / "maps.csv",
+            map_rows(records),
+            ["ENVIRONMENT", *(c.upper() for c, _ in MAP_COLUMNS), "RUNS"],
+        ),
         "thesis": write_csv(out / "thesis.csv", side_by_side(records), THESIS_COLUMNS),
     }

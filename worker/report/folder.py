@@ -8,7 +8,7 @@ import zipfile
 from pathlib import Path
 
 from worker.evaluate.trajio import write_carmen, write_errors, write_relations, write_tum
-from worker.report.plots import errors_png, map_png, trajectories_png
+from worker.report.plots import errors_png, map_png, overlay_png, trajectories_png
 from worker.report.summary import RunSummary
 
 SUMMARY = "summary.json"
@@ -26,6 +26,23 @@ def error_lines(summary: RunSummary) -> list[str]:
         f"trans. error: mean {t.mean:.3f} m, std {t.std:.3f} m",
         f"rot. error: mean {r.mean:.4f} rad, std {r.std:.4f} rad",
         f"{t.n} B relations; {summary.outcome}, coverage {summary.coverage:.0%}",
+    ]
+
+
+def map_score_lines(summary: RunSummary) -> list[str]:
+    """The map-versus-floorplan score as written on the overlay."""
+    m = summary.map_score
+    if m is None:
+        return []
+
+    def f(v: float | None, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    return [
+        f"wall distance {f(m.distance_m, '.3f')} m (map->plan {f(m.distance_map_m, '.3f')}, "
+        f"plan->map {f(m.distance_floorplan_m, '.3f')})",
+        f"precision {f(m.precision, '.2f')}, recall {f(m.recall, '.2f')} "
+        f"(within {m.tolerance_m:g} m); free share {m.free_share:.0%}",
     ]
 
 
@@ -48,6 +65,10 @@ def write_report(result, out_dir: str | Path) -> Path:
         out / "trajectories.png", world.occ, world.resolution, world.origin,
         ex.pose_gt, ex.pose_est, title,
     )  # fmt: skip
+    score = getattr(result, "map_score", None)
+    if score is not None:
+        overlay_png(out / "map_overlay.png", score.floorplan_walls, score.map_walls_xy,
+                    world.resolution, world.origin, map_score_lines(summary))  # fmt: skip
     for kind, rel in result.relations.items():
         write_relations(out / f"relations_{kind}.txt", rel)
     if "B" in result.errors:

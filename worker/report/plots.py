@@ -133,3 +133,59 @@ def errors_png(
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+FLOORPLAN_WALL_RGB = (40, 110, 220)  # blue: the floorplan's walls
+MAP_WALL_RGB = (220, 40, 40)  # red: the SLAM map's walls, registered onto the floorplan
+BOTH_RGB = (20, 20, 20)  # black: a cell that is a wall in both
+
+
+def overlay_png(
+    path: str | Path | BinaryIO,
+    floorplan_walls: np.ndarray,
+    map_walls_xy: np.ndarray,
+    resolution: float,
+    origin: Sequence[float],
+    lines: Sequence[str],
+    min_width: int = 640,
+) -> None:
+    """The floorplan's walls (blue) and the map's walls (red; black where both) on the world grid.
+
+    floorplan_walls: `(H, W) bool` world cells, `[iy, ix]` with row 0 at the bottom;
+    map_walls_xy: `(K, 2)` [m] the map's wall cell centres already in the world frame.
+    """
+    h, w = floorplan_walls.shape
+    ix = np.floor((map_walls_xy[:, 0] - origin[0]) / resolution).astype(np.int64)
+    iy = np.floor((map_walls_xy[:, 1] - origin[1]) / resolution).astype(np.int64)
+    inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+    map_walls = np.zeros((h, w), dtype=bool)
+    map_walls[iy[inside], ix[inside]] = True
+    rgb = np.full((h, w, 3), 255, dtype=np.uint8)
+    rgb[floorplan_walls] = FLOORPLAN_WALL_RGB
+    rgb[map_walls] = MAP_WALL_RGB
+    rgb[floorplan_walls & map_walls] = BOTH_RGB
+    img = Image.fromarray(np.ascontiguousarray(rgb[::-1]), mode="RGB")  # top row first
+    scale = max(1, int(np.ceil(min_width / max(w, 1))))
+    if scale > 1:
+        img = img.resize((img.width * scale, img.height * scale), Image.Resampling.NEAREST)
+    draw = ImageDraw.Draw(img, "RGBA")
+    font = _font(max(12, img.width // 50))
+    legend = [
+        ("floorplan walls", FLOORPLAN_WALL_RGB),
+        ("map walls (registered)", MAP_WALL_RGB),
+        ("both", BOTH_RGB),
+    ]
+    rows = [(s, (90, 0, 0)) for s in lines] + legend
+    pad = 6
+    boxes = [draw.textbbox((0, 0), s, font=font) for s, _ in rows]
+    line_h = max(b[3] - b[1] for b in boxes) + 4
+    box_w = max(b[2] - b[0] for b in boxes) + 2 * pad + line_h
+    draw.rectangle((0, 0, box_w, line_h * len(rows) + 2 * pad), fill=(255, 255, 255, 225))
+    for i, (s, colour) in enumerate(rows):
+        y = pad + i * line_h
+        x = pad
+        if i >= len(lines):  # a swatch before each legend entry
+            draw.rectangle((x, y + 2, x + line_h - 6, y + line_h - 4), fill=colour)
+            x += line_h
+        draw.text((x, y), s, fill=(0, 0, 0) if i >= len(lines) else colour, font=font)
+    img.save(path, format="PNG")

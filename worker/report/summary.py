@@ -96,6 +96,26 @@ class AteSummary(_Part):
     skipped: int  # ground-truth times the estimate could not provide
 
 
+class MapScoreSummary(_Part):
+    """The final map against the floorplan after a rigid registration (worker.evaluate.map_score);
+    ratios in [0, 1], null where there was nothing to take them over."""
+
+    precision: float | None  # map walls within tolerance of a floorplan wall
+    recall: float | None  # floorplan walls the map has seen within tolerance of a map wall
+    wall_coverage: float | None  # all floorplan walls within tolerance of a map wall
+    distance_m: float | None  # [m] symmetric mean nearest-neighbour distance between the walls
+    distance_map_m: float | None  # [m] map walls -> floorplan walls
+    distance_floorplan_m: float | None  # [m] seen floorplan walls -> map walls
+    free_share: float  # reachable floorplan free space the map marks free
+    tolerance_m: float  # [m]
+    n_map_walls: int
+    n_floorplan_walls: int
+    n_floorplan_walls_seen: int
+    icp_iterations: int
+    icp_converged: bool
+    alignment: Alignment  # T_world_map after ICP
+
+
 class Collision(_Part):
     """Ground-truth time and pose of the first collision."""
 
@@ -160,6 +180,9 @@ class RunSummary(_Part):
     # RunParams.to_json(): its schema is RunParams's own (validated by RunParams.from_json)
     params: dict[str, Any]
     versions: Versions
+    # absent from summaries stored before 2026-12-02 (issue 17): such a summary is shown (API,
+    # files, database) as it was stored, without the key rather than with a null
+    map_score: MapScoreSummary | None = Field(default=None, exclude_if=lambda v: v is None)
 
     @classmethod
     def load(cls, data: Mapping[str, Any] | None) -> RunSummary | None:

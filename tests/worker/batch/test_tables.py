@@ -116,3 +116,38 @@ def test_figures_without_data_are_left_out_and_said_so(tmp_path):
     assert _read(files["translation"]) == []
     page = files["report"].read_text()
     assert "not drawn (no completed run with B relations yet)" in page
+
+
+def _map_score(distance, precision, free_share):
+    return {
+        "precision": precision, "recall": 0.9, "wall_coverage": 0.5, "distance_m": distance,
+        "distance_map_m": distance, "distance_floorplan_m": distance, "free_share": free_share,
+        "tolerance_m": 0.1, "n_map_walls": 10, "n_floorplan_walls": 20,
+        "n_floorplan_walls_seen": 12, "icp_iterations": 3, "icp_converged": True,
+        "alignment": {"x": 0.0, "y": 0.0, "theta": 0.0},
+    }  # fmt: skip
+
+
+def _with_map(rec, score):
+    summary = rec["summary"]
+    return {**rec, "summary": summary.model_validate(summary.to_dict() | {"map_score": score})}
+
+
+def test_map_scores_go_to_runs_csv_and_their_means_to_maps_csv(tmp_path, records):
+    recs = list(records)
+    recs[0] = _with_map(recs[0], _map_score(0.04, 0.9, 0.8))
+    recs[1] = _with_map(recs[1], _map_score(0.10, None, 0.6))  # a null precision
+    recs[2] = _with_map(recs[2], _map_score(1.00, 0.1, 0.1))  # failed: not in maps.csv
+    files = write_results(recs, BatchDir(tmp_path), expected=8)
+    runs = _read(files["runs"])
+    assert (runs[0]["map_distance_m"], runs[0]["map_precision"]) == ("0.04", "0.9")
+    assert runs[1]["map_precision"] == "" and runs[4]["map_distance_m"] == ""
+    maps = {r["ENVIRONMENT"]: r for r in _read(files["maps"])}
+    # office, noise 0: completed runs 1 and 2 have scores; distance (0.04 + 0.10) / 2,
+    # precision 0.9 alone (the other is null), free share (0.8 + 0.6) / 2
+    office = maps["office noise 0"]
+    assert float(office["MAP_DISTANCE_M"]) == pytest.approx(0.07)
+    assert float(office["MAP_PRECISION"]) == pytest.approx(0.9)
+    assert float(office["MAP_FREE_SHARE"]) == pytest.approx(0.7)
+    assert office["RUNS"] == "2"
+    assert set(maps) == {"office noise 0"}  # no other environment has a scored completed run

@@ -95,7 +95,24 @@ def test_a_fresh_runs_summary_json_is_what_json_dumps_writes_of_it(tmp_path):
     doc = json.loads(text)
     # the old writer's bytes: same keys in the same order, the json module's float formatting
     assert _dumps(doc) == text
-    assert list(doc) == list(json.loads(EXAMPLE.read_text()))
+    # the map-versus-floorplan score (issue 17) is the one section added since, at the end
+    assert list(doc) == [*json.loads(EXAMPLE.read_text()), "map_score"]
     assert list(doc["timings"])[-2:] == ["simulation_wall_s", "slam_wall_s"]
     assert doc["params"] == params.to_json() and doc["seed"] == 4
     assert RunSummary.model_validate_json(text) == result.summary
+
+
+def test_a_summary_without_a_map_score_dumps_without_the_key_one_with_it_keeps_it():
+    old = make_summary()
+    assert old.map_score is None
+    assert "map_score" not in old.to_dict() and '"map_score"' not in old.model_dump_json()
+    section = {
+        "precision": 0.9, "recall": None, "wall_coverage": 0.5, "distance_m": 0.04,
+        "distance_map_m": 0.03, "distance_floorplan_m": 0.05, "free_share": 0.8,
+        "tolerance_m": 0.1, "n_map_walls": 10, "n_floorplan_walls": 20,
+        "n_floorplan_walls_seen": 12, "icp_iterations": 3, "icp_converged": True,
+        "alignment": {"x": 0.0, "y": 0.1, "theta": 0.0},
+    }  # fmt: skip
+    new = RunSummary.model_validate({**old.to_dict(), "map_score": section})
+    assert new.to_dict()["map_score"] == section
+    assert RunSummary.model_validate_json(new.to_json_text()) == new

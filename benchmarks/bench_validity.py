@@ -1,0 +1,279 @@
+"""Does the map score tell the truth? Runs spanning good to bad maps, and Spearman's rho between
+their relation errors and their map-versus-floorplan scores (issue 17 section 4).
+
+    .venv/bin/python benchmarks/bench_validity.py [--out out/validity] [--time-limit 90]
+        [--seeds 1 2] [--worlds worlds/bormann/office_a.yaml worlds/bormann/lab_ipa.yaml]
+        [--noises 0 0.1 0.3] [--limit N] [--report-only] [--plot docs/validity.png]
+
+Every run (rbpf with 40, 10, 3 and 1 particles and the odometry baseline; laser noise 0, 0.1
+and 0.3 m; each world and seed) is written to OUT/<key>.json as soon as it ends, and a run
+already there is not run again: stop it any time and start it again to resume. The runs are
+ordered seed first, so any prefix spans the algorithms, noises and worlds. The odometry error
+is 5x Stage's default (E = 0.05, 0.05, 0.10) so that dead reckoning and starved filters make
+bad maps within a short time limit. B relations: at least 500 a run (issue 17 section 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+WORLDS = ("worlds/bormann/office_a.yaml", "worlds/bormann/lab_ipa.yaml")
+SLAMS = (("rbpf", 40), ("rbpf", 10), ("rbpf", 3), ("rbpf", 1), ("odometry", 1))
+NOISES = (0.0, 0.1, 0.3)  # [m]
+ODOM_ERROR = (0.05, 0.05, 0.10)  # [-] Stage E, 5x the default
+# Thesis 6.3.4: a map is visually bad above these mean B errors.
+BAD_T = 1.0  # [m]
+BAD_R = 0.03  # [rad]
+SCORES = ("distance_m", "distance_map_m", "distance_floorplan_m", "precision", "recall",
+          "wall_coverage", "free_share")  # fmt: skip
+ERRORS = (("B", "translation"), ("B", "rotation"), ("A", "translation"), ("A", "rotation"),
+          ("SM", "translation"), ("SM", "rotation"))  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One run of the benchmark."""
+
+    world: str  # path relative to the repository
+    algorithm: str
+    particles: int
+    noise: float  # [m] laser range noise sigma
+    seed: int
+
+    @property
+    def key(self) -> str:
+        slam = f"rbpf{self.particles}" if self.algorithm == "rbpf" else self.algorithm
+        return f"{Path(self.world).stem}-{slam}-n{self.noise:g}-s{self.seed}"
+
+    @property
+    def slam(self) -> str:
+        return f"rbpf-{self.particles}" if self.algorithm == "rbpf" else self.algorithm
+
+
+def specs(worlds: list[str], seeds: list[int], noises: tuple[float, ...] = NOISES) -> list[Spec]:
+    """All runs, seed first (a prefix spans everything else)."""
+    return [
+        Spec(w, alg, n, noise, seed)
+        for seed in seeds
+        for noise in noises
+        for w in worlds
+        for alg, n in SLAMS
+    ]
+
+
+def run_params(spec: Spec, time_limit: float) -> dict[str, Any]:
+    return {
+        "algorithm": spec.algorithm,
+        "sim": {"laser_noise_sigma": spec.noise, "odom_error": list(ODOM_ERROR)},
+        "slam": {"particles": spec.particles},
+        "explore": {"time_limit": time_limit},
+        "eval": {"b": {"min_relations": 500}},
+    }
+
+
+def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
+    """Run what OUT does not hold yet, one at a time, writing each as it ends."""
+    from worker.pipeline import run_one
+    from worker.run_params import RunParams
+    from worker.world.loader import load_world
+
+    worlds: dict[str, Any] = {}
+    for i, spec in enumerate(todo):
+        path = out / f"{spec.key}.json"
+        if path.exists():
+            continue
+        world = worlds.setdefault(spec.world, load_world(ROOT / spec.world))
+        t0 = time.perf_counter()
+        rec: dict[str, Any] = {"key": spec.key, "world": world.name, "slam": spec.slam,
+                               "noise": spec.noise, "seed": spec.seed}  # fmt: skip
+        try:
+            r = run_one(world, RunParams.from_json(run_params(spec, time_limit)), spec.seed)
+            rec["summary"] = r.summary.to_dict()
+        except Exception as exc:  # a run that raises is recorded, the rest go on
+            rec["error"] = f"{type(exc).__name__}: {exc}"
+        rec["wall_s"] = time.perf_counter() - t0
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(rec) + "\n")
+        tmp.replace(path)
+        utc = time.strftime("%H:%M:%S", time.gmtime())
+        print(f"[{utc} UTC] {i + 1}/{len(todo)} {spec.key}: {rec['wall_s']:.0f} s", flush=True)
+
+
+def load(out: Path) -> list[dict[str, Any]]:
+    """The finished runs in OUT that have a B error and a map score."""
+    rows = []
+    for path in sorted(out.glob("*.json")):
+        rec = json.loads(path.read_text())
+        s = rec.get("summary")
+        if not s or not s.get("map_score") or "B" not in s["relations"]:
+            continue
+        row = {k: rec[k] for k in ("key", "world", "slam", "noise", "seed")}
+        row["outcome"] = s["outcome"]
+        for kind, axis in ERRORS:
+            rel = s["relations"].get(kind)
+            row[f"{kind}_{axis}"] = rel[axis]["mean"] if rel else None
+        row.update({k: s["map_score"][k] for k in SCORES})
+        rows.append(row)
+    return rows
+
+
+def column(rows: list[dict[str, Any]], name: str) -> np.ndarray:
+    return np.array([np.nan if r[name] is None else r[name] for r in rows], dtype=float)
+
+
+def spearman_table(rows: list[dict[str, Any]]) -> list[tuple[str, dict[str, tuple[float, int]]]]:
+    """(error, {score: (rho, n)}) for every relation error and map score."""
+    from scipy.stats import spearmanr
+
+    table = []
+    for kind, axis in ERRORS:
+        err = column(rows, f"{kind}_{axis}")
+        cells = {}
+        for score in SCORES:
+            sc = column(rows, score)
+            ok = np.isfinite(err) & np.isfinite(sc)
+            rho = spearmanr(err[ok], sc[ok]).statistic if ok.sum() >= 3 else math.nan
+            cells[score] = (float(rho), int(ok.sum()))
+        table.append((f"{kind} {axis}", cells))
+    return table
+
+
+def agreement(rows: list[dict[str, Any]], threshold: float) -> tuple[int, int, int, int]:
+    """(agree, n, bad by the thesis's rule, bad by the map score): the rule of thumb (mean B
+    above 1 m or 0.03 rad is bad) against the map score (distance above `threshold` is bad)."""
+    bt, br = column(rows, "B_translation"), column(rows, "B_rotation")
+    dist = column(rows, "distance_m")
+    ok = np.isfinite(bt) & np.isfinite(br) & np.isfinite(dist)
+    bad_rule = (bt[ok] > BAD_T) | (br[ok] > BAD_R)
+    bad_map = dist[ok] > threshold
+    return int(np.sum(bad_rule == bad_map)), int(ok.sum()), int(bad_rule.sum()), int(bad_map.sum())
+
+
+def best_threshold(rows: list[dict[str, Any]]) -> float:
+    """The distance threshold that agrees best with the rule of thumb (fitted on these runs)."""
+    dist = np.sort(column(rows, "distance_m")[np.isfinite(column(rows, "distance_m"))])
+    if len(dist) == 0:
+        return math.nan
+    cands = np.concatenate(([dist[0] - 1e-9], 0.5 * (dist[1:] + dist[:-1]), [dist[-1]]))
+    return float(max(cands, key=lambda t: (agreement(rows, t)[0], -t)))
+
+
+def report(rows: list[dict[str, Any]], tolerance: float) -> str:
+    """The figures as text (what the README quotes)."""
+    lines = [f"{len(rows)} runs with B errors and a map score"]
+    by = {}
+    for r in rows:
+        by.setdefault(r["slam"], []).append(r)
+    for slam, rs in by.items():
+        bt, d = column(rs, "B_translation"), column(rs, "distance_m")
+        lines.append(f"  {slam:9s} {len(rs):3d} runs: median B {np.nanmedian(bt):.3f} m, "
+                     f"median wall distance {np.nanmedian(d):.3f} m")  # fmt: skip
+    lines.append("Spearman's rho, mean relation error against map score (n runs):")
+    lines.append("  " + " ".join(f"{s:>20s}" for s in ("error",) + SCORES))
+    for name, cells in spearman_table(rows):
+        cols = " ".join(f"{rho:>14.3f} ({n:3d})" for rho, n in cells.values())
+        lines.append(f"  {name:>20s} {cols}")
+    lines.append("The same within each laser-noise level (noise blurs the map's walls, whatever")
+    lines.append("the trajectory; B, A, SM translation against distance_m / precision):")
+    for noise in sorted({r["noise"] for r in rows}):
+        sub = [r for r in rows if r["noise"] == noise]
+        cells = dict(spearman_table(sub))
+        parts = [
+            f"{kind} {cells[f'{kind} translation']['distance_m'][0]:+.3f} / "
+            f"{cells[f'{kind} translation']['precision'][0]:+.3f}"
+            for kind in ("B", "A", "SM")
+        ]
+        lines.append(f"  noise {noise:g} m ({len(sub)} runs): " + ", ".join(parts))
+    for label, thr in (("a priori, the tolerance", tolerance), ("fitted", best_threshold(rows))):
+        agree, n, bad_rule, bad_map = agreement(rows, thr)
+        lines.append(f"rule of thumb vs wall distance > {thr:.3f} m ({label}): {agree}/{n} "
+                     f"runs agree (bad: {bad_rule} by the rule, {bad_map} by the map)")  # fmt: skip
+    return "\n".join(lines)
+
+
+def scatter(rows: list[dict[str, Any]], path: Path) -> None:
+    """B error against the wall distance and the precision, one colour per SLAM variant."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.stats import spearmanr
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8), dpi=100)
+    marks = {0.0: "o", 0.1: "s", 0.3: "^"}
+    colours = {"rbpf-40": "#1a9e1a", "rbpf-10": "#1f5fbf", "rbpf-3": "#bf8f1f",
+               "rbpf-1": "#d62020", "odometry": "#555555"}  # fmt: skip
+    panels = (("distance_m", "symmetric wall distance [m]"),
+              ("precision", "wall precision (0.1 m)"),
+              ("free_share", "free share of the reachable floorplan"))  # fmt: skip
+    for ax, (score, label) in zip(axes, panels, strict=True):
+        for r in rows:
+            if r["B_translation"] is None or r[score] is None:
+                continue
+            ax.scatter(r["B_translation"], r[score], c=colours.get(r["slam"], "k"),
+                       marker=marks.get(r["noise"], "x"), s=30, alpha=0.8)  # fmt: skip
+        bt, sc = column(rows, "B_translation"), column(rows, score)
+        ok = np.isfinite(bt) & np.isfinite(sc)
+        rho = spearmanr(bt[ok], sc[ok]).statistic if ok.sum() >= 3 else math.nan
+        ax.set_xscale("log")
+        if score == "distance_m":
+            ax.set_yscale("log")
+        ax.axvline(BAD_T, color="k", lw=0.8, ls="--")
+        ax.set_xlabel("mean B translational error [m]")
+        ax.set_ylabel(label)
+        ax.set_title(f"Spearman rho = {rho:.2f} ({ok.sum()} runs)", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    for slam, c in colours.items():
+        axes[0].scatter([], [], c=c, label=slam)
+    for noise, m in marks.items():
+        axes[0].scatter([], [], c="w", edgecolors="k", marker=m, label=f"noise {noise:g} m")
+    axes[0].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out/validity", help="one JSON per run (resumable)")
+    ap.add_argument("--worlds", nargs="+", default=list(WORLDS))
+    ap.add_argument("--seeds", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--noises", nargs="+", type=float, default=list(NOISES), help="[m]")
+    ap.add_argument("--time-limit", type=float, default=90.0, help="[s] simulated")
+    ap.add_argument("--limit", type=int, default=None, help="run only the first N runs")
+    ap.add_argument("--report-only", action="store_true", help="no new runs")
+    ap.add_argument("--plot", default=None, help="scatter plot PNG (default OUT/validity.png)")
+    args = ap.parse_args()
+    if args.time_limit <= 0 or (args.limit is not None and args.limit < 1):
+        print("bench_validity: --time-limit and --limit must be positive", file=sys.stderr)
+        sys.exit(2)
+    if any(n < 0 for n in args.noises):
+        print("bench_validity: --noises must be >= 0", file=sys.stderr)
+        sys.exit(2)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    todo = specs(args.worlds, args.seeds, tuple(args.noises))[: args.limit]
+    if not args.report_only:
+        run_all(todo, out, args.time_limit)
+    rows = load(out)
+    from worker.evaluate.map_score import MapScoreParams
+
+    print(report(rows, MapScoreParams().tolerance))
+    if rows:
+        plot = Path(args.plot) if args.plot else out / "validity.png"
+        scatter(rows, plot)
+        print(f"scatter plot: {plot}")
+
+
+if __name__ == "__main__":
+    main()

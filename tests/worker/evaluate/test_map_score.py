@@ -1,0 +1,144 @@
+"""The map-versus-floorplan score on hand-made rooms whose distances are counted by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from worker.evaluate.map_score import MapScoreParams, score_map, start_alignment
+from worker.slam.grid import OccupancyGrid
+
+RES = 0.05  # [m]
+
+
+def ring(w: int, h: int) -> np.ndarray:
+    """(h, w) bool: a one-cell wall around the grid's edge."""
+    occ = np.zeros((h, w), bool)
+    occ[[0, -1], :] = True
+    occ[:, [0, -1]] = True
+    return occ
+
+
+def room_with_pillar() -> np.ndarray:
+    """A 4 m x 3 m room (one-cell walls) with a 0.5 m pillar off the centre: no symmetry, so
+    one rigid pose alone fits it."""
+    occ = ring(82, 62)
+    occ[15:25, 20:30] = True
+    occ[40:45, 60:62] = True
+    return occ
+
+
+def seen_surface(occ: np.ndarray) -> np.ndarray:
+    """Obstacle cells with a free cell among their 8 neighbours (what beams can hit)."""
+    free = np.pad(~occ, 1, constant_values=False)
+    h, w = occ.shape
+    near = np.zeros_like(occ)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= free[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+    return occ & near
+
+
+def perfect_map(occ: np.ndarray) -> OccupancyGrid:
+    """The floorplan as a laser maps it, in the world frame: the walls' surfaces occupied,
+    free cells free, the inside of the pillar never seen."""
+    prob = np.where(occ, np.nan, 0.0).astype(np.float32)
+    prob[seen_surface(occ)] = 1.0
+    return OccupancyGrid(prob, RES, np.zeros(2))
+
+
+def test_a_perfect_map_scores_precision_and_recall_one_and_distance_zero():
+    occ = room_with_pillar()
+    s = score_map(occ, RES, np.zeros(2), ~occ, perfect_map(occ), np.zeros(3))
+    assert (s.precision, s.recall, s.wall_coverage) == (1.0, 1.0, 1.0)
+    assert s.distance_m == pytest.approx(0.0, abs=1e-12)
+    assert s.free_share == 1.0
+    # inner wall surface only: the map's walls are the floorplan's walls, cell for cell
+    assert s.n_map_walls == s.n_floorplan_walls == s.n_floorplan_walls_seen
+
+
+@pytest.mark.parametrize("offset", [(0.12, -0.07, 0.03), (-0.3, 0.2, -0.05), (0.0, 0.0, 0.08)])
+def test_a_map_started_off_by_a_known_offset_registers_back(offset):
+    occ = room_with_pillar()
+    s = score_map(occ, RES, np.zeros(2), ~occ, perfect_map(occ), np.array(offset))
+    np.testing.assert_allclose(s.T_world_map, [0.0, 0.0, 0.0], atol=1e-6)
+    assert (s.precision, s.recall) == (1.0, 1.0)
+    assert s.distance_m == pytest.approx(0.0, abs=1e-6)
+    assert s.icp_converged
+
+
+def test_a_map_in_its_own_frame_is_placed_by_its_pose_and_refined():
+    """The map frame is the world frame moved by T = (1.0, 0.5, +90 deg): world point
+    w = R m + t, so the map array is the world's turned a quarter and its origin follows."""
+    occ = room_with_pillar()
+    h, w = occ.shape
+    tx, ty = 1.0, 0.5
+    prob = perfect_map(occ).prob.T[::-1, :]  # A[a, b] = world[b, w-1-a]
+    # map cell (0, 0) is world cell (ix = w-1, iy = 0): m = R^T (w - t) = (wy - ty, tx - wx)
+    grid = OccupancyGrid(prob, RES, np.array([-ty, tx - w * RES]))
+    T_true = np.array([tx, ty, math.pi / 2])
+    for T0 in (T_true, T_true + [0.1, -0.1, 0.04]):
+        s = score_map(occ, RES, np.zeros(2), ~occ, grid, T0)
+        np.testing.assert_allclose(s.T_world_map, T_true, atol=1e-6)
+        assert (s.precision, s.recall, s.free_share) == (1.0, 1.0, 1.0)
+        assert s.distance_m == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_wall_drawn_too_far_gives_the_distances_counted_by_hand():
+    """Floorplan: a 40 x 30 cell ring. Map: a 46 x 30 cell ring (its right wall 6 cells too far
+    right), not registered (ICP off). Distances in cells:
+    - map -> floorplan: the 6 extra cells of the top and the bottom row are 1..6 from the
+      floorplan's corner; the map's right wall (28 cells between the rows) is 6 from the
+      floorplan's; the other 2*40 + 30 - 2 ... map cells lie on the floorplan: 0.
+      148 map cells, sum 2 * 21 + 28 * 6 = 210; beyond 2 cells (0.1 m): 2 * 4 + 28 = 36.
+    - floorplan -> map: the floorplan's right wall cells y = 1..28 are min(y, 29 - y, 6)
+      from the map (its top/bottom rows pass through the floorplan's corners, its right wall
+      6 away): sum 15 + 18 * 6 + 15 = 138 over 136 cells; beyond 2 cells: 28 - 4 = 24.
+    """
+    fp = ring(40, 30)
+    grid = perfect_map(ring(46, 30))
+    p = MapScoreParams(icp_iterations=0)
+    s = score_map(fp, RES, np.zeros(2), ~fp, grid, np.zeros(3), p)
+    assert (s.n_map_walls, s.n_floorplan_walls, s.n_floorplan_walls_seen) == (148, 136, 136)
+    assert s.distance_map_m == pytest.approx(RES * 210 / 148)
+    assert s.distance_floorplan_m == pytest.approx(RES * 138 / 136)
+    assert s.distance_m == pytest.approx(0.5 * RES * (210 / 148 + 138 / 136))
+    assert s.precision == pytest.approx(112 / 148)
+    assert s.recall == pytest.approx(112 / 136)
+    assert s.free_share == 1.0
+
+
+def test_walls_the_map_never_saw_count_against_wall_coverage_not_recall():
+    """The map knows only the left half (x < 1.0 m) of a 40 x 30 ring, seen perfectly."""
+    fp = ring(40, 30)
+    prob = np.where(fp, 1.0, 0.0).astype(np.float32)
+    prob[:, 20:] = np.nan
+    s = score_map(fp, RES, np.zeros(2), ~fp, OccupancyGrid(prob, RES, np.zeros(2)), np.zeros(3),
+                  MapScoreParams(icp_iterations=0, seen_margin=0.0))  # fmt: skip
+    # map: left wall 30 + 2 rows of 19 = 68 cells; floorplan 136, seen the same 68
+    assert (s.n_map_walls, s.n_floorplan_walls_seen) == (68, 68)
+    assert (s.precision, s.recall) == (1.0, 1.0)
+    # unseen floorplan cells: x = 20..38 on two rows within 2 cells of x = 19 are x = 20, 21
+    # (2 each), the right wall's 30 are far: matched 68 + 2 * 2 = 72 of 136
+    assert s.wall_coverage == pytest.approx(72 / 136)
+    # reachable interior 38 x 28; the map marks free x = 1..19 of it: 19 of 38 columns
+    assert s.free_share == pytest.approx(19 / 38)
+
+
+def test_start_alignment_maps_the_first_estimate_onto_the_first_ground_truth():
+    est0 = np.array([0.0, 0.0, 0.0])
+    gt0 = np.array([2.0, 3.0, math.pi / 2])
+    np.testing.assert_allclose(start_alignment(est0, gt0), gt0)
+    # est0 = (1, 0, 0) must land on gt0: t = gt0.xy - R(pi/2) (1, 0) = (2, 2)
+    np.testing.assert_allclose(start_alignment(np.array([1.0, 0, 0]), gt0), [2.0, 2.0, math.pi / 2])
+
+
+def test_an_empty_map_scores_none_but_free_share_zero():
+    fp = ring(20, 20)
+    grid = OccupancyGrid(np.full((20, 20), np.nan, np.float32), RES, np.zeros(2))
+    s = score_map(fp, RES, np.zeros(2), ~fp, grid, np.zeros(3))
+    assert (s.precision, s.recall, s.distance_m) == (None, None, None)
+    assert s.wall_coverage == 0.0
+    assert s.free_share == 0.0

@@ -1,0 +1,165 @@
+"""Kernels of the map-versus-floorplan score: wall cells as points, ICP, nearest distances.
+
+The nearest-neighbour queries go through scipy's cKDTree (compiled); the rest is vectorised
+numpy over all cells at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+def wall_surface(occ: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """`(H, W) bool` obstacle cells of `occ` with a `free` cell among their 8 neighbours.
+
+    The floorplan's walls as a laser can see them: the inside of a thick wall and the solid
+    outside of a building are never hit by a beam, so they are not walls a map could show.
+    """
+    near_free = ndimage.binary_dilation(free, structure=_EIGHT)
+    return occ & near_free
+
+
+def cell_centres(mask: np.ndarray, resolution: float, origin: np.ndarray) -> NDArray[np.float64]:
+    """`(K, 2)` [m] centres of the True cells of `mask (H, W)` (`[iy, ix]`, row 0 at the bottom)."""
+    iy, ix = np.nonzero(mask)
+    return np.column_stack(
+        (origin[0] + (ix + 0.5) * resolution, origin[1] + (iy + 0.5) * resolution)
+    ).astype(np.float64)
+
+
+def transform(T: np.ndarray, xy: np.ndarray) -> NDArray[np.float64]:
+    """`(K, 2)` points `xy` moved by the pose T `(3,)` [x, y, theta]: R(theta) xy + t."""
+    c, s = math.cos(T[2]), math.sin(T[2])
+    out = np.empty_like(xy, dtype=np.float64)
+    out[:, 0] = c * xy[:, 0] - s * xy[:, 1] + T[0]
+    out[:, 1] = s * xy[:, 0] + c * xy[:, 1] + T[1]
+    return out
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> NDArray[np.float64]:
+    """The pose a * b (b first, then a), both `(3,)` [x, y, theta]."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    theta = math.atan2(math.sin(a[2] + b[2]), math.cos(a[2] + b[2]))
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], theta])
+
+
+@dataclass(frozen=True)
+class IcpResult:
+    """A rigid registration of source points onto target points."""
+
+    T: NDArray[np.float64]  # (3,) [x, y, theta] the refined pose applied to the source
+    iterations: int  # iterations run (0: the initial pose kept)
+    pairs: int  # correspondences in the last iteration
+    converged: bool  # the last update was under the tolerance
+
+
+def normals(points: np.ndarray, tree: cKDTree, k: int = 7) -> NDArray[np.float64]:
+    """`(M, 2)` unit normals of the wall through each of `points (M, 2)`: the direction of
+    least spread of its k nearest neighbours (batched 2x2 eigen-decomposition)."""
+    if len(points) < 2:
+        return np.tile([1.0, 0.0], (len(points), 1))
+    _, idx = tree.query(points, k=min(k, len(points)))
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)  # (M, k, 2)
+    cov = np.einsum("mki,mkj->mij", nb, nb)
+    _, vec = np.linalg.eigh(cov)  # ascending eigenvalues: column 0 is the normal
+    return vec[:, :, 0]
+
+
+def _point_to_line_step(p: np.ndarray, q: np.ndarray, n: np.ndarray) -> NDArray[np.float64]:
+    """The pose dT minimising sum ((R p + t - q) . n)^2, linearised in the angle about the
+    centroid of p (Chen & Medioni's point-to-plane ICP in 2D), solved in least squares."""
+    c = p.mean(axis=0)
+    pc, qc = p - c, q - c
+    # R(a) x ~ x + a (-x_y, x_x): residual n.(p - q) + n.t + a (n_y p_x - n_x p_y)
+    A = np.column_stack((n[:, 0], n[:, 1], n[:, 1] * pc[:, 0] - n[:, 0] * pc[:, 1]))
+    b = -np.einsum("ij,ij->i", pc - qc, n)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    a = float(sol[2])
+    ca, sa = math.cos(a), math.sin(a)
+    # x -> R(a)(x - c) + c + t: the translation of the pose is c + t - R(a) c
+    return np.array([c[0] + sol[0] - (ca * c[0] - sa * c[1]),
+                     c[1] + sol[1] - (sa * c[0] + ca * c[1]), a])  # fmt: skip
+
+
+def icp(
+    source: np.ndarray,
+    tree: cKDTree,
+    target: np.ndarray,
+    T0: np.ndarray,
+    max_distances: tuple[float, ...],
+    iterations: int,
+    tol: float,
+    min_pairs: int,
+) -> IcpResult:
+    """Point-to-line ICP of `source (K, 2)` onto `target (M, 2)` (indexed by `tree`) from T0.
+
+    Point-to-point ICP stalls on grids (cells snap to the same neighbours a fraction of a cell
+    off); measuring the residual along the target wall's normal lets the source slide along
+    walls. Each stage of `max_distances` [m] (coarse to fine) iterates until the update moves
+    the source by less than `tol` [m] or `iterations` is spent. Fewer than `min_pairs` pairs
+    keep the pose reached so far.
+    """
+    T = np.asarray(T0, dtype=np.float64).copy()
+    done, pairs, converged = 0, 0, False
+    if len(source) == 0 or len(target) == 0:
+        return IcpResult(T, 0, 0, False)
+    n_target = normals(target, tree)
+    radius = float(np.max(np.linalg.norm(source - source.mean(axis=0), axis=1)))
+    for max_d in max_distances:
+        converged = False
+        for _ in range(iterations):
+            moved = transform(T, source)
+            dist, idx = tree.query(moved, distance_upper_bound=max_d)
+            ok = np.isfinite(dist)
+            pairs = int(np.count_nonzero(ok))
+            if pairs < min_pairs:
+                break
+            dT = _point_to_line_step(moved[ok], target[idx[ok]], n_target[idx[ok]])
+            T = compose(dT, T)
+            done += 1
+            # the largest displacement of a source point under the update
+            if math.hypot(dT[0], dT[1]) + abs(dT[2]) * radius < tol:
+                converged = True
+                break
+    return IcpResult(T, done, pairs, converged)
+
+
+def nearest_distances(points: np.ndarray, tree: cKDTree) -> NDArray[np.float64]:
+    """`(K,)` [m] distance from each of `points (K, 2)` to its nearest point in `tree`."""
+    if len(points) == 0:
+        return np.zeros(0)
+    if tree.n == 0:
+        return np.full(len(points), np.inf)
+    dist, _ = tree.query(points)
+    return np.asarray(dist, dtype=np.float64)
+
+
+def map_cells_at(
+    xy_world: np.ndarray, T_world_map: np.ndarray, map_origin: np.ndarray, map_resolution: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Map cell indices `(ix, iy)` of world points `(K, 2)` (may lie outside the map)."""
+    inv_c, inv_s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
+    dx = xy_world[:, 0] - T_world_map[0]
+    dy = xy_world[:, 1] - T_world_map[1]
+    xm = inv_c * dx + inv_s * dy  # R^T (p_world - t)
+    ym = -inv_s * dx + inv_c * dy
+    mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
+    my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
+    return mx, my
+
+
+def lookup(mask: np.ndarray, mx: np.ndarray, my: np.ndarray) -> NDArray[np.bool_]:
+    """`mask[my, mx]` where inside the grid, False outside."""
+    h, w = mask.shape
+    inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
+    out = np.zeros(len(mx), dtype=bool)
+    out[inside] = mask[my[inside], mx[inside]]
+    return out
