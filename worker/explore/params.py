@@ -67,6 +67,10 @@ class ExploreParams:
     # any non-INSCRIBED cell is fine): 0.1 m is about the circumscribed radius (0.28 m), so the
     # robot can turn wherever its plan takes it (gaps between table legs are trapped otherwise)
     planner_margin: float = 0.1
+    # [m] the margin when no plan or frontier is reachable with planner_margin: a door of
+    # 0.7 m clear width, mapped a cell narrower each side, leaves the robot's centre 0.25 to
+    # 0.3 m of clearance; navfn (0: any cell below the inscribed cost) plans through it
+    narrow_margin: float = 0.0
     # [m] near the robot, plans may cross the margin (not the inscribed radius): a pocket the
     # map closed around the robot as it mapped obstacles better must not trap it
     escape_radius: float = 0.5
@@ -140,6 +144,11 @@ class ExploreParams:
     # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in
     # the map must not end the run
     no_frontier_time: float = 1.0
+    # a run stopped as done is `incomplete` when the floorplan holds a reachable region never
+    # seen free at least this large [m^2] and this wide [m] (a room behind a given-up frontier,
+    # not the slivers along walls no viewpoint shows): the harness's judgement, not the robot's
+    incomplete_area: float = 2.0
+    incomplete_width: float = 0.8
     progress_period: float = 1.0  # [s] on_progress callback period
     coverage_period: float = 10.0  # [s] the coverage on_progress reports is refreshed this often
 
@@ -147,7 +156,7 @@ class ExploreParams:
         signed = ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
         may_be_zero = (
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
-            "look_fov_margin", "goal_search_extra",
+            "look_fov_margin", "goal_search_extra", "narrow_margin",
         )  # fmt: skip
         bad = []
         for f in fields(self):

@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 SCHEMA_VERSION: Final = 1
 
-Outcome = Literal["completed", "failed"]
+Outcome = Literal["completed", "failed", "incomplete"]
 # completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
 # "slam_diverged" (the stop rules of worker.explore.loop, which a test keeps in step with these)
 Reason = Literal[
