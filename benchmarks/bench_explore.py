@@ -5,10 +5,12 @@ simulator nor SLAM) spends per simulated second, on the largest Bormann map (off
 SLAM: mean and 95th percentile over the first --seconds of a run, one core.
 
     .venv/bin/python benchmarks/bench_explore.py [--world office_g] [--seconds 600]
-    .venv/bin/python benchmarks/bench_explore.py --proof [--slam oracle|rbpf] [--png DIR]
+    .venv/bin/python benchmarks/bench_explore.py --proof [--slam oracle|rbpf] [--png DIR] [--md F]
 
---proof runs whole explorations on a list of worlds (with and without furniture) and prints
-outcome, coverage, simulated and wall time for each: the proof the CI keeps a subset of.
+--proof runs whole explorations, by default of every bundled plan (Bormann with and without
+furniture, then the 31 schools), and prints outcome, coverage of the reachable free space,
+simulated and wall time for each (--md: also as a Markdown table): the proof the CI keeps a
+subset of. --worlds takes names under worlds/bormann or worlds/schools, or YAML paths.
 """
 
 from __future__ import annotations
@@ -33,33 +35,34 @@ from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
-PROOF_WORLDS = (
-    "Freiburg52_scan",
-    "Freiburg52_scan_furnitures",
-    "lab_ipa",
-    "lab_ipa_furnitures",
-    "lab_c_scan",
-    "lab_c_scan_furnitures",
-    "lab_d_scan",
-    "lab_d_scan_furnitures",
-    "lab_a_scan_furnitures",
-    "lab_b_scan",
-    "office_b",
-    "office_b_furnitures",
-    "office_d",
-    "office_d_furnitures",
-)
+WORLDS = ROOT / "worlds"
 
 
-def run(name: str, slam_name: str, seed: int, time_limit: float):
-    world = load_world(ROOT / "worlds" / "bormann" / f"{name}.yaml")
+def proof_worlds() -> list[str]:
+    """Every bundled Bormann plan (both variants) and every school plan, by name."""
+    return [p.stem for d in ("bormann", "schools") for p in sorted((WORLDS / d).glob("*.yaml"))]
+
+
+def world_path(name: str) -> Path:
+    """A world by name (bundled under worlds/bormann or worlds/schools) or by path."""
+    if name.endswith((".yaml", ".yml", ".world")):
+        return Path(name)
+    for d in ("bormann", "schools"):
+        if (p := WORLDS / d / f"{name}.yaml").is_file():
+            return p
+    raise SystemExit(f"no world {name!r} under {WORLDS}/bormann or /schools")
+
+
+def run(name: str, slam_name: str, seed: int, time_limit: float, **explore_kw):
+    world = load_world(world_path(name))
     rng = np.random.default_rng(seed)
     sim_params = SimParams()
     sim = Simulator(world, sim_params, rng)
     oracle = slam_name == "oracle"
     slam = make_slam("odometry" if oracle else slam_name, sim_params.laser, SlamParams(), rng)
     t0 = time.perf_counter()
-    result = explore(world, sim, slam, ExploreParams(time_limit=time_limit), oracle=oracle)
+    params = ExploreParams(time_limit=time_limit, **explore_kw)
+    result = explore(world, sim, slam, params, oracle=oracle)
     return world, result, time.perf_counter() - t0
 
 
@@ -96,22 +99,42 @@ def bench(args) -> None:
 
 def proof(args) -> None:
     warm_up()
-    worlds = args.worlds.split(",") if args.worlds else PROOF_WORLDS
+    worlds = args.worlds.split(",") if args.worlds else proof_worlds()
     ok = 0
+    rows = []
     for name in worlds:
         world, result, wall = run(name, args.slam, args.seed, args.time_limit)
         good = result.completed and result.coverage >= 0.95 and result.collision is None
         ok += good
-        print(f"{name:28s} {result.outcome:9s} {result.reason:14s} "
+        print(f"{name:28s} {result.outcome:10s} {result.reason:14s} "
               f"coverage {100 * result.coverage:5.1f} %  sim {result.t[-1]:6.0f} s  "
               f"path {result.path_length_m:5.0f} m  goals {result.goals_reached:3d} ok "
               f"{result.goals_failed:2d} failed  wall {wall:6.1f} s", flush=True)  # fmt: skip
+        if result.outcome != "completed":
+            print(f"    {result.stop_detail}", flush=True)
+        rows.append(
+            f"| {name} | {result.outcome} ({result.reason}) | {100 * result.coverage:.1f} | "
+            f"{result.t[-1]:.0f} | {result.path_length_m:.0f} | "
+            f"{'none' if result.collision is None else 'yes'} | {'yes' if good else 'no'} |"
+        )
+        if args.md:
+            _write_table(Path(args.md), rows, args)
         if args.png:
             from worker.explore.render import render_run
 
             Path(args.png).mkdir(parents=True, exist_ok=True)
             render_run(world, result, Path(args.png) / f"{name}_{args.slam}.png")
     print(f"{ok}/{len(worlds)} completed with coverage >= 95 % and no collision ({args.slam})")
+
+
+def _write_table(path: Path, rows: list[str], args) -> None:
+    """The proof so far as a Markdown table (rewritten after every run)."""
+    head = (
+        f"slam {args.slam}, seed {args.seed}, time limit {args.time_limit:g} s\n\n"
+        "| world | outcome (stop) | coverage [%] | simulated [s] | path [m] | collision "
+        "| >= 95 % |\n|---|---|---:|---:|---:|---|---|\n"
+    )
+    path.write_text(head + "\n".join(rows) + "\n")
 
 
 def main() -> None:
@@ -124,6 +147,7 @@ def main() -> None:
     ap.add_argument("--slam", default="oracle", choices=registry.names())
     ap.add_argument("--time-limit", type=float, default=3600.0, help="per run in --proof [s]")
     ap.add_argument("--png", default="", help="folder for one PNG per --proof run")
+    ap.add_argument("--md", default="", help="Markdown table of the --proof runs to write")
     args = ap.parse_args()
     proof(args) if args.proof else bench(args)
 
