@@ -84,3 +84,22 @@ def test_seen_free_maps_the_slam_grid_through_the_alignment():
 def test_the_outcome_vocabulary_reaches_the_summary_and_the_tables():
     assert RunOutcome("incomplete") == RunOutcome.INCOMPLETE
     assert "incomplete" in summary.Outcome.__args__
+
+
+def test_success_table_counts_incomplete_runs_apart_from_completed_and_failed():
+    from worker.batch.tables import success_rows
+
+    def rec(outcome, reason):
+        s = SimpleNamespace(outcome=outcome, reason=reason, relation=lambda kind: None)
+        return {"world": "Borchen4", "variant": "", "noise": 0.0, "slam": "odometry",
+                "status": "done", "summary": s}  # fmt: skip
+
+    raised = {"world": "Borchen4", "variant": "", "noise": 0.0, "slam": "odometry",
+              "status": "error", "summary": None}  # fmt: skip
+    records = [
+        rec("completed", None), rec("incomplete", "no_frontier"),
+        rec("incomplete", "map_unchanged"), rec("failed", "stuck"), raised,
+    ]  # fmt: skip
+    (row,) = success_rows(records)
+    assert (row["runs"], row["completed"], row["incomplete"], row["failed"]) == (5, 1, 2, 2)
+    assert (row["stuck"], row["error"], row["collision"]) == (1, 1, 0)
