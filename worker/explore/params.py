@@ -26,6 +26,13 @@ class ExploreParams:
     inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
     cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
     occupied_thresh: float = 0.25  # [-] SLAM cell probability from which a cell is an obstacle
+    # obstacle layer (thesis pioneer3at_costmap_common_params): the latest scan marks its hits
+    # within obstacle_range lethal (wall faces the SLAM map shows free under its occupied
+    # threshold) and clears, by raytracing up to raytrace_range, the marks its beams cross;
+    # readings without a return are dropped
+    obstacle_layer: bool = True
+    obstacle_range: float = 30.0  # [m]
+    raytrace_range: float = 30.0  # [m]
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
