@@ -5,6 +5,7 @@ simulator nor SLAM) spends per simulated second, on the largest Bormann map (off
 SLAM: mean and 95th percentile over the first --seconds of a run, one core.
 
     .venv/bin/python benchmarks/bench_explore.py [--world office_g] [--seconds 600]
+    .venv/bin/python benchmarks/bench_explore.py --against /work/main [--rounds 2]
     .venv/bin/python benchmarks/bench_explore.py --proof [--slam oracle|rbpf] [--png DIR] [--md F]
 
 --proof runs whole explorations, by default of every bundled plan (Bormann with and without
@@ -17,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -137,6 +140,36 @@ def _write_table(path: Path, rows: list[str], args) -> None:
     path.write_text(head + "\n".join(rows) + "\n")
 
 
+_MEAN = re.compile(r"navigation stack per simulated second: mean ([0-9.]+) ms")
+_CPU = re.compile(r"its CPU time \(thread\): mean ([0-9.]+) ms")
+
+
+def _timed(tree: Path, args) -> tuple[float, float]:
+    """(wall, CPU) ms per simulated second of the timing run of `tree`'s bench_explore.py."""
+    cmd = [
+        sys.executable, str(tree / "benchmarks" / "bench_explore.py"), "--world", args.world,
+        "--seconds", str(args.seconds), "--seed", str(args.seed),
+    ]  # fmt: skip
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=tree).stdout
+    print(f"--- {tree}\n{out}", end="", flush=True)
+    return float(_MEAN.search(out).group(1)), float(_CPU.search(out).group(1))
+
+
+def against(args) -> None:
+    """The timing of this tree and of --against DIR side by side, --rounds times, the order
+    alternating; the ratios this / that of the means."""
+    trees = (ROOT, Path(args.against).resolve())
+    got: dict[Path, list[tuple[float, float]]] = {t: [] for t in trees}
+    for k in range(args.rounds):
+        for tree in trees if k % 2 == 0 else trees[::-1]:
+            got[tree].append(_timed(tree, args))
+    mine, theirs = (np.mean(got[t], axis=0) for t in trees)
+    print(f"this tree: wall {mine[0]:.2f} ms, CPU {mine[1]:.2f} ms per simulated second; "
+          f"{trees[1]}: wall {theirs[0]:.2f} ms, CPU {theirs[1]:.2f} ms; ratio wall "
+          f"{mine[0] / theirs[0]:.2f}, CPU {mine[1] / theirs[1]:.2f} "
+          f"({args.rounds} rounds)")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--world", default="office_g", help="Bormann world for the timing")
@@ -148,8 +181,15 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=3600.0, help="per run in --proof [s]")
     ap.add_argument("--png", default="", help="folder for one PNG per --proof run")
     ap.add_argument("--md", default="", help="Markdown table of the --proof runs to write")
+    ap.add_argument("--against", default="", help="another checkout: time both side by side")
+    ap.add_argument("--rounds", type=int, default=2, help="rounds of --against")
     args = ap.parse_args()
-    proof(args) if args.proof else bench(args)
+    if args.proof:
+        proof(args)
+    elif args.against:
+        against(args)
+    else:
+        bench(args)
 
 
 if __name__ == "__main__":
