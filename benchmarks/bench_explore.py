@@ -53,7 +53,8 @@ def world_path(name: str) -> Path:
     for d in ("bormann", "schools"):
         if (p := WORLDS / d / f"{name}.yaml").is_file():
             return p
-    raise SystemExit(f"no world {name!r} under {WORLDS}/bormann or /schools")
+    print(f"bench_explore: no world {name!r} under {WORLDS}/bormann or /schools", file=sys.stderr)
+    raise SystemExit(2)
 
 
 def run(name: str, slam_name: str, seed: int, time_limit: float, **explore_kw):
@@ -101,8 +102,10 @@ def bench(args) -> None:
 
 
 def proof(args) -> None:
-    warm_up()
     worlds = args.worlds.split(",") if args.worlds else proof_worlds()
+    for name in worlds:
+        world_path(name)  # a bad name fails before the warm-up
+    warm_up()
     ok = 0
     rows = []
     for name in worlds:
