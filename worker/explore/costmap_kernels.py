@@ -294,12 +294,13 @@ def raytrace_scan(
     """
     h, w = obstacle.shape
     y0, y1, x0, x1 = h, 0, w, 0
-    step = 0.5 * resolution
     for k in range(ranges.shape[0]):
         r = ranges[k]
         if not (r < range_max * 0.999) or r <= 0.0:
             continue
         c, s = math.cos(theta + angles[k]), math.sin(theta + angles[k])
+        # one cell along the beam's major axis per step, as Bresenham's line walks it
+        step = resolution / max(abs(c), abs(s))
         re = r + 0.2 * resolution
         ex = int(math.floor((px + re * c - origin_x) / resolution))
         ey = int(math.floor((py + re * s - origin_y) / resolution))
