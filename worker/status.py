@@ -38,6 +38,9 @@ class RunOutcome(StrEnum):
 
     COMPLETED = "completed"  # nothing left to explore
     FAILED = "failed"  # collision, stuck, time limit, SLAM diverged, ...
+    # stopped as done (no frontier, map unchanged) with space left that the robot could reach
+    # in the floorplan but never saw: frontiers given up (blacklisted, unreachable in the map)
+    INCOMPLETE = "incomplete"
 
 
 class WorldStatus(StrEnum):

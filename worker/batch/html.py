@@ -115,8 +115,16 @@ def write_html(
     expected: int,
 ) -> Path:
     """report.html in `out`, readable offline: every image is embedded in the page."""
-    success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good", "failed"]
-    success_cols += ["collision", "stuck", "time_limit", "slam_diverged", "error"]
+    success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good"]
+    success_cols += [
+        "incomplete",
+        "failed",
+        "collision",
+        "stuck",
+        "time_limit",
+        "slam_diverged",
+        "error",
+    ]
     page = _template().render(
         info=info,
         finished=len(records),

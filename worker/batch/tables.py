@@ -119,7 +119,9 @@ def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         row["runs"] = len(recs)
         row["completed"] = sum(o == RunOutcome.COMPLETED for o, _ in outcomes)
         row["good"] = sum(is_good(r) for r in recs)
-        row["failed"] = row["runs"] - row["completed"]
+        # stopped as done with reachable space left unseen: neither done nor a failure
+        row["incomplete"] = sum(o == RunOutcome.INCOMPLETE for o, _ in outcomes)
+        row["failed"] = row["runs"] - row["completed"] - row["incomplete"]
         for reason in REASONS:
             row[reason] = sum(o == RunOutcome.FAILED and r == reason for o, r in outcomes)
         rows.append(row)
@@ -194,7 +196,8 @@ def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path
     runs = [run_row(r) for r in records]
     success = success_rows(records)
     run_cols = list(runs[0]) if runs else list(RUN_LABELS)
-    success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good", "failed"]
+    success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good"]
+    success_cols += ["incomplete", "failed"]
     return {
         "runs": write_csv(out / "runs.csv", runs, run_cols),
         "success": write_csv(out / "success.csv", success, [*success_cols, *REASONS]),

@@ -32,6 +32,8 @@ class GlobalCostmap:
         self.lethal = np.zeros((0, 0), dtype=np.bool_)
         self.unknown = np.zeros((0, 0), dtype=np.bool_)
         self.inflated = np.zeros((0, 0), dtype=np.uint8)
+        # obstacle layer: the laser's hits, kept until a beam passes through (raytrace_scan)
+        self.obstacle = np.zeros((0, 0), dtype=np.bool_)
         self._kernel = np.zeros((1, 1), dtype=np.uint8)
         self._fresh = np.zeros((0, 0), dtype=np.bool_)  # new obstacle cells to stamp
 
@@ -63,7 +65,7 @@ class GlobalCostmap:
         out[self.unknown & (self.inflated < ck.INSCRIBED)] = ck.NO_INFORMATION
         return out
 
-    def update(self, prob: np.ndarray, resolution: float, origin, window_m=None):
+    def update(self, prob: np.ndarray, resolution: float, origin, window_m=None, scan=None):
         """Bring the layers up to date with the SLAM map `prob (h, w)` (NaN unknown).
 
         The SLAM map may be cropped and grow between calls: the costmap keeps its own frame,
@@ -71,6 +73,8 @@ class GlobalCostmap:
         recomputed). window_m: `(x0, y0, x1, y1)` [m] where the map can have changed since the
         last call (None: everywhere). Returns the bounding box `(y0, y1, x0, x1)` of the cells
         whose lethal or unknown state changed (empty when y1 == y0), in the costmap's frame.
+        scan: `(pose (3,), ranges (B,), angles (B,), range_max)` in the map frame, for the
+        obstacle layer (None: the layer is left as it is).
         """
         origin = np.asarray(origin, dtype=float)[:2]
         ph, pw = prob.shape
@@ -85,12 +89,14 @@ class GlobalCostmap:
             off_x = int(round((origin[0] - self.origin[0]) / self.resolution))
             off_y = int(round((origin[1] - self.origin[1]) / self.resolution))
             h, w = self.shape
+        marked = self._mark(scan)
         if window_m is None:
             y0, y1, x0, x1 = 0, h, 0, w
         else:
             x0, y0 = self.world_to_cell(window_m[0], window_m[1])
             x1, y1 = self.world_to_cell(window_m[2], window_m[3])
             y0, y1, x0, x1 = max(0, y0), min(h, y1 + 1), max(0, x0), min(w, x1 + 1)
+            y0, y1, x0, x1 = _union((y0, y1, x0, x1), marked)
         if y1 <= y0 or x1 <= x0:
             return (0, 0, 0, 0)
         t = _TILE
@@ -100,13 +106,25 @@ class GlobalCostmap:
             self._fresh = np.zeros(self.lethal.shape, dtype=np.bool_)
         ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
-            y0, y1, x0, x1, tiles, self._fresh, fresh_tiles, t,
+            y0, y1, x0, x1, tiles, self._fresh, fresh_tiles, t, self.obstacle,
         )  # fmt: skip
         if ly1 > ly0:
             # obstacles that went away: their blocks are recomputed; new ones: stamped in
             ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
             ck.stamp_fresh(self.lethal, self._kernel, self.inflated, self._fresh, fresh_tiles, t)
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
+
+    def _mark(self, scan) -> tuple[int, int, int, int]:
+        """Clear and mark the obstacle layer with one scan; the box of the cells changed."""
+        if scan is None:
+            return (0, 0, 0, 0)
+        pose, ranges, angles, range_max = scan
+        p = self.params
+        return ck.raytrace_scan(
+            self.obstacle, float(self.origin[0]), float(self.origin[1]), self.resolution,
+            float(pose[0]), float(pose[1]), float(pose[2]), np.asarray(ranges, dtype=float),
+            np.asarray(angles, dtype=float), float(range_max), p.obstacle_range, p.raytrace_range,
+        )  # fmt: skip
 
     def _reset(self, resolution: float, origin: np.ndarray, shape) -> None:
         self.resolution = float(resolution)
@@ -115,6 +133,7 @@ class GlobalCostmap:
         self.lethal = np.zeros(shape, dtype=np.bool_)
         self.unknown = np.ones(shape, dtype=np.bool_)
         self.inflated = np.zeros(shape, dtype=np.uint8)
+        self.obstacle = np.zeros(shape, dtype=np.bool_)
         p = self.params
         self._kernel = ck.inflation_kernel(
             self.resolution, self.inscribed_radius, p.cost_scaling_factor, p.inflation_radius
@@ -135,7 +154,10 @@ class GlobalCostmap:
         lethal[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.lethal
         unknown[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.unknown
         inflated[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.inflated
+        obstacle = np.zeros(shape, dtype=np.bool_)
+        obstacle[-ny0 : -ny0 + h, -nx0 : -nx0 + w] = self.obstacle
         self.lethal, self.unknown, self.inflated = lethal, unknown, inflated
+        self.obstacle = obstacle
         self.origin = self.origin + np.array([nx0, ny0]) * self.resolution
         self.frame_id += 1
         # Old obstacles near the old border inflate into the new ring around it.

@@ -230,7 +230,7 @@ def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
 @njit(cache=True)
 def classify_region(
     prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1, tiles, fresh,
-    fresh_tiles, tile,
+    fresh_tiles, tile, obstacle,
 ):  # fmt: skip
     """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
 
@@ -239,8 +239,10 @@ def classify_region(
     `occupied_thresh` (GMapping publishes 100 above its occ_thresh). The `tile x tile` blocks
     holding obstacle cells that went away are flagged in `tiles (ceil(H / tile),
     ceil(W / tile)) bool`; new obstacle cells in `fresh (H, W) bool`, their blocks in
-    `fresh_tiles`. Returns the bounding boxes `(y0, y1, x0, x1)` of the lethal and of the
-    unknown changes, each empty (y1 == y0) when nothing changed.
+    `fresh_tiles`. A cell the obstacle layer `obstacle (H, W) bool` marks is lethal too (the
+    master grid takes the maximum of the layers). Returns the bounding boxes
+    `(y0, y1, x0, x1)` of the lethal and of the unknown changes, each empty (y1 == y0) when
+    nothing changed.
     """
     ph, pw = prob.shape
     ly0, ly1, lx0, lx1 = y1, y0, x1, x0
@@ -251,7 +253,7 @@ def classify_region(
             sx = ix - off_x
             p = prob[sy, sx] if (0 <= sy < ph and 0 <= sx < pw) else np.nan
             unk = math.isnan(p)
-            let = (not unk) and p > occupied_thresh
+            let = ((not unk) and p > occupied_thresh) or obstacle[iy, ix]
             if let != lethal[iy, ix]:
                 lethal[iy, ix] = let
                 if let:
@@ -274,3 +276,54 @@ def classify_region(
     if uy1 <= uy0:
         uy0 = uy1 = ux0 = ux1 = 0
     return ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1
+
+
+@njit(cache=True)
+def raytrace_scan(
+    obstacle, origin_x, origin_y, resolution, px, py, theta, ranges, angles, range_max,
+    obstacle_range, raytrace_range,
+):  # fmt: skip
+    """costmap_2d's obstacle layer on one scan, in place on `obstacle (H, W) bool`.
+
+    Beams without a return (>= range_max) are dropped, as costmap_2d drops them. Each other
+    beam first clears the cells it crosses up to min(range, raytrace_range), its end cell
+    excluded (raytrace clearing: a mark a later beam passes through goes), then marks its end
+    cell when the range is within obstacle_range (nudged a fifth of a cell inside the
+    obstacle, so that rounding cannot put the mark in the free cell in front). Returns the
+    bounding box `(y0, y1, x0, x1)` of the cells that changed (empty when y1 == y0).
+    """
+    h, w = obstacle.shape
+    y0, y1, x0, x1 = h, 0, w, 0
+    for k in range(ranges.shape[0]):
+        r = ranges[k]
+        if not (r < range_max * 0.999) or r <= 0.0:
+            continue
+        c, s = math.cos(theta + angles[k]), math.sin(theta + angles[k])
+        # one cell along the beam's major axis per step, as Bresenham's line walks it
+        step = resolution / max(abs(c), abs(s))
+        re = r + 0.2 * resolution
+        ex = int(math.floor((px + re * c - origin_x) / resolution))
+        ey = int(math.floor((py + re * s - origin_y) / resolution))
+        n = int(min(r, raytrace_range) / step)
+        for i in range(n + 1):
+            d = i * step
+            ix = int(math.floor((px + d * c - origin_x) / resolution))
+            iy = int(math.floor((py + d * s - origin_y) / resolution))
+            if (ix == ex and iy == ey) or not (0 <= ix < w and 0 <= iy < h):
+                continue
+            if obstacle[iy, ix]:
+                obstacle[iy, ix] = False
+                y0, y1, x0, x1 = min(y0, iy), max(y1, iy + 1), min(x0, ix), max(x1, ix + 1)
+    for k in range(ranges.shape[0]):
+        r = ranges[k]
+        if not (r < range_max * 0.999) or r <= 0.0 or r > obstacle_range:
+            continue
+        re = r + 0.2 * resolution
+        ix = int(math.floor((px + re * math.cos(theta + angles[k]) - origin_x) / resolution))
+        iy = int(math.floor((py + re * math.sin(theta + angles[k]) - origin_y) / resolution))
+        if 0 <= ix < w and 0 <= iy < h and not obstacle[iy, ix]:
+            obstacle[iy, ix] = True
+            y0, y1, x0, x1 = min(y0, iy), max(y1, iy + 1), min(x0, ix), max(x1, ix + 1)
+    if y1 <= y0:
+        return 0, 0, 0, 0
+    return y0, y1, x0, x1

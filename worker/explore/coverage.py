@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -56,7 +57,7 @@ def align_map_to_world(pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
     return np.array([x, y, th])
 
 
-def coverage(
+def seen_free(
     reachable: np.ndarray,
     world_resolution: float,
     world_origin: np.ndarray,
@@ -65,15 +66,16 @@ def coverage(
     map_origin: np.ndarray,
     occ_thresh: float,
     T_world_map: np.ndarray,
-) -> float:
-    """Share of `reachable (H, W)` world cells whose centre falls on a free cell of the map.
+) -> np.ndarray:
+    """`(H, W) bool`: the `reachable` world cells whose centre falls on a free map cell.
 
     prob: (h, w) SLAM probabilities (NaN unknown; free at or below occ_thresh), in the map
     frame placed in the world by T_world_map `(3,)`.
     """
+    out = np.zeros_like(reachable, dtype=np.bool_)
     iy, ix = np.nonzero(reachable)
     if iy.size == 0:
-        return 0.0
+        return out
     xw = world_origin[0] + (ix + 0.5) * world_resolution - T_world_map[0]
     yw = world_origin[1] + (iy + 0.5) * world_resolution - T_world_map[1]
     c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
@@ -84,5 +86,56 @@ def coverage(
     h, w = prob.shape
     inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
     p = prob[my[inside], mx[inside]]
-    free = np.count_nonzero(~np.isnan(p) & (p <= occ_thresh))
-    return free / iy.size
+    out[iy[inside], ix[inside]] = ~np.isnan(p) & (p <= occ_thresh)
+    return out
+
+
+def coverage(reachable: np.ndarray, *args) -> float:
+    """Share of `reachable (H, W)` world cells whose centre falls on a free cell of the map
+    (arguments as `seen_free`)."""
+    n = np.count_nonzero(reachable)
+    return 0.0 if n == 0 else np.count_nonzero(seen_free(reachable, *args)) / n
+
+
+@dataclass(frozen=True)
+class UnseenRegion:
+    """A piece of reachable free space the map never showed free."""
+
+    area_m2: float  # [m^2]
+    centre: tuple[float, float]  # [m] world frame, its centroid
+
+
+def unseen_regions(
+    reachable: np.ndarray,
+    seen: np.ndarray,
+    resolution: float,
+    origin: np.ndarray,
+    min_area: float,
+    min_width: float,
+) -> list[UnseenRegion]:
+    """Reachable, unseen regions at least `min_width` [m] wide and `min_area` [m^2] large,
+    largest first: rooms never entered, not the slivers along walls and behind furniture
+    legs that no viewpoint shows (nor the map's misalignment shows as unseen).
+
+    reachable, seen: `(H, W) bool` world grids (`reachable_free`, `seen_free`). A region is
+    an 8-connected component of what remains of reachable & ~seen after an opening by a disc
+    of diameter min_width (the slivers go, a room stays).
+    """
+    unseen = reachable & ~seen
+    r = max(1, int(round(0.5 * min_width / resolution)))
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    disc = xx**2 + yy**2 <= r * r
+    wide = ndimage.binary_opening(unseen, structure=disc)
+    labels, n = ndimage.label(wide, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return []
+    keep = np.arange(1, n + 1)
+    counts = np.asarray(ndimage.sum_labels(wide, labels, keep))
+    centres = ndimage.center_of_mass(wide, labels, keep)
+    out = []
+    for count, (cy, cx) in zip(counts, centres, strict=True):
+        area = float(count) * resolution * resolution
+        if area >= min_area:
+            x = float(origin[0] + (cx + 0.5) * resolution)
+            out.append(UnseenRegion(area, (x, float(origin[1] + (cy + 0.5) * resolution))))
+    return sorted(out, key=lambda u: -u.area_m2)

@@ -10,7 +10,12 @@ import numpy as np
 from worker.explore import frontier_kernels as fk
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.params import ExploreParams
-from worker.explore.planner import DijkstraSearch, cells_in_radius, planner_blocked_cost
+from worker.explore.planner import (
+    DijkstraSearch,
+    cells_in_radius,
+    narrow_params,
+    planner_blocked_cost,
+)
 
 
 @dataclass(frozen=True)
@@ -169,8 +174,20 @@ class FrontierSearch:
 
     def _search(self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid):
         """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
-        robot's cell `start (ix, iy)`: flat indices, nearest first."""
+        robot's cell `start (ix, iy)`: flat indices, nearest first. Tried with the planner's
+        margin, then with a wider escape (a pocket the map sealed around the robot), then
+        with narrow_margin (frontiers behind doors too narrow for the margin)."""
         p = self.params
+        args = (costmap, start, cells, labels, cell_valid, avoid)
+        found = self._search_with(*args, p, None)
+        if found.size == 0:
+            found = self._search_with(*args, p, p.pocket_escape_radius)
+        if found.size == 0 and p.planner_margin > p.narrow_margin:
+            found = self._search_with(*args, narrow_params(p), None)
+        return found
+
+    def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, p, escape_m):
+        """One goal search with settings `p` and escape radius escape_m [m] (None: p's)."""
         res = costmap.resolution
         offsets = cells_in_radius(p.goal_radius, res)
         marked = fk.stamp_targets(
@@ -189,15 +206,11 @@ class FrontierSearch:
             # Look a little past the first candidate (goal_search_extra goal radii of free
             # travel) so that the goal can be the lowest-cost cell of that cluster.
             extra = p.neutral_cost * p.goal_search_extra * p.goal_radius / res
-            found = self.search.run(costmap, start, self._target, p, extra, allow_unknown=False)
-            if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
-                found = self.search.run(
-                    costmap, start, self._target, p, extra, allow_unknown=False,
-                    escape_m=p.pocket_escape_radius,
-                )  # fmt: skip
+            return self.search.run(
+                costmap, start, self._target, p, extra, allow_unknown=False, escape_m=escape_m
+            )
         finally:
             self._target[marked[:, 0], marked[:, 1]] = False
-        return found
 
     def _goal(self, costmap: GlobalCostmap, robot_xy, found, cells, labels, sizes):
         """The goal among the cells found for the nearest cluster: the lowest-cost one

@@ -10,7 +10,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from worker.errors import SlamFailed
-from worker.explore.coverage import align_map_to_world, coverage, reachable_free
+from worker.explore.coverage import (
+    align_map_to_world,
+    coverage,
+    reachable_free,
+    seen_free,
+    unseen_regions,
+)
 from worker.explore.navigator import GoalRecord, Navigator
 from worker.explore.params import ExploreParams
 from worker.explore.stop_rules import (
@@ -25,7 +31,7 @@ from worker.status import RunOutcome
 
 __all__ = [
     "Exploration", "ExploreParams", "ExplorationResult", "ExploreProgress", "Outcome", "Reason",
-    "explore",
+    "explore", "judge_outcome",
 ]  # fmt: skip
 
 
@@ -201,6 +207,9 @@ class Exploration:
         live = (goal, nav.path, ranges, self.slam.occupancy)
         self.on_progress(ExploreProgress(t, pose_gt, pose_est, self.last_cov, done, status, *live))
 
+    def _judge(self, stop: StopReason, seen: np.ndarray, cov: float) -> tuple[RunOutcome, str]:
+        return judge_outcome(stop, self.reach, seen, self.world, cov, self.p)
+
     def result(self, stop: StopReason) -> ExplorationResult:
         """The run, ended by `stop`: its recording, final map, coverage and counters."""
         world, sim, nav, rec = self.world, self.sim, self.nav, self.rec
@@ -208,17 +217,20 @@ class Exploration:
         pose_gt = rec.buf[: rec.n, 1:4].copy()
         pose_est = rec.buf[: rec.n, 4:7].copy()
         T = align_map_to_world(pose_est, pose_gt)
-        cov = coverage(
+        seen = seen_free(
             self.reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
             grid.occ_thresh, T,
         )  # fmt: skip
+        n_reach = np.count_nonzero(self.reach)
+        cov = np.count_nonzero(seen) / n_reach if n_reach else 0.0
+        outcome, detail = self._judge(stop, seen, cov)
         n0 = self.n_collisions0
         col = sim.collisions[n0] if len(sim.collisions) > n0 else None
         goals = tuple(nav.stats.goals)
         return ExplorationResult(
-            outcome=stop.outcome,
+            outcome=outcome,
             reason=stop.reason,
-            stop_detail=stop.detail,
+            stop_detail=detail,
             t=rec.buf[: rec.n, 0].copy(),
             pose_gt=pose_gt,
             pose_est=pose_est,
@@ -236,6 +248,29 @@ class Exploration:
             nav_cpu_s=rec.cpu[: rec.n].copy(),
             wall_s=time.perf_counter() - self.wall0,
         )
+
+
+def judge_outcome(
+    stop: StopReason, reach: np.ndarray, seen: np.ndarray, world, cov: float, p: ExploreParams
+) -> tuple[RunOutcome, str]:
+    """The outcome and its line: a run stopped as done (no frontier, map unchanged) that left
+    a reachable region unseen (`unseen_regions` with incomplete_area, incomplete_width) is
+    incomplete: the robot gave up frontiers it could have driven to."""
+    if stop.outcome != RunOutcome.COMPLETED:
+        return stop.outcome, stop.detail
+    left = unseen_regions(
+        reach, seen, world.resolution, world.origin, p.incomplete_area, p.incomplete_width
+    )
+    if not left:
+        return stop.outcome, stop.detail
+    big = left[0]
+    area = sum(u.area_m2 for u in left)
+    detail = (
+        f"{stop.detail}, but {area:.1f} m^2 of reachable space never seen in {len(left)} "
+        f"region(s), the largest {big.area_m2:.1f} m^2 at ({big.centre[0]:.1f}, "
+        f"{big.centre[1]:.1f}); coverage {100 * cov:.1f} %"
+    )
+    return RunOutcome.INCOMPLETE, detail
 
 
 def explore(

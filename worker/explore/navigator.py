@@ -57,6 +57,7 @@ class Navigator:
         self._map_updated = False
         self._half_fov = float(np.max(np.abs(self.angles))) - params.look_fov_margin  # [rad]
         self._beams_box: tuple[float, float, float, float] | None = None
+        self._last_scan: tuple[np.ndarray, np.ndarray] | None = None  # (pose, ranges)
 
     @property
     def goal(self) -> FrontierGoal | None:
@@ -78,7 +79,10 @@ class Navigator:
             b = self._beams_box
             window = (b[0] - m, b[1] - m, b[2] + m, b[3] + m)
         self._beams_box = None
-        changed = self.costmap.update(prob, resolution, origin, window)
+        scan = None
+        if self.params.obstacle_layer and self._last_scan is not None:
+            scan = (*self._last_scan, self.angles, self.range_max)
+        changed = self.costmap.update(prob, resolution, origin, window, scan)
         self.frontiers.update(self.costmap, changed)
         if changed[1] > changed[0]:
             self._frontier_changed = True
@@ -91,6 +95,7 @@ class Navigator:
     def step(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
         """One control period: the command for pose `(3,)` [x, y, theta] (map frame)."""
         self._grow_beams_box(pose, ranges)
+        self._last_scan = (np.array(pose, dtype=float), np.asarray(ranges, dtype=float))
         if self.state is NavState.WAITING:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)

@@ -26,6 +26,13 @@ class ExploreParams:
     inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
     cost_scaling_factor: float = 7.5  # [1/m] inflation_layer.cost_scaling_factor
     occupied_thresh: float = 0.25  # [-] SLAM cell probability from which a cell is an obstacle
+    # obstacle layer (thesis pioneer3at_costmap_common_params): the latest scan marks its hits
+    # within obstacle_range lethal (wall faces the SLAM map shows free under its occupied
+    # threshold) and clears, by raytracing up to raytrace_range, the marks its beams cross;
+    # readings without a return are dropped
+    obstacle_layer: bool = True
+    obstacle_range: float = 30.0  # [m]
+    raytrace_range: float = 30.0  # [m]
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
@@ -67,6 +74,10 @@ class ExploreParams:
     # any non-INSCRIBED cell is fine): 0.1 m is about the circumscribed radius (0.28 m), so the
     # robot can turn wherever its plan takes it (gaps between table legs are trapped otherwise)
     planner_margin: float = 0.1
+    # [m] the margin when no plan or frontier is reachable with planner_margin: a door of
+    # 0.7 m clear width, mapped a cell narrower each side, leaves the robot's centre 0.25 to
+    # 0.3 m of clearance; navfn (0: any cell below the inscribed cost) plans through it
+    narrow_margin: float = 0.0
     # [m] near the robot, plans may cross the margin (not the inscribed radius): a pocket the
     # map closed around the robot as it mapped obstacles better must not trap it
     escape_radius: float = 0.5
@@ -140,6 +151,11 @@ class ExploreParams:
     # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in
     # the map must not end the run
     no_frontier_time: float = 1.0
+    # a run stopped as done is `incomplete` when the floorplan holds a reachable region never
+    # seen free at least this large [m^2] and this wide [m] (a room behind a given-up frontier,
+    # not the slivers along walls no viewpoint shows): the harness's judgement, not the robot's
+    incomplete_area: float = 2.0
+    incomplete_width: float = 0.8
     progress_period: float = 1.0  # [s] on_progress callback period
     coverage_period: float = 10.0  # [s] the coverage on_progress reports is refreshed this often
 
@@ -147,7 +163,7 @@ class ExploreParams:
         signed = ("escape_vel", "occdist_scale", "pdist_scale", "gdist_scale")
         may_be_zero = (
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
-            "look_fov_margin", "goal_search_extra",
+            "look_fov_margin", "goal_search_extra", "narrow_margin",
         )  # fmt: skip
         bad = []
         for f in fields(self):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -132,6 +133,11 @@ class GlobalPlanner:
             found = attempt()
             if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
                 found = attempt(p.pocket_escape_radius)
+            if found.size == 0 and p.planner_margin > p.narrow_margin:
+                # a door narrower than the margin allows: navfn's own rule (any cell below
+                # the inscribed cost), as move_base would plan through it
+                p = narrow_params(p)
+                found = attempt()
         finally:
             self._target[gy, gx] = False
         if found.size == 0:
@@ -139,6 +145,14 @@ class GlobalPlanner:
         cells = self.search.path_to(found[0])
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
         return np.column_stack((xs, ys))
+
+
+def narrow_params(params: ExploreParams) -> ExploreParams:
+    """The settings with planner_margin lowered to narrow_margin (the fallback that lets the
+    plans through doors whose clearance is under the margin but above the inscribed radius)."""
+    out = dataclasses.replace(params, planner_margin=params.narrow_margin)
+    object.__setattr__(out, "footprint_half_m", params.footprint_half_m)
+    return out
 
 
 def planner_blocked_cost(params: ExploreParams) -> int:

@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler
 
 SCHEMA_VERSION: Final = 1
 
-Outcome = Literal["completed", "failed"]
+Outcome = Literal["completed", "failed", "incomplete"]
 # completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
 # "slam_diverged" | "slam_failed" (the stop rules of worker.explore.loop, which a test keeps in
 # step with these)

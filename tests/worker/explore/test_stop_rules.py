@@ -63,10 +63,13 @@ def test_rule_takes_a_snapshot_every_period_and_fires_on_a_small_change():
     assert rule.last_mse == 0.0
 
 
-def test_exploration_ends_completed_when_the_rule_fires():
-    # a threshold no pair of snapshots can miss: the run ends at the second snapshot
+def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unseen():
+    # a threshold no pair of snapshots can miss: the run ends at the second snapshot, 6 s
+    # in, with the 7.8 m corridor (1.2 m wide, > 2 m^2) never seen: a done-rule that fired
+    # early is incomplete, not completed
     result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_mse=1e9)
-    assert result.outcome == "completed" and result.reason == "map_unchanged"
+    assert result.outcome == "incomplete" and result.reason == "map_unchanged"
+    assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
     assert "MSE" in result.stop_detail
 

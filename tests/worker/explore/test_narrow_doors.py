@@ -1,0 +1,70 @@
+"""Doors under the planner's margin but wider than the robot: navfn's rule as a fallback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worker.explore.costmap import GlobalCostmap
+from worker.explore.frontiers import FrontierSearch
+from worker.explore.params import ExploreParams
+from worker.explore.planner import GlobalPlanner, narrow_params, planner_blocked_cost
+
+RES = 0.05
+
+
+def _door(cells: int) -> np.ndarray:
+    """(60, 100) SLAM probabilities: a wall at x = 50 with a door of `cells` free cells."""
+    prob = np.full((60, 100), 0.05)
+    prob[:, 50] = 0.9
+    prob[30 - cells // 2 : 30 - cells // 2 + cells, 50] = 0.05
+    return prob
+
+
+def _costmap(prob: np.ndarray, p: ExploreParams) -> GlobalCostmap:
+    cm = GlobalCostmap(p)
+    cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
+    return cm
+
+
+def test_a_0_7_m_door_mapped_a_cell_narrower_each_side_is_planned_through():
+    # 0.7 m in the floorplan, 0.5 m (10 cells) in the map: the door's middle cells are 5 and
+    # 6 cells (0.25, 0.30 m) from the jambs' centres; one of them at 0.25 m, under the 0.2 m
+    # inscribed radius plus the 0.1 m margin, but over the inscribed radius alone
+    p = ExploreParams()
+    path = GlobalPlanner(p).plan(_costmap(_door(10), p), (0.5, 0.5), (4.5, 0.5))
+    assert path is not None
+    crossing = path[np.argmin(np.abs(path[:, 0] - 2.525))]
+    assert 25 * RES < crossing[1] < 35 * RES
+    # without the fallback (narrow margin = the margin) there is no plan
+    strict = ExploreParams(narrow_margin=p.planner_margin)
+    assert GlobalPlanner(strict).plan(_costmap(_door(10), strict), (0.5, 0.5), (4.5, 0.5)) is None
+
+
+def test_the_fallback_is_navfn_and_still_refuses_a_door_narrower_than_the_robot():
+    p = ExploreParams()
+    from worker.explore.costmap_kernels import INSCRIBED
+
+    assert planner_blocked_cost(narrow_params(p)) == INSCRIBED
+    assert narrow_params(p).footprint_half_m == p.footprint_half_m
+    # 0.35 m mapped (7 cells): the middle cell is 0.2 m from a jamb, inside the inscribed radius
+    assert GlobalPlanner(p).plan(_costmap(_door(7), p), (0.5, 0.5), (4.5, 0.5)) is None
+
+
+@pytest.mark.parametrize(
+    ("cells", "narrow_margin", "expected"), [(10, 0.0, True), (10, 0.1, False), (7, 0.0, False)]
+)
+def test_a_frontier_behind_a_narrow_door_is_a_goal(cells, narrow_margin, expected):
+    prob = _door(cells)
+    # the far room known up to x = 4 m: every goal (within 0.6 m of the frontier) lies past
+    # the wall, so the goal search must get through the door
+    prob[:, 80:] = np.nan
+    p = ExploreParams(narrow_margin=narrow_margin)
+    cm = _costmap(prob, p)
+    fs = FrontierSearch(p)
+    fs.update(cm, None)
+    goal = fs.choose(cm, (0.5, 1.5), [])
+    if expected:
+        assert goal is not None and goal.goal_xy[0] > 3.3
+    else:
+        assert goal is None
