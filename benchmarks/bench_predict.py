@@ -56,7 +56,7 @@ def scatter(cvs: list[tuple[CvResult, str]], path: Path) -> None:
     for ax, (cv, unit) in zip(np.atleast_1d(axes), cvs, strict=True):
         m, p = cv.measured, cv.predicted["trees"]
         furn = np.array(["furniture" in w for w in cv.worlds])
-        err = np.vstack([p - cv.low, cv.high - p])
+        err = np.maximum(np.vstack([p - cv.low, cv.high - p]), 0.0)  # median may cross a bound
         for mask, label, marker in ((~furn, "no furniture", "o"), (furn, "furniture", "s")):
             ax.errorbar(m[mask], p[mask], yerr=err[:, mask], fmt=marker, ms=5, alpha=0.8,
                         elinewidth=0.6, capsize=2, label=f"{label} (trees, 80 %)")  # fmt: skip

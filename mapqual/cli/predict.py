@@ -4,6 +4,7 @@ predicted from a floorplan alone, and the model that does it trained on batch ta
 from __future__ import annotations
 
 import json
+import math
 import shlex
 import sys
 from pathlib import Path
@@ -108,5 +109,5 @@ def _predict(path: Path, slam, model_path, resolution, as_json, allow_outside) -
         value = p.features[name]
         word = "raises" if contrib > 0 else "lowers"
         print(f"{'driver':>22}: {name} = {value:.4g} {unit}".rstrip()
-              + f"  ({word} the error x{2.718281828 ** abs(contrib):.2f})")  # fmt: skip
+              + f"  ({word} the error by a factor {math.exp(abs(contrib)):.2f})")  # fmt: skip
     print(f"{'trained on':>22}: {p.trained_on}")

@@ -67,15 +67,15 @@ def _fold(ds: Dataset, y: np.ndarray, train: np.ndarray, test: np.ndarray, p: Tr
     quant = fit_quantiles(X[train], ylog[train], p)["quantiles"]
     area_col = ds.names.index("free_area_m2")
     area = fit_linear(X[train][:, [area_col]], ylog[train], TrainParams(ridge_alphas=(1e-6,)))
+    # the three quantile models sorted per world, as `predict` does (they may cross)
+    q = np.sort([np.exp(predict_gbr(quant[k], X[test])) for k in ("0.1", "0.5", "0.9")], axis=0)
     out = {
-        "trees": np.exp(predict_gbr(quant["0.5"], X[test])),
+        "trees": q[1],
         "linear": np.exp([linear_predict(lin, x)[0] for x in X[test]]),
         "mean": np.full(test.sum(), y[train].mean()),
         "free_area": np.exp([linear_predict(area, x)[0] for x in X[test][:, [area_col]]]),
     }
-    low = np.exp(predict_gbr(quant["0.1"], X[test]))
-    high = np.exp(predict_gbr(quant["0.9"], X[test]))
-    return out, np.minimum(low, high), np.maximum(low, high)
+    return out, q[0], q[2]
 
 
 def leave_one_building_out(
