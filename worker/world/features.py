@@ -122,6 +122,8 @@ def world_features(
         1, round(params.work_res_m / res), math.ceil(max(region.shape) / params.work_cells)
     )
     work, work_res = fk.coarsen(region, factor), res * factor
+    if not work.any():
+        raise InputError(f"{world.name}: free space too narrow to analyse at {work_res:g} m")
     work_clear = ndimage.distance_transform_edt(np.pad(work, 1))[1:-1, 1:-1] * work_res
     labels, n, rooms_from = _room_labels(work, work_clear, work_res, rooms, factor, params)
     graph = fk.medial_graph(work, work_res)
