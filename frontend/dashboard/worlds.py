@@ -35,7 +35,24 @@ FACT_LABELS = {
 }
 
 
+def _predictions(request, session, worlds) -> dict[int, dict]:
+    """Per ready world: the bundled model's rbpf prediction and measured errors, or
+    {"error": why} (a plan with no enclosed free space, say)."""
+    out: dict[int, dict] = {}
+    for w in worlds:
+        if w.status != WorldStatus.READY:
+            continue
+        try:
+            row = session.get(World, w.id)
+            out[w.id] = worlds_api.world_prediction_of(request.app, session, row, "rbpf")
+        except InputError as exc:
+            out[w.id] = {"error": str(exc)}
+    return out
+
+
 def _worlds_page(request, session, user, error=None, notice=None, status_code=200):
+    from worker.world.features import FEATURE_DOCS
+
     worlds = user_worlds(session, user)
     # reload until every analysis is done; not an error page, which answers a POST (a reload
     # would send the form again)
@@ -43,6 +60,7 @@ def _worlds_page(request, session, user, error=None, notice=None, status_code=20
     return render(
         request, "worlds.html", status_code, user=user, worlds=worlds,
         error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
+        predictions=_predictions(request, session, worlds), feature_docs=FEATURE_DOCS,
     )  # fmt: skip
 
 

@@ -24,6 +24,7 @@ app = typer.Typer(
 from mapqual.cli import batch as _batch  # noqa: E402,F401
 from mapqual.cli import evaluate as _evaluate  # noqa: E402,F401
 from mapqual.cli import export as _export  # noqa: E402,F401
+from mapqual.cli import predict as _predict  # noqa: E402,F401
 from mapqual.cli import problem as _problem  # noqa: E402,F401
 from mapqual.cli import run as _run  # noqa: E402,F401
 from mapqual.cli import runs as _runs  # noqa: E402,F401

@@ -69,8 +69,9 @@ def info(
         allow_outside=allow_outside,
     )
     summary = world_summary(w)
+    features, why = _features(w, segmentation, allow_outside)
     if as_json:
-        print(json.dumps(summary))
+        print(json.dumps({**summary, "features": features, "features_error": why}))
         return
     f = w.facts
     rooms = "-" if f.n_rooms is None else str(f.n_rooms)
@@ -101,6 +102,30 @@ def info(
         print(f"{key:>13}: {value}")
     for warning in w.warnings:
         print(f"{'warning':>13}: {warning}")
+    _print_features(features, why)
+
+
+def _features(w, segmentation: Path | None, allow_outside: bool) -> tuple[dict | None, str | None]:
+    """(the floorplan features as a dict, None) or (None, why there are none)."""
+    from worker.errors import InputError
+    from worker.world.features import segmentation_rooms, world_features
+
+    try:
+        seg = segmentation_rooms(w, segmentation, allow_outside=allow_outside)
+        return world_features(w, seg).as_dict(), None
+    except InputError as exc:
+        return None, str(exc)
+
+
+def _print_features(features: dict | None, why: str | None) -> None:
+    """The features, one a line: name, value and unit, meaning."""
+    from worker.world.features import FEATURE_DOCS
+
+    print("features:" if features else f"features: none ({why})")
+    for name, value in (features or {}).items():
+        unit, meaning = FEATURE_DOCS[name]
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        print(f"  {name:<27} {text:>10} {unit:<9} {meaning}")
 
 
 @world_app.command("list")

@@ -254,3 +254,57 @@ def world_image(
     buf = io.BytesIO()
     img.save(buf, format="PNG", optimize=True)
     return Response(buf.getvalue(), media_type="image/png")
+
+
+def prediction_cache(app) -> Any:
+    """The app's cache of world predictions (made on first use)."""
+    from worker.predict.service import PredictionCache
+
+    cache = getattr(app.state, "prediction_cache", None)
+    if cache is None:
+        cache = app.state.prediction_cache = PredictionCache()
+    return cache
+
+
+def measured_errors(session: Session, world_id: int, slam: str) -> dict[str, Any]:
+    """The world's measured mean B errors: means over its runs of `slam` that have them."""
+    from backend.db.models import Run
+
+    rows = session.execute(
+        select(Run.b_mean_t, Run.b_mean_r).where(
+            Run.world_id == world_id, Run.slam == slam, Run.b_mean_t.is_not(None)
+        )
+    ).all()
+    if not rows:
+        return {"runs": 0, "b_mean_t": None, "b_mean_r": None}
+    return {
+        "runs": len(rows),
+        "b_mean_t": float(np.mean([r[0] for r in rows])),
+        "b_mean_r": float(np.mean([r[1] for r in rows if r[1] is not None] or [np.nan])),
+    }
+
+
+def world_prediction_of(app, session: Session, w: World, slam: str) -> dict[str, Any]:
+    """Predicted errors of a ready world (cached per content) and its measured ones."""
+    from backend.store_worlds import world_model
+
+    out = prediction_cache(app).get((w.id, w.sha256), lambda: world_model(w), slam)
+    return {**out, "world_id": w.id, "measured": measured_errors(session, w.id, slam)}
+
+
+@router.get("/worlds/{world_id}/prediction")
+def world_prediction(
+    world_id: IdPath,
+    request: Request,
+    session: SessionDep,
+    user: CurrentUser,
+    slam: Annotated[str, Query(max_length=40, description="SLAM algorithm")] = "rbpf",
+) -> dict[str, Any]:
+    """Map quality predicted from the floorplan alone by the bundled model: mean B errors with
+    an 80 % interval, success probability, the features that drove them; and the measured
+    errors of the world's runs, when there are any (400: no such model part, or no enclosed
+    free space)."""
+    w = owned(user, session.get(World, world_id), "world", world_id)
+    if w.status != "ready":
+        raise HTTPException(status.HTTP_409_CONFLICT, not_ready(w))
+    return world_prediction_of(request.app, session, w, slam)

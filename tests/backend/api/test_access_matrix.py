@@ -41,6 +41,7 @@ ROUTES: dict[tuple[str, str], str] = {
     ("GET", "/api/v1/worlds"): LIST,
     ("GET", "/api/v1/worlds/{world_id}"): OWNED,
     ("GET", "/api/v1/worlds/{world_id}/image"): OWNED,
+    ("GET", "/api/v1/worlds/{world_id}/prediction"): OWNED,
     ("POST", "/api/v1/jobs"): CREATE,
     ("GET", "/api/v1/jobs"): LIST,
     ("GET", "/api/v1/jobs/{job_id}"): OWNED,

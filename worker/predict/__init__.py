@@ -1,0 +1,1 @@
+"""Map quality predicted from a floorplan: dataset, models, model file, cross-validation."""
