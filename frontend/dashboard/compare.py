@@ -1,5 +1,6 @@
 """The dashboard's comparison page: success and B errors per world (thesis Tables 6.4, 6.5)
-and their error-bar charts (Figs. 6.8, 6.9), drawn with matplotlib."""
+and their error-bar charts (Figs. 6.8, 6.9), drawn with matplotlib; and the algorithms side by
+side per world with their paired comparison on the same seeds (worker.batch.paired)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ from sqlalchemy import select
 
 from backend.api.deps import Principal, SessionDep
 from backend.api.routes import stats as stats_api
-from backend.db.models import Run
+from backend.db.models import Run, World
 from frontend.dashboard.pages import PageUser, render
+from worker.batch.paired import Sample, paired_diffs
 from worker.report.summary import RunSummary
 from worker.status import RunOutcome, RunStatus
 
@@ -26,7 +28,36 @@ def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLR
     counts = _relation_counts(session, user)
     for row in rows:
         row["relations"] = counts.get(row["world_id"], 0)
-    return render(request, "compare.html", user=user, rows=rows)
+    by_slam, samples = _per_algorithm(session, user)
+    paired = [d.as_row() for d in paired_diffs(samples)]
+    return render(request, "compare.html", user=user, rows=rows, by_slam=by_slam, paired=paired)
+
+
+def _per_algorithm(session, user: Principal) -> tuple[list[dict], list[Sample]]:
+    """Per world and algorithm: runs done, completed, mean of the runs' mean B translational
+    error [m]; and each completed run's score for the paired comparison."""
+    stmt = (
+        select(World.name, Run.slam, Run.seed, Run.outcome, Run.b_mean_t)
+        .join(World, Run.world_id == World.id)
+        .where(Run.status == RunStatus.DONE)
+    )
+    if not user.is_admin:
+        stmt = stmt.where(Run.owner_id == user.id)
+    cells: dict[tuple[str, str], dict] = {}
+    samples: list[Sample] = []
+    for name, slam, seed, outcome, b_t in session.execute(stmt):
+        cell = cells.setdefault((name, slam), {"world": name, "slam": slam, "runs": 0, "b": []})
+        cell["runs"] += 1
+        if outcome == RunOutcome.COMPLETED and b_t is not None:
+            cell["b"].append(b_t)
+            samples.append(Sample(name, slam, seed, b_t))
+    rows = []
+    for key in sorted(cells):
+        c = cells[key]
+        mean = sum(c["b"]) / len(c["b"]) if c["b"] else None
+        rows.append({"world": c["world"], "slam": c["slam"], "runs": c["runs"],
+                     "completed": len(c["b"]), "b_mean_t": mean})  # fmt: skip
+    return rows, samples
 
 
 def _relation_counts(session, user: Principal) -> dict[int, int]:

@@ -12,6 +12,7 @@ from typing import Any
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template
 
+from worker.batch.paired import batch_paired_rows
 from worker.batch.state import now_iso
 from worker.batch.tables import (
     ERROR_COLUMNS,
@@ -130,6 +131,7 @@ def write_html(
         error_columns=ERROR_COLUMNS,
         figures=[_figure(name, path) for name, path in figures.items()],
         runs=[_run_row(r, out) for r in records],
+        paired=batch_paired_rows(records),
     )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
