@@ -25,6 +25,7 @@ import numpy as np
 from scipy import stats
 
 CONFIDENCE = 0.95  # [1] of the intervals
+ALL = "ALL"  # the group of the pooled rows
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,7 @@ class PairedDiff:
     group: str
     a: str
     b: str
-    seeds: tuple[int, ...]
+    seeds: tuple  # the paired seeds (the ALL rows: (group, seed) pairs)
     mean_a: float  # [m] mean over the paired seeds
     mean_b: float  # [m]
     mean_diff: float  # [m] mean of e_A - e_B
@@ -75,11 +76,15 @@ class PairedDiff:
         """A table row (report, dashboard): the fields, n and the verdict."""
         return {
             "group": self.group, "a": self.a, "b": self.b, "n": self.n,
-            "seeds": " ".join(str(s) for s in self.seeds), "mean_a": self.mean_a,
+            "seeds": " ".join(_key(s) for s in self.seeds), "mean_a": self.mean_a,
             "mean_b": self.mean_b, "mean_diff": self.mean_diff, "std_diff": self.std_diff,
             "ci_low": self.ci_low, "ci_high": self.ci_high, "a_lower": self.a_lower,
             "confidence": self.confidence, "verdict": self.verdict,
         }  # fmt: skip
+
+
+def _key(seed) -> str:
+    return f"{seed[0]}:{seed[1]}" if isinstance(seed, tuple) else str(seed)
 
 
 def mean_ci(
@@ -99,8 +104,8 @@ def mean_ci(
     return mean, mean - half, mean + half
 
 
-def compare(a: str, b: str, group: str, by_seed: dict[str, dict[int, float]], confidence: float):
-    """A against B on one group (None when no seed has both)."""
+def compare(a: str, b: str, group: str, by_seed: dict[str, dict], confidence: float):
+    """A against B on one group, over the seed keys both have (None when none)."""
     seeds = tuple(sorted(set(by_seed[a]) & set(by_seed[b])))
     if not seeds:
         return None
@@ -116,7 +121,9 @@ def compare(a: str, b: str, group: str, by_seed: dict[str, dict[int, float]], co
 
 def paired_diffs(samples: Iterable[Sample], confidence: float = CONFIDENCE) -> list[PairedDiff]:
     """Every pair of algorithms (in name order, A before B) on every group, over their
-    common seeds; several scores of one group, algorithm and seed are averaged first."""
+    common seeds; several scores of one group, algorithm and seed are averaged first. When
+    a pair of algorithms meets on more than one group, a last row ALL pairs them over every
+    (group, seed) they share: "A is lower across these worlds", with its interval."""
     acc: dict[str, dict[str, dict[int, list[float]]]] = defaultdict(
         lambda: defaultdict(lambda: defaultdict(list))
     )
@@ -133,7 +140,23 @@ def paired_diffs(samples: Iterable[Sample], confidence: float = CONFIDENCE) -> l
             diff = compare(a, b, group, by_seed, confidence)
             if diff is not None:
                 out.append(diff)
-    return out
+    return out + _pooled(acc, out, confidence)
+
+
+def _pooled(acc, per_group: list[PairedDiff], confidence: float) -> list[PairedDiff]:
+    """The ALL rows: each pair of algorithms over the (group, seed) keys they share."""
+    rows = []
+    for a, b in sorted({(d.a, d.b) for d in per_group}):
+        if sum(d.a == a and d.b == b for d in per_group) < 2:
+            continue
+        by_key = {
+            alg: {(g, seed): float(np.mean(v)) for g in acc for seed, v in acc[g][alg].items()}
+            for alg in (a, b)
+        }
+        diff = compare(a, b, ALL, by_key, confidence)
+        if diff is not None:
+            rows.append(diff)
+    return rows
 
 
 def group_label(world: str, noise: float | None = None) -> str:

@@ -69,6 +69,14 @@ def test_only_common_seeds_are_paired_and_groups_kept_apart():
     assert len(house) == 1 and house[0].n == 1 and house[0].ci_low is None
     assert house[0].verdict == "one pair: no interval"
     assert house[0].mean_diff == pytest.approx(0.2)
+    # pooled over both worlds: (office, 1), (office, 2), (house, 1): -0.2, -0.3, +0.2
+    (pooled,) = [d for d in diffs if d.group == "ALL"]
+    assert pooled.seeds == (("house", 1), ("office", 1), ("office", 2))
+    assert pooled.as_row()["seeds"] == "house:1 office:1 office:2"
+    ref = stats.ttest_rel([0.40, 0.10, 0.20], [0.20, 0.30, 0.50]).confidence_interval(0.95)
+    assert pooled.mean_diff == pytest.approx(-0.1)
+    assert (pooled.ci_low, pooled.ci_high) == (pytest.approx(ref.low), pytest.approx(ref.high))
+    assert diffs[-1] is pooled  # after the per-world rows
 
 
 def test_verdict_names_the_lower_algorithm_when_the_interval_excludes_zero():
