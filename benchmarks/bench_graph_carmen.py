@@ -7,8 +7,9 @@ The problem of each log is `worker.sim.drift.drifting_problem` with its default 
 (3 % scale error per axis, 5 % per-step noise, seeded), exactly as benchmarks/bench_reallogs.py
 makes it, so graph and rbpf solve the same problems as rbpf's real-log benchmark. Both run
 in this process on one core, rbpf with the thesis's 40 particles, graph with its defaults, and
-are scored on the same B relations (bench_reallogs's: at least 500 random ground-truth pairs,
-the relations' seed is the problem's). Each is scored on the trajectory `mapqual slam` writes
+are scored as bench_reallogs scores (`b_errors`: B relations, at least 500 random
+ground-truth pairs, more when the pilot sample of the estimate asks for more; the relations'
+seed is the problem's). Each is scored on the trajectory `mapqual slam` writes
 (run_slam's: graph's final optimised one; rbpf's online estimate); graph's online estimate is
 printed beside it. --out DIR writes each run's trajectory (TUM), the
 graph's loop closures and a PNG of its map with the closures drawn, to look at a bad run.

@@ -76,7 +76,12 @@ def _relation_counts(session, user: Principal) -> dict[int, int]:
 
 @router.get("/compare/{kind}.png")
 def compare_plot(kind: str, session: SessionDep, user: PageUser) -> Response:
-    """Mean B error per world with a 1-std error bar and the min-max range."""
+    """Mean B error per world with a 1-std error bar and the min-max range; or (paired) each
+    pair of algorithms' mean per-seed difference with its 95 % confidence interval."""
+    if kind == "paired":
+        buf = io.BytesIO()
+        paired_chart(buf, [d.as_row() for d in paired_diffs(_per_algorithm(session, user)[1])])
+        return Response(buf.getvalue(), media_type="image/png")
     if kind not in ("translation", "rotation"):
         raise HTTPException(404, f"no chart {kind!r}")
     rows = [r for r in stats_api.stats(session, user, "world") if r[kind]["mean"] is not None]
@@ -108,6 +113,34 @@ def error_bar_chart(out, rows: list[dict], kind: str) -> None:
     ax.set_ylim(bottom=0.0)
     if not rows:
         ax.text(0.5, 0.5, "no completed runs yet", ha="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(out, format="png")
+    plt.close(fig)
+
+
+def paired_chart(out, rows: list[dict]) -> None:
+    """Per world and pair of algorithms: the mean per-seed difference of mean B error (A - B)
+    with its confidence interval as the error bar (a dot alone: one pair, no interval)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 1.6 + 0.45 * max(len(rows), 1)), dpi=100)
+    y = list(range(len(rows)))
+    for k, r in enumerate(rows):
+        lo = r["mean_diff"] - r["ci_low"] if r["ci_low"] is not None else 0.0
+        hi = r["ci_high"] - r["mean_diff"] if r["ci_high"] is not None else 0.0
+        ax.errorbar([r["mean_diff"]], [k], xerr=[[lo], [hi]], fmt="o", color="#1f5fbf", capsize=4)
+    ax.axvline(0.0, color="#999999", lw=1)
+    ax.set_yticks(y, [f"{r['group']}: {r['a']} − {r['b']} (n={r['n']})" for r in rows], fontsize=8)
+    ax.set_xlabel("A − B, mean B translational error [m] (left of 0: A lower)", fontsize=8)
+    ax.invert_yaxis()
+    ax.set_title("paired per-seed difference, 95 % confidence interval", fontsize=9)
+    ax.grid(axis="x", alpha=0.3)
+    if not rows:
+        ax.text(0.5, 0.5, "no two algorithms on a common seed yet", ha="center",
+                transform=ax.transAxes)  # fmt: skip
     fig.tight_layout()
     fig.savefig(out, format="png")
     plt.close(fig)

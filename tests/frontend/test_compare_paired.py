@@ -88,3 +88,9 @@ def test_compare_page_shows_algorithms_side_by_side_with_a_paired_interval(clien
     assert paired[4:7] == ["0.113", "0.243", f"{np.mean(g - b):+.3f}"]
     assert paired[7] == f"[{ci.low:+.3f}, {ci.high:+.3f}]"
     assert ci.high < 0 and paired[8:] == ["3 of 3", "graph lower"]
+
+
+def test_paired_chart_is_a_png(client):
+    r = client.get("/compare/paired.png")
+    assert r.status_code == 200 and r.content[:4] == b"\x89PNG"
+    assert client.get("/compare/nonsense.png").status_code == 404
