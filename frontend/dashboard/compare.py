@@ -1,5 +1,6 @@
 """The dashboard's comparison page: success and B errors per world (thesis Tables 6.4, 6.5)
-and their error-bar charts (Figs. 6.8, 6.9), drawn with matplotlib."""
+and their error-bar charts (Figs. 6.8, 6.9), drawn with matplotlib; and the algorithms side by
+side per world with their paired comparison on the same seeds (worker.batch.paired)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ from sqlalchemy import select
 
 from backend.api.deps import Principal, SessionDep
 from backend.api.routes import stats as stats_api
-from backend.db.models import Run
+from backend.db.models import Run, World
 from frontend.dashboard.pages import PageUser, render
+from worker.batch.paired import Sample, paired_diffs
 from worker.report.summary import RunSummary
 from worker.status import RunOutcome, RunStatus
 
@@ -26,8 +28,38 @@ def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLR
     counts = _relation_counts(session, user)
     for row in rows:
         row["relations"] = counts.get(row["world_id"], 0)
-    paired = _estimate_rows(session, user)
-    return render(request, "compare.html", user=user, rows=rows, paired=paired)
+    by_slam, samples = _per_algorithm(session, user)
+    paired = [d.as_row() for d in paired_diffs(samples)]
+    estimates = _estimate_rows(session, user)
+    return render(request, "compare.html", user=user, rows=rows, by_slam=by_slam, paired=paired,
+                  estimates=estimates)  # fmt: skip
+
+
+def _per_algorithm(session, user: Principal) -> tuple[list[dict], list[Sample]]:
+    """Per world and algorithm: runs done, completed, mean of the runs' mean B translational
+    error [m]; and each completed run's score for the paired comparison."""
+    stmt = (
+        select(World.name, Run.slam, Run.seed, Run.outcome, Run.b_mean_t)
+        .join(World, Run.world_id == World.id)
+        .where(Run.status == RunStatus.DONE)
+    )
+    if not user.is_admin:
+        stmt = stmt.where(Run.owner_id == user.id)
+    cells: dict[tuple[str, str], dict] = {}
+    samples: list[Sample] = []
+    for name, slam, seed, outcome, b_t in session.execute(stmt):
+        cell = cells.setdefault((name, slam), {"world": name, "slam": slam, "runs": 0, "b": []})
+        cell["runs"] += 1
+        if outcome == RunOutcome.COMPLETED and b_t is not None:
+            cell["b"].append(b_t)
+            samples.append(Sample(name, slam, seed, b_t))
+    rows = []
+    for key in sorted(cells):
+        c = cells[key]
+        mean = sum(c["b"]) / len(c["b"]) if c["b"] else None
+        rows.append({"world": c["world"], "slam": c["slam"], "runs": c["runs"],
+                     "completed": len(c["b"]), "b_mean_t": mean})  # fmt: skip
+    return rows, samples
 
 
 def _estimate_rows(session, user: Principal) -> list[dict]:
@@ -78,7 +110,12 @@ def _relation_counts(session, user: Principal) -> dict[int, int]:
 
 @router.get("/compare/{kind}.png")
 def compare_plot(kind: str, session: SessionDep, user: PageUser) -> Response:
-    """Mean B error per world with a 1-std error bar and the min-max range."""
+    """Mean B error per world with a 1-std error bar and the min-max range; or (paired) each
+    pair of algorithms' mean per-seed difference with its 95 % confidence interval."""
+    if kind == "paired":
+        buf = io.BytesIO()
+        paired_chart(buf, [d.as_row() for d in paired_diffs(_per_algorithm(session, user)[1])])
+        return Response(buf.getvalue(), media_type="image/png")
     if kind not in ("translation", "rotation"):
         raise HTTPException(404, f"no chart {kind!r}")
     rows = [r for r in stats_api.stats(session, user, "world") if r[kind]["mean"] is not None]
@@ -110,6 +147,34 @@ def error_bar_chart(out, rows: list[dict], kind: str) -> None:
     ax.set_ylim(bottom=0.0)
     if not rows:
         ax.text(0.5, 0.5, "no completed runs yet", ha="center", transform=ax.transAxes)
+    fig.tight_layout()
+    fig.savefig(out, format="png")
+    plt.close(fig)
+
+
+def paired_chart(out, rows: list[dict]) -> None:
+    """Per world and pair of algorithms: the mean per-seed difference of mean B error (A - B)
+    with its confidence interval as the error bar (a dot alone: one pair, no interval)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 1.6 + 0.45 * max(len(rows), 1)), dpi=100)
+    y = list(range(len(rows)))
+    for k, r in enumerate(rows):
+        lo = r["mean_diff"] - r["ci_low"] if r["ci_low"] is not None else 0.0
+        hi = r["ci_high"] - r["mean_diff"] if r["ci_high"] is not None else 0.0
+        ax.errorbar([r["mean_diff"]], [k], xerr=[[lo], [hi]], fmt="o", color="#1f5fbf", capsize=4)
+    ax.axvline(0.0, color="#999999", lw=1)
+    ax.set_yticks(y, [f"{r['group']}: {r['a']} − {r['b']} (n={r['n']})" for r in rows], fontsize=8)
+    ax.set_xlabel("A − B, mean B translational error [m] (left of 0: A lower)", fontsize=8)
+    ax.invert_yaxis()
+    ax.set_title("paired per-seed difference, 95 % confidence interval", fontsize=9)
+    ax.grid(axis="x", alpha=0.3)
+    if not rows:
+        ax.text(0.5, 0.5, "no two algorithms on a common seed yet", ha="center",
+                transform=ax.transAxes)  # fmt: skip
     fig.tight_layout()
     fig.savefig(out, format="png")
     plt.close(fig)

@@ -12,6 +12,7 @@ from typing import Any
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template
 
+from worker.batch.paired import batch_paired_rows
 from worker.batch.state import now_iso
 from worker.batch.tables import (
     ERROR_COLUMNS,
@@ -142,6 +143,7 @@ def write_html(
         runs=[_run_row(r, out) for r in records],
         thesis=side_by_side(records),
         findings=findings(records),
+        paired=batch_paired_rows(records),
     )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")

@@ -19,7 +19,9 @@ from worker.slam.params import SlamParams, with_defaults_for
 class SlamRunResult:
     """What a SLAM run over a log gives.
 
-    trajectory: the estimate (map frame) at every laser timestamp, (N,) t and (N, 3) poses.
+    trajectory: the estimate (map frame) at every laser timestamp, (N,) t and (N, 3) poses:
+        the online one, or an algorithm's final one when it has one (graph SLAM's
+        `final_trajectory`, after every loop closure).
     grid: the final map. updates: filter updates; wall_s [s]: processing time;
     log_duration_s [s]: the log's span of simulated (or recorded) time.
     """
@@ -70,6 +72,9 @@ def run_slam(
             est[k] = slam.pose_estimate()
             if on_progress is not None and (k % every == 0 or k == n - 1):
                 on_progress(k + 1, n)
+        final = getattr(slam, "final_trajectory", None)
+        if final is not None:  # graph SLAM: every scan as the final, optimised graph has it
+            est = final()
         grid = slam.occupancy()
     wall = time.perf_counter() - wall0
     return SlamRunResult(

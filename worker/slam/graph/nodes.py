@@ -71,18 +71,21 @@ class EdgeList:
         self.z: list[np.ndarray] = []
         self.sigma: list[tuple[float, float, float]] = []
         self.robust: list[bool] = []
+        self.frame: list[float] = []
 
-    def add(self, i: int, j: int, z: np.ndarray, sigma, robust: bool) -> None:
-        """z: (3,) pose of j in i's frame; sigma: (3,) [m, m, rad]."""
+    def add(self, i: int, j: int, z: np.ndarray, sigma, robust: bool, frame: float = 0.0) -> None:
+        """z: (3,) pose of j in i's frame; sigma: (3,) [m, m, rad] along axes turned by
+        frame [rad] from z's frame."""
         self.i.append(i)
         self.j.append(j)
         self.z.append(np.asarray(z, dtype=np.float64))
         self.sigma.append(tuple(sigma))
         self.robust.append(robust)
+        self.frame.append(float(frame))
 
     def pop(self) -> None:
         """Drop the last edge."""
-        for lst in (self.i, self.j, self.z, self.sigma, self.robust):
+        for lst in (self.i, self.j, self.z, self.sigma, self.robust, self.frame):
             lst.pop()
 
     def __len__(self) -> int:
@@ -96,6 +99,7 @@ class EdgeList:
             np.array(self.z).reshape(-1, 3),
             np.array(self.sigma, dtype=np.float64).reshape(-1, 3),
             np.array(self.robust, dtype=bool),
+            np.array(self.frame, dtype=np.float64),
         )
 
 

@@ -21,6 +21,8 @@ class Edges:
 
     i, j: (E,) int64; z: (E, 3) [x, y, theta]; sigma: (E, 3) [m, m, rad] standard deviations
     (diagonal information 1 / sigma^2); robust: (E,) bool, Huber kernel on these.
+    frame: (E,) [rad] or None (all zero): sigma's x and y are along axes turned by this from
+    z's frame (a corridor closure: one sigma along the corridor, one across it).
     """
 
     i: np.ndarray
@@ -28,6 +30,7 @@ class Edges:
     z: np.ndarray
     sigma: np.ndarray
     robust: np.ndarray
+    frame: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,8 +70,22 @@ def edge_errors(poses: np.ndarray, e: Edges) -> tuple[np.ndarray, np.ndarray, np
     a[:, 2, 2] = -1.0
     b[:, :2, :2] = m
     b[:, 2, 2] = 1.0
+    if e.frame is not None and np.any(e.frame != 0.0):
+        _turn_xy(e.frame, err, a, b)
     w = 1.0 / e.sigma
     return err * w, a * w[:, :, None], b * w[:, :, None]
+
+
+def _turn_xy(frame: np.ndarray, err: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """Express the xy rows of the errors (E, 3) and Jacobians (E, 3, 3) in axes turned by
+    frame (E,) [rad], in place."""
+    c, s = np.cos(frame), np.sin(frame)
+    for arr in (err, a, b):
+        x, y = arr[:, 0].copy(), arr[:, 1].copy()
+        cc = c if arr.ndim == 2 else c[:, None]
+        ss = s if arr.ndim == 2 else s[:, None]
+        arr[:, 0] = cc * x + ss * y
+        arr[:, 1] = -ss * x + cc * y
 
 
 def huber_weights(err_w: np.ndarray, robust: np.ndarray, delta: float) -> np.ndarray:

@@ -60,6 +60,12 @@ class GraphSlamParams:
     # or the place is ambiguous (a corridor, a twin room) and no closure is made
     loop_ambiguity_radius: float = 0.5  # [m]
     loop_ambiguity_ratio: float = 0.9
+    # an ambiguous match whose rival is the same rotation shifted (a corridor: the scan
+    # slides along it) still fixes the rotation and the offset across the shift: it is
+    # added with loop_corridor_sigma along the shift instead of being dropped (what Karto's
+    # match covariance does); rivals turned by more than loop_corridor_max_rotation are not
+    loop_corridor_sigma: float = 1.0  # [m] along the shift (about free); 0 drops them all
+    loop_corridor_max_rotation: float = 0.02  # [rad]
     loop_attempt_every: int = 3  # [nodes] a loop search every this many nodes (Cartographer
     # samples 0.3 of the nodes for constraints: sampling_ratio 0.3)
     # a closure that moves the current node less than this is added without optimising at
@@ -104,7 +110,8 @@ class GraphSlamParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"graph parameter {name} must be a positive number, got {value}")
-        for name in ("loop_gate_xy_per_m", "loop_gate_theta_per_m"):
+        for name in ("loop_gate_xy_per_m", "loop_gate_theta_per_m", "loop_corridor_sigma",
+                     "loop_corridor_max_rotation"):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise InputError(f"graph parameter {name} must be >= 0, got {value}")

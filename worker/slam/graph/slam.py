@@ -52,6 +52,7 @@ class GraphSlam:
         self.closures: list[LoopClosure] = []
         self.rejected_closures = 0  # matched, then undone by the chi^2 check
         self.ambiguous_closures = 0  # matched, but as well somewhere else
+        self.corridor_closures = 0  # ambiguous along one shift only: added, free along it
         self.match_failures = 0  # nodes tied by odometry alone
         self.optimisations = 0
         self.updates = 0
@@ -60,6 +61,9 @@ class GraphSlam:
         self._pose_odom = np.zeros(3)
         self._T_map_odom = np.zeros(3)
         self._grid: OccupancyGrid | None = None
+        self._scan_node: list[int] = []  # per scan processed: the latest node at that scan
+        self._scan_odom: list[np.ndarray] = []  # per scan processed: its odometry pose
+        self._scan_path: list[float] = []  # per scan processed: [m] odometry path so far
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -67,9 +71,13 @@ class GraphSlam:
             self._path_m += math.hypot(pose[0] - self._odom_prev[0], pose[1] - self._odom_prev[1])
         self._odom_prev = pose
         self._pose_odom = pose
+        self._scan_odom.append(pose)
+        self._scan_path.append(self._path_m)
         if not self._gate.step(t, pose):
+            self._scan_node.append(self.nodes.n - 1)
             return False
         k = self._add_node(t, pose, ranges)
+        self._scan_node.append(k)
         g = self.graph_params
         if g.do_loop_closing and k % g.loop_attempt_every == 0:
             self._try_loop_closure(k)
@@ -145,12 +153,17 @@ class GraphSlam:
             return
         excl = (float(match.pose[0]), float(match.pose[1]), g.loop_ambiguity_radius)
         other = chain_map.match(nodes.points[k], cur, lin, ang, min_score, exclude=excl)
-        if other.score >= g.loop_ambiguity_ratio * match.score:
-            self.ambiguous_closures += 1
-            return
-        z = relative3(nodes.poses[cand.node], match.pose)
         sigma = (g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_theta)
-        self.edges.add(cand.node, k, z, sigma, robust=True)
+        frame = 0.0
+        if other.score >= g.loop_ambiguity_ratio * match.score:
+            frame = _shift_frame(match.pose, other.pose, g.loop_corridor_max_rotation)
+            if frame is None or g.loop_corridor_sigma <= 0:
+                self.ambiguous_closures += 1
+                return
+            self.corridor_closures += 1
+            sigma = (g.loop_corridor_sigma, g.loop_sigma_xy, g.loop_sigma_theta)
+        z = relative3(nodes.poses[cand.node], match.pose)
+        self.edges.add(cand.node, k, z, sigma, robust=True, frame=frame)
         moved = relative3(cur, match.pose)
         small = (
             math.hypot(moved[0], moved[1]) < g.loop_optimize_min_correction
@@ -182,6 +195,33 @@ class GraphSlam:
         nodes.poses[: nodes.n] = poses
         return True
 
+    def final_trajectory(self) -> np.ndarray:
+        """(N, 3) the pose at every scan processed so far as the final graph has it (offline
+        SLAM's answer; pose_estimate gave the online one, before later closures). A node's
+        scan is at its optimised pose; a scan between nodes a and b at the two poses the
+        odometry gives from each, (P_a (+) o_a^-1 o_s) and (P_b (+) o_b^-1 o_s), blended by
+        the share of the odometry path from a to b travelled at the scan; scans after the
+        last node from it alone."""
+        odom = np.array(self._scan_odom).reshape(-1, 3)
+        node = np.array(self._scan_node, dtype=np.int64)
+        out = odom.copy()  # before the first node (none: the first scan makes one)
+        has = node >= 0
+        if not has.any():
+            return out
+        nodes, a = self.nodes, node[has]
+        fwd = _compose_many(nodes.poses[a], _relative_many(nodes.odom[a], odom[has]))
+        b = np.minimum(a + 1, nodes.n - 1)
+        bwd = _compose_many(nodes.poses[b], _relative_many(nodes.odom[b], odom[has]))
+        span = nodes.path_m[b] - nodes.path_m[a]
+        along = np.array(self._scan_path)[has] - nodes.path_m[a]
+        w = np.clip(along / np.where(span > 0, span, np.inf), 0.0, 1.0)
+        d = bwd - fwd
+        d[:, 2] = (d[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
+        blend = fwd + w[:, None] * d
+        blend[:, 2] = (blend[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
+        out[has] = blend
+        return out
+
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)
 
@@ -205,6 +245,32 @@ class GraphSlam:
 def _inverse3(a: np.ndarray) -> np.ndarray:
     c, s = math.cos(a[2]), math.sin(a[2])
     return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+def _shift_frame(pose: np.ndarray, rival: np.ndarray, max_rotation: float) -> float | None:
+    """[rad] the direction from a match's pose to its rival's, in the match's frame (the
+    axis a corridor leaves free), or None when the rival is turned by more than
+    max_rotation [rad]: not a shift."""
+    if abs(math.remainder(float(rival[2] - pose[2]), 2.0 * math.pi)) > max_rotation:
+        return None
+    return math.atan2(rival[1] - pose[1], rival[0] - pose[0]) - float(pose[2])
+
+
+def _relative_many(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, 3) inv(a_k) (+) b_k."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    dth = (b[:, 2] - a[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])
+
+
+def _compose_many(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N, 3) a_k (+) d_k."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    th = (a[:, 2] + d[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
+    return np.column_stack(
+        [a[:, 0] + c * d[:, 0] - s * d[:, 1], a[:, 1] + s * d[:, 0] + c * d[:, 1], th]
+    )
 
 
 def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):

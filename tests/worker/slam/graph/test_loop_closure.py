@@ -121,3 +121,22 @@ def test_a_wrong_closure_with_the_checks_off_puts_the_robot_in_the_other_room(tw
     assert worst > 1.0
     err_end = np.hypot(*(est[-1, :2] - twin_log.pose_gt[-1, :2]))
     assert abs(err_end - 3.3) < 0.5
+
+
+def test_final_trajectory_carries_the_closures_back_to_the_scans_before_them(ring_log):
+    # offline SLAM's answer: each scan at its node's optimised pose (plus the odometry since
+    # it); the scans just before the first closure were estimated online with the drift the
+    # closure then removed, the final trajectory has them where the closed loop puts them
+    slam, est = _run(ring_log, SlamParams())
+    final = slam.final_trajectory()
+    assert final.shape == est.shape
+    k_close = int(np.searchsorted(ring_log.t, slam.closures[0].t))
+    # the node scans are exactly the final node poses
+    node_scans = np.searchsorted(ring_log.t, slam.nodes.t[: slam.nodes.n])
+    assert np.allclose(final[node_scans], slam.node_poses(), atol=1e-12)
+    window = slice(max(0, k_close - 20), k_close)
+    err_online = np.hypot(*(est[window, :2] - ring_log.pose_gt[window, :2]).T).mean()
+    err_final = np.hypot(*(final[window, :2] - ring_log.pose_gt[window, :2]).T).mean()
+    assert err_online > 0.2 and err_final * 3 <= err_online
+    # after the last scan the two agree: the online estimate is the latest node's pose
+    assert np.allclose(final[-1], est[-1], atol=1e-9)

@@ -64,3 +64,24 @@ def test_jacobians_match_finite_differences():
             p0[node, d] -= eps
             num = (edge_errors(p1, e)[0][0] - edge_errors(p0, e)[0][0]) / (2 * eps)
             assert np.allclose(num, jac[:, d], atol=1e-5)
+
+
+def test_a_turned_edge_frame_leaves_its_free_axis_to_the_other_edges():
+    # edge A: z = (1, 0.5, 0), sigma 0.1 on each axis. Edge B (a corridor closure):
+    # z = (2, 0, 0) with sigma 10 m along one axis and 0.01 m across it.
+    # frame 0: B is free along x and holds y: x1 = 1 (A alone), y1 = the weighted mean
+    # (100 * 0.5 + 10^4 * 0) / (100 + 10^4 + 0.01) of A's and B's y;
+    # frame pi / 2: B's free axis is y: x1 = (100 * 1 + 10^4 * 2) / (100 + 10^4 + 0.01),
+    # y1 = 0.5 (A alone, up to B's 0.01 weight)
+    def solve(frame: float) -> np.ndarray:
+        a = _edges([(0, 1, (1.0, 0.5, 0), (0.1, 0.1, 0.1)), (0, 1, (2.0, 0, 0), (10, 0.01, 0.1))])
+        e = Edges(a.i, a.j, a.z, a.sigma, a.robust, np.array([0.0, frame]))
+        return optimize(np.zeros((2, 3)), e, 1.0, 30, 1e-15).poses[1]
+
+    w_a, w_b, w_free = 1 / 0.1**2, 1 / 0.01**2, 1 / 10.0**2
+    x, y, _ = solve(0.0)
+    assert abs(x - (w_a * 1.0 + w_free * 2.0) / (w_a + w_free)) < 1e-6
+    assert abs(y - w_a * 0.5 / (w_a + w_b)) < 1e-6
+    x, y, _ = solve(np.pi / 2)
+    assert abs(x - (w_a * 1.0 + w_b * 2.0) / (w_a + w_b)) < 1e-6
+    assert abs(y - w_a * 0.5 / (w_a + w_free)) < 1e-6
