@@ -166,7 +166,8 @@ def run_one(
     with _open_log(sim_log) as stream, closed_after(slam):
         writer = None
         if stream is not None:
-            header = f"mapqual run: world {world.name}, seed {seed}, {params.algorithm}"
+            name = registry.label(params.algorithm, params.slam)
+            header = f"mapqual run: world {world.name}, seed {seed}, {name}"
             writer = CarmenWriter(stream, params.sim.laser, comment=header)
         sim = _TimedSimulator(Simulator(world, params.sim, rng_sim), writer)
         exploration = explore(
@@ -284,7 +285,7 @@ def _summary(world, seed, params, ex, errors, ate, wall_explore, wall, stage_wal
         "coverage": ex.coverage,
         "world": world.name,
         "seed": seed,
-        "algorithm": params.algorithm,
+        "algorithm": registry.label(params.algorithm, params.slam),
         "relations": {k: e.summary() for k, e in errors.items()},
         "ate": None if ate is None else ate.summary(),
         "path_length_m": ex.path_length_m,

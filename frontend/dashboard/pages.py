@@ -164,7 +164,7 @@ def user_worlds(session, user: Principal) -> list[WorldOut]:
     return worlds_api.list_worlds(session, user)
 
 
-def _jobs_page(request, session, user, error: str | None = None, status_code: int = 200):
+def _jobs_page(request, session, user, settings, error: str | None = None, status_code: int = 200):
     page = jobs_api.list_jobs(session, user, None, None, 100, 0)
     worlds = user_worlds(session, user)
     names = {w.id: w.name for w in worlds}
@@ -172,13 +172,16 @@ def _jobs_page(request, session, user, error: str | None = None, status_code: in
     return render(
         request, "jobs.html", status_code, user=user, jobs=page.items, total=page.total,
         worlds=worlds, world_names=names, refresh=refresh, error=error,
+        external_programs=sorted(settings.external_slam),  # the form's external:NAME choices
     )  # fmt: skip
 
 
 @router.get("/", response_class=HTMLResponse)
-def jobs_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
+def jobs_page(
+    request: Request, session: SessionDep, user: PageUser, settings: SettingsDep
+) -> HTMLResponse:
     """Jobs with status and progress bars (refreshing while any runs); a submit form."""
-    return _jobs_page(request, session, user)
+    return _jobs_page(request, session, user, settings)
 
 
 @router.post("/jobs", response_class=HTMLResponse)
@@ -196,16 +199,20 @@ def submit_job_form(
     params: dict[str, Any] = {}
     if time_limit is not None:
         params["explore"] = {"time_limit": time_limit}
+    slam, program = registry.parse_label(slam)  # external:NAME: an administrator's program
+    if program is not None:
+        params["slam"] = {"external": {"name": program}}
     try:
         body = JobIn(world_id=world_id, runs=runs, slam=slam, params=params)
         job = jobs_api.submit(session, user, settings, body, None)
     except ValidationError as exc:
         msg = "; ".join(e["msg"] for e in exc.errors())
-        return _jobs_page(request, session, user, f"invalid job: {msg}", 400)
+        return _jobs_page(request, session, user, settings, f"invalid job: {msg}", 400)
     except (HTTPException, InputError) as exc:
         session.rollback()
         code = 429 if getattr(exc, "status_code", 400) == 429 else 400  # 429: over a quota
-        return _jobs_page(request, session, user, str(getattr(exc, "detail", exc)), code)
+        detail = str(getattr(exc, "detail", exc))
+        return _jobs_page(request, session, user, settings, detail, code)
     return RedirectResponse(f"/jobs/{job.id}", status_code=303)
 
 

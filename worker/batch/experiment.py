@@ -279,11 +279,13 @@ def expand(
                 for slam in g.slam:
                     for noise in g.laser_noise:
                         over = {"algorithm": slam, "sim": {"laser_noise_sigma": noise}}
-                        params = RunParams.from_json(merge(g.params, over)).to_json()
+                        run_params = RunParams.from_json(merge(g.params, over))
+                        params = run_params.to_json()
                         key = run_key(fp, world.name, params, seed)
+                        name = registry.label(slam, run_params.slam)  # external:NAME
                         specs.setdefault(
                             key,
-                            RunSpec(key, str(path), world.name, base, variant, slam, noise,
+                            RunSpec(key, str(path), world.name, base, variant, name, noise,
                                     seed, params),
                         )  # fmt: skip
     if len(specs) > MAX_RUNS:

@@ -129,6 +129,25 @@ def _external(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator
 
 
 register("external", _external, "an external SLAM program (slam.external)", "slam")
+EXTERNAL_PREFIX = "external:"  # an external program's label: external:NAME
+
+
+def label(algorithm: str, slam: SlamParams | None = None) -> str:
+    """What reports, tables, the database and the dashboard call a run's algorithm: its name,
+    or `external:NAME` for an external program (two programs never share a row, and the
+    label says at a glance that the program ran over the protocol)."""
+    ext = slam.external if slam is not None else None
+    if algorithm == "external" and ext is not None:
+        return EXTERNAL_PREFIX + ext.name
+    return algorithm
+
+
+def parse_label(text: str) -> tuple[str, str | None]:
+    """(algorithm, external program name or None) of a label: `external:mine` ->
+    ("external", "mine"), `rbpf` -> ("rbpf", None)."""
+    if text.startswith(EXTERNAL_PREFIX):
+        return "external", text[len(EXTERNAL_PREFIX) :]
+    return text, None
 
 
 def _plugin_factory(ep: EntryPoint) -> SlamFactory:

@@ -32,6 +32,7 @@ from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
 from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.store import mark_run_failed
 from worker.run_params import RunParams  # light: no numba in the API process
+from worker.slam import registry
 from worker.status import JobStatus, WorldStatus
 
 router = APIRouter(tags=["jobs"])
@@ -39,10 +40,11 @@ router = APIRouter(tags=["jobs"])
 
 @lru_cache(maxsize=256)
 def _run_params(overrides_json: str) -> tuple[str, str]:
-    """(algorithm, RunParams JSON) for the overrides: validated by the pipeline's own rules
-    (InputError -> 400), once per distinct set of overrides."""
+    """(algorithm's label, RunParams JSON) for the overrides: validated by the pipeline's own
+    rules (InputError -> 400), once per distinct set of overrides; the label of an external
+    program is external:NAME."""
     params = RunParams.from_json(json.loads(overrides_json))
-    return params.algorithm, json.dumps(params.to_json())
+    return registry.label(params.algorithm, params.slam), json.dumps(params.to_json())
 
 
 _WORLD_OWNER = select(World.owner_id, World.status).where(World.id == bindparam("world_id"))

@@ -77,13 +77,14 @@ def test_a_registered_program_is_picked_by_name_and_stored_with_its_command(api)
     r = _job(api, {"name": "deadreck", "step_timeout_s": 5.0})
     assert r.status_code == 202, r.text
     job = r.json()
-    assert job["slam"] == "external"
+    assert job["slam"] == "external:deadreck"  # the program by its name (runs and jobs alike)
     want = {"name": "deadreck", "command": PROGRAMS["deadreck"], "start_timeout_s": 30.0,
             "step_timeout_s": 5.0, "close_timeout_s": 2.0}  # fmt: skip
     assert job["params"]["slam"]["external"] == want
     with session_scope(api.url) as s:  # what the worker will read
-        (params,) = s.scalars(select(Run.params)).all()
-    assert params["slam"]["external"] == want
+        ((params, slam),) = s.execute(select(Run.params, Run.slam)).all()
+    assert params["slam"]["external"] == want and params["algorithm"] == "external"
+    assert slam == "external:deadreck"
     assert api.broker.llen("mapqual") == 1
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.slam.external.protocol import ENCODINGS, ProtocolError, cells, count, number
+from worker.slam.external.protocol import ENCODINGS, ProtocolError, cells, cells_into, count, number
 from worker.slam.grid import OccupancyGrid
 
 
@@ -44,7 +44,7 @@ def _lay(prob: np.ndarray, patch: Any, encoding: str, where: str) -> None:
         raise ProtocolError(
             f"{where} ({col}, {row}) + ({w} x {h}) leaves the {prob.shape[1]} x {prob.shape[0]} map"
         )
-    prob[row : row + h, col : col + w] = cells(patch.get("data"), encoding, h, w, where)
+    cells_into(prob[row : row + h, col : col + w], patch.get("data"), encoding, where)
 
 
 def _placed(

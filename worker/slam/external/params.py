@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 from worker.errors import InputError
 
+MAX_NAME = 31  # [characters] of a program's name
+
 
 @dataclass(frozen=True)
 class ExternalSlamParams:
@@ -29,6 +31,8 @@ class ExternalSlamParams:
             raise InputError(
                 f"slam.external.name {self.name!r} must be an identifier (letters, digits, _, -)"
             )
+        if len(self.name) > MAX_NAME:  # external:NAME fits the database's 40 characters
+            raise InputError(f"slam.external.name {self.name!r} is longer than {MAX_NAME} letters")
         if any(not isinstance(a, str) or "\0" in a for a in self.command):
             raise InputError("slam.external.command must be a list of strings without NUL bytes")
         if self.command and not self.command[0]:

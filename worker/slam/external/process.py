@@ -69,6 +69,7 @@ class ChildProcess:
         for fd in (self._out, self._in):  # a map in a few wake-ups, not one per 64 KiB
             _grow_pipe(fd)
         self._buf = bytearray()
+        self._pollers: dict[tuple[int, int], select.poll] = {}  # (fd, event): made once
         self.closed = False
         self._tail = ""  # the stderr tail, kept when the process is closed
 
@@ -117,8 +118,10 @@ class ChildProcess:
 
     def _wait(self, fd: int, event: int, deadline: float) -> bool:
         """Whether `fd` is ready (or hung up) before the deadline."""
-        poller = select.poll()
-        poller.register(fd, event | select.POLLHUP | select.POLLERR)
+        poller = self._pollers.get((fd, event))
+        if poller is None:
+            poller = self._pollers[(fd, event)] = select.poll()
+            poller.register(fd, event | select.POLLHUP | select.POLLERR)
         while True:
             left = deadline - time.monotonic()
             if left <= 0:

@@ -105,6 +105,15 @@ def count(message: dict[str, Any], key: str) -> int:
 def cells(data: Any, encoding: str, height: int, width: int, where: str) -> np.ndarray:
     """(height, width) float32 probabilities from a map's or patch's `data` bytes, NaN unknown:
     float32 as is (NaN or negative = unknown), int8 as ROS's OccupancyGrid (0-100, -1)."""
+    out = np.empty((height, width), dtype=np.float32)
+    cells_into(out, data, encoding, where)
+    return out
+
+
+def cells_into(out: np.ndarray, data: Any, encoding: str, where: str) -> None:
+    """Check `data` (the cells of `out`'s shape, see `cells`) and write them into `out`, a
+    float32 array or view, in place: one copy, no temporary grid."""
+    height, width = out.shape
     dtype = ENCODINGS[encoding]
     if not isinstance(data, bytes) or len(data) != height * width * dtype.itemsize:
         size = len(data) if isinstance(data, bytes) else type(data).__name__
@@ -112,16 +121,20 @@ def cells(data: Any, encoding: str, height: int, width: int, where: str) -> np.n
         raise ProtocolError(f"{where} 'data' must be {need} bytes of {encoding}, got {size}")
     raw = np.frombuffer(data, dtype=dtype).reshape(height, width)
     if encoding == "int8":
-        prob = raw.astype(np.float32) / np.float32(100.0)
-        prob[raw < 0] = np.nan
         if np.any(raw > 100):
             raise ProtocolError(f"{where} int8 cells must be -1 or 0..100")
-        return prob
+        np.divide(raw, np.float32(100.0), out=out, dtype=np.float32)
+        np.copyto(out, np.float32(np.nan), where=raw < 0)
+        return
     with np.errstate(invalid="ignore"):
-        bad = raw > 1.0
-    if np.any(bad) or np.any(np.isinf(raw)):
+        bad = np.any(raw > 1.0)  # +inf included
+        negative = raw < 0
+        if not bad and negative.any():  # rare: unknown cells said by a negative value
+            bad = bool(np.isinf(raw[negative]).any())
+    if bad:
         raise ProtocolError(f"{where} float32 cells must be probabilities in [0, 1] or NaN")
-    return np.where(raw < 0, np.float32(np.nan), raw)
+    np.copyto(out, raw)
+    np.copyto(out, np.float32(np.nan), where=negative)
 
 
 def _brief(value: Any) -> str:

@@ -60,10 +60,12 @@ class MapSender:
             return m
         # bit patterns: NaN (unknown) equals NaN, and one comparison pass
         changed = grid.prob.view(np.uint32) != last.prob.view(np.uint32)
-        rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+        rows = np.flatnonzero(changed.any(axis=1))
         if rows.size == 0:
             return None
-        r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+        r0, r1 = int(rows[0]), int(rows[-1]) + 1
+        cols = np.flatnonzero(changed[r0:r1].any(axis=0))  # only the rows that changed
+        c0, c1 = int(cols[0]), int(cols[-1]) + 1
         data = np.ascontiguousarray(grid.prob[r0:r1, c0:c1], dtype="<f4").tobytes()
         m["patches"] = [{"col": c0, "row": r0, "width": c1 - c0, "height": r1 - r0, "data": data}]
         return m

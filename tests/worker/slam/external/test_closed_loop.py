@@ -37,6 +37,7 @@ def test_the_example_program_explores_the_two_rooms_to_the_end(tmp_path):
     write_report(result, tmp_path)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["params"]["slam"]["external"]["command"] == example()  # stored with the run
+    assert summary["algorithm"] == "external:prog"  # the program by its name, in every table
     assert RunParams.from_json(summary["params"]) == result.params
 
 
