@@ -60,7 +60,7 @@ def site(tmp_path_factory):
     """An app on a fresh database with two users, and one finished run of user `a`."""
     url = f"sqlite:///{tmp_path_factory.mktemp('pages') / 'pages.db'}"
     upgrade(url)
-    world = World.from_array(rooms(), 0.05, name="rooms")
+    world = World.from_array(rooms(), 0.05, name="owner_a_plan")
     params = RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 60.0}})
     result = run_one(world, params, 4)
     ex = result.exploration
@@ -231,7 +231,7 @@ def test_other_owners_pages_answer_404(site):
     client = _signed_in(site, "b")
     assert client.get(f"/jobs/{site['job']}").status_code == 404
     assert client.get(f"/runs/{site['run']}/plot/trajectories.png").status_code == 404
-    assert "rooms" not in client.get("/worlds").text
+    assert "owner_a_plan" not in client.get("/worlds").text  # no heading says it
 
 
 def test_compare_table_matches_the_stats(site):
@@ -242,7 +242,7 @@ def test_compare_table_matches_the_stats(site):
     # the table counts the relations of completed runs only (as the errors)
     completed = site["summary"]["outcome"] == "completed"
     n = site["summary"]["relations"]["B"]["translation"]["n"] if completed else 0
-    assert row["world"] == "rooms" and row["completed"] == int(completed)
+    assert row["world"] == "owner_a_plan" and row["completed"] == int(completed)
     assert f"<td>{n}</td>" in page
     t = row["translation"]
     for k in ("mean", "std", "min", "max"):
