@@ -4,6 +4,7 @@ their relation errors and their map-versus-floorplan scores (issue 17 section 4)
     .venv/bin/python benchmarks/bench_validity.py [--out out/validity] [--time-limit 90]
         [--seeds 1 2] [--worlds worlds/bormann/office_a.yaml worlds/bormann/lab_ipa.yaml]
         [--noises 0 0.1 0.3] [--limit N] [--report-only] [--plot docs/validity.png]
+        [--walls ridge|front|occupied]
 
 Every run (rbpf with 40, 10, 3 and 1 particles and the odometry baseline; laser noise 0, 0.1
 and 0.3 m; each world and seed) is written to OUT/<key>.json as soon as it ends, and a run
@@ -11,6 +12,10 @@ already there is not run again: stop it any time and start it again to resume. T
 ordered seed first, so any prefix spans the algorithms, noises and worlds. The odometry error
 is 5x Stage's default (E = 0.05, 0.05, 0.10) so that dead reckoning and starved filters make
 bad maps within a short time limit. B relations: at least 500 a run (issue 17 section 2).
+Each run's final map is kept beside it (OUT/<key>.npz: the hit ratios, the grid's geometry and
+the first estimated and true poses), and the report scores the stored maps again with the map
+score of the current code (`--walls` picks the wall extraction), so a change to the score needs
+no new runs; a run without its map is run again (a summary alone cannot be scored again).
 """
 
 from __future__ import annotations
@@ -90,7 +95,7 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
     worlds: dict[str, Any] = {}
     for i, spec in enumerate(todo):
         path = out / f"{spec.key}.json"
-        if path.exists():
+        if path.exists() and path.with_suffix(".npz").exists():
             continue
         world = worlds.setdefault(spec.world, load_world(ROOT / spec.world))
         t0 = time.perf_counter()
@@ -99,6 +104,7 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
         try:
             r = run_one(world, RunParams.from_json(run_params(spec, time_limit)), spec.seed)
             rec["summary"] = r.summary.to_dict()
+            save_map(path.with_suffix(".npz"), r.exploration)
         except Exception as exc:  # a run that raises is recorded, the rest go on
             rec["error"] = f"{type(exc).__name__}: {exc}"
         rec["wall_s"] = time.perf_counter() - t0
@@ -109,14 +115,55 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
         print(f"[{utc} UTC] {i + 1}/{len(todo)} {spec.key}: {rec['wall_s']:.0f} s", flush=True)
 
 
-def load(out: Path) -> list[dict[str, Any]]:
-    """The finished runs in OUT that have a B error and a map score."""
-    rows = []
+def save_map(path: Path, ex: Any) -> None:
+    """The final map and the poses its score starts from, so that it can be scored again."""
+    if len(ex.pose_gt) == 0:
+        return
+    g = ex.final_map
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, prob=g.prob, resolution=g.resolution, origin=g.origin,
+                        occ_thresh=g.occ_thresh, pose_est0=ex.pose_est[0],
+                        pose_gt0=ex.pose_gt[0])  # fmt: skip
+    tmp.replace(path)
+
+
+def rescore(npz: Path, world_path: Path, p: Any, cache: dict[str, Any]) -> dict[str, Any]:
+    """The map score of a stored map, computed again (as worker.pipeline scores a run)."""
+    from worker.evaluate.map_score import score_map, start_alignment
+    from worker.explore.coverage import reachable_free
+    from worker.explore.params import ExploreParams
+    from worker.slam.grid import OccupancyGrid
+    from worker.world.loader import load_world
+
+    d = np.load(npz)
+    world = cache.get(str(world_path)) or cache.setdefault(str(world_path), load_world(world_path))
+    g0 = d["pose_gt0"]
+    start = (int(math.floor((g0[0] - world.origin[0]) / world.resolution)),
+             int(math.floor((g0[1] - world.origin[1]) / world.resolution)))  # fmt: skip
+    key = f"reach {world_path} {start}"
+    if key not in cache:
+        cache[key] = reachable_free(world.occ, world.resolution, start,
+                                    ExploreParams().footprint_half_m)  # fmt: skip
+    grid = OccupancyGrid(d["prob"], float(d["resolution"]), d["origin"], float(d["occ_thresh"]))
+    T0 = start_alignment(d["pose_est0"], g0)
+    return score_map(world.occ, world.resolution, world.origin, cache[key], grid, T0, p).summary()
+
+
+def load(out: Path, p: Any = None, world_paths: tuple[str, ...] = WORLDS) -> list[dict[str, Any]]:
+    """The finished runs in OUT that have a B error and a map score; a run whose map is
+    stored (OUT/<key>.npz) is scored again with `p` (MapScoreParams), the others keep the
+    score their summary holds."""
+    rows: list[dict[str, Any]] = []
+    cache: dict[str, Any] = {}
+    worlds = {Path(w).stem: ROOT / w for w in world_paths}
     for path in sorted(out.glob("*.json")):
         rec = json.loads(path.read_text())
         s = rec.get("summary")
         if not s or not s.get("map_score") or "B" not in s["relations"]:
             continue
+        npz = path.with_suffix(".npz")
+        if p is not None and npz.exists() and rec["world"] in worlds:
+            s["map_score"] = rescore(npz, worlds[rec["world"]], p, cache)
         row = {k: rec[k] for k in ("key", "world", "slam", "noise", "seed")}
         row["outcome"] = s["outcome"]
         for kind, axis in ERRORS:
@@ -252,6 +299,8 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=90.0, help="[s] simulated")
     ap.add_argument("--limit", type=int, default=None, help="run only the first N runs")
     ap.add_argument("--report-only", action="store_true", help="no new runs")
+    ap.add_argument("--walls", default="ridge", choices=("ridge", "front", "occupied"),
+                    help="the map's walls, when stored maps are scored again")  # fmt: skip
     ap.add_argument("--plot", default=None, help="scatter plot PNG (default OUT/validity.png)")
     args = ap.parse_args()
     if args.time_limit <= 0 or (args.limit is not None and args.limit < 1):
@@ -265,10 +314,11 @@ def main() -> None:
     todo = specs(args.worlds, args.seeds, tuple(args.noises))[: args.limit]
     if not args.report_only:
         run_all(todo, out, args.time_limit)
-    rows = load(out)
     from worker.evaluate.map_score import MapScoreParams
 
-    print(report(rows, MapScoreParams().tolerance))
+    p = MapScoreParams(walls=args.walls)
+    rows = load(out, p, tuple(args.worlds))
+    print(report(rows, p.tolerance))
     if rows:
         plot = Path(args.plot) if args.plot else out / "validity.png"
         scatter(rows, plot)

@@ -23,6 +23,7 @@ from worker.batch.tables import (
     summary_of,
 )
 from worker.batch.thesis import findings, side_by_side
+from worker.batch.validity import validity
 from worker.status import RecordStatus, RunOutcome
 
 CAPTIONS = {
@@ -108,6 +109,15 @@ def _figure(name: str, path: Path | None) -> dict[str, Any]:
     return {"name": name, "data": data, "caption": CAPTIONS[name], "missing": MISSING[name]}
 
 
+def _validity(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Any] | None:
+    """The validity section with its scatter plot embedded (None: too few scored runs)."""
+    v = validity(records, out)
+    if v is not None:
+        plot = v.pop("plot")
+        v["data"] = base64.b64encode(plot.read_bytes()).decode("ascii") if plot else None
+    return v
+
+
 def write_html(
     records: Sequence[dict[str, Any]],
     figures: dict[str, Path | None],
@@ -144,6 +154,7 @@ def write_html(
         thesis=side_by_side(records),
         findings=findings(records),
         paired=batch_paired_rows(records),
+        validity=_validity(records, out),
     )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")

@@ -25,6 +25,8 @@ from scipy.spatial import cKDTree
 from worker.evaluate import map_score_kernels as k
 from worker.explore.coverage import coverage
 
+WALLS = ("ridge", "front", "occupied")
+
 
 @dataclass(frozen=True)
 class MapScoreParams:
@@ -37,6 +39,15 @@ class MapScoreParams:
     icp_tol: float = 1e-4  # [m] stop a gate once the update moves no wall cell more than this
     icp_min_pairs: int = 10  # fewer correspondences keep the pose reached so far
     seen_margin: float = 0.1  # [m] a floorplan wall this close to a known map cell was seen
+    # which of the map's cells are its walls: "ridge" (occupied cells on the ridge of the hit
+    # ratio across the wall, robust to laser range noise), "front" (occupied cells facing a
+    # free cell) or "occupied" (every cell above the grid's occ_thresh)
+    walls: str = "ridge"
+    ridge_sigma_m: float = 0.05  # [m] Gaussian smoothing of the hit ratio before the ridge
+
+    def __post_init__(self) -> None:
+        if self.walls not in WALLS:
+            raise ValueError(f"walls must be one of {', '.join(WALLS)}, got {self.walls!r}")
 
 
 @dataclass(frozen=True)
@@ -89,6 +100,15 @@ def floorplan_walls(occ: np.ndarray, reachable: np.ndarray) -> np.ndarray:
     return k.wall_surface(occ, reachable)
 
 
+def map_walls(grid, p: MapScoreParams = MapScoreParams()) -> np.ndarray:
+    """`(H, W) bool` the cells of `grid` (an OccupancyGrid) taken as its walls, by `p.walls`."""
+    if p.walls == "occupied":
+        return grid.occupied
+    if p.walls == "front":
+        return k.front_walls(grid.prob, grid.occ_thresh)
+    return k.ridge_walls(grid.prob, grid.occ_thresh, p.ridge_sigma_m / grid.resolution)
+
+
 def score_map(
     occ: np.ndarray,
     world_resolution: float,
@@ -106,7 +126,7 @@ def score_map(
     world_origin = np.asarray(world_origin, dtype=np.float64)
     fp_walls = floorplan_walls(occ, reachable)
     fp_xy = k.cell_centres(fp_walls, world_resolution, world_origin)
-    map_xy = k.cell_centres(grid.occupied, grid.resolution, grid.origin)
+    map_xy = k.cell_centres(map_walls(grid, p), grid.resolution, grid.origin)
     fp_tree = cKDTree(fp_xy)
     reg = _register(map_xy, fp_tree, fp_xy, np.asarray(T0, dtype=np.float64), p)
     T = reg.T

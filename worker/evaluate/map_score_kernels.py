@@ -163,3 +163,55 @@ def lookup(mask: np.ndarray, mx: np.ndarray, my: np.ndarray) -> NDArray[np.bool_
     out = np.zeros(len(mx), dtype=bool)
     out[inside] = mask[my[inside], mx[inside]]
     return out
+
+
+# the 4 directions across a wall, by the normal's angle in 45-degree bins: (dy, dx)
+_ACROSS = ((0, 1), (1, 1), (1, 0), (1, -1))
+
+
+def ridge_walls(prob: np.ndarray, occ_thresh: float, sigma_cells: float) -> NDArray[np.bool_]:
+    """`(H, W) bool` occupied cells on the ridge of the hit ratio across their wall.
+
+    Laser range noise spreads a wall's hits over a band of cells several cells thick; its
+    ridge is one cell thick. The hit ratio (NaN as 0) is smoothed by a Gaussian of
+    `sigma_cells`; the wall's normal at a cell is the eigenvector of the smoothed ratio's
+    Hessian with the most negative eigenvalue (the direction the ratio falls off fastest);
+    an occupied cell is dropped if an occupied neighbour along that normal has a higher
+    smoothed ratio (non-maximum suppression, as Canny's edges, within the band: a free
+    neighbour never thins a wall; ties keep both). Where the ratio falls off alike in every
+    direction (a corner, a post: the Hessian's two eigenvalues within a factor of two) there
+    is no normal, and the cell is kept.
+    """
+    p = np.nan_to_num(np.asarray(prob, dtype=np.float64), nan=0.0)
+    occ = p > occ_thresh
+    if not occ.any():
+        return occ
+
+    def g(order: tuple[int, int]) -> np.ndarray:
+        return ndimage.gaussian_filter(p, sigma_cells, order=order, mode="constant")
+
+    s, hyy, hxx, hxy = g((0, 0)), g((2, 0)), g((0, 2)), g((1, 1))
+    half_gap = np.hypot(0.5 * (hxx - hyy), hxy)  # half the eigenvalues' difference
+    lam_min = 0.5 * (hxx + hyy) - half_gap
+    line = 2.0 * half_gap > 0.5 * np.abs(lam_min)  # lam_max - lam_min > |lam_min| / 2
+    # angle of the larger eigenvalue's eigenvector; the normal is at right angles to it
+    normal = 0.5 * np.arctan2(2.0 * hxy, hxx - hyy) + 0.5 * np.pi
+    bins = np.round(normal / (0.25 * np.pi)).astype(np.int64) % 4
+    padded = np.pad(np.where(occ, s, -np.inf), 1, constant_values=-np.inf)
+    h, w = p.shape
+    keep = np.zeros_like(occ)
+    eps = 1e-9 * max(float(s.max()), 1.0)  # floating-point ties (symmetric corners)
+    for b, (dy, dx) in enumerate(_ACROSS):
+        fwd = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+        bwd = padded[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w]
+        keep |= (bins == b) & (s >= fwd - eps) & (s >= bwd - eps)
+    return occ & (keep | ~line)
+
+
+def front_walls(prob: np.ndarray, occ_thresh: float) -> NDArray[np.bool_]:
+    """`(H, W) bool` occupied cells with a free (seen, not occupied) cell among their 8
+    neighbours: the wall's face towards the robot, as `wall_surface` takes the floorplan's."""
+    p = np.asarray(prob)
+    known = ~np.isnan(p)
+    occ = np.nan_to_num(p, nan=0.0) > occ_thresh
+    return wall_surface(occ, known & ~occ)

@@ -142,3 +142,56 @@ def test_an_empty_map_scores_none_but_free_share_zero():
     assert (s.precision, s.recall, s.distance_m) == (None, None, None)
     assert s.wall_coverage == 0.0
     assert s.free_share == 0.0
+
+
+def blurred_ring() -> np.ndarray:
+    """A 40 x 30 ring map as range noise draws it: the wall cells hit 80 % of the time, the
+    ring one cell inside 30 % (above the grid's 25 %: occupied too), the rest free."""
+    prob = np.zeros((30, 40), np.float32)
+    prob[1:-1, 1:-1] = 0.3
+    prob[2:-2, 2:-2] = 0.0
+    prob[ring(40, 30)] = 0.8
+    return prob
+
+
+def test_a_wall_blurred_by_noise_is_thinned_to_its_ridge():
+    """Every occupied map cell counts as wall: the inner ring's 2 * 38 + 2 * 26 = 128 cells lie
+    one cell (0.05 m) inside the floorplan's 136, so map -> plan is 0.05 * 128 / 264. The ridge
+    (the map padded by two unknown cells, as behind a real wall) drops the inner ring's
+    straight runs: across the wall, their outer neighbour's smoothed ratio is higher. At each
+    corner the inner corner cell (1, 1) stays and outranks the two outer cells beside it,
+    (0, 1) and (1, 0): with a 3 x 3 Gaussian of sigma 1 cell (weights 1, e^-0.5, e^-1), (1, 1)
+    has 0.3 + 0.607 * 2.2 + 0.368 * 2.4 = 2.52 against 0.8 + 0.607 * 1.9 + 0.368 * 1.1 = 2.36.
+    So 136 - 8 + 4 = 132 map walls; the 4 kept inner corners are 0.05 m from the plan and the
+    8 dropped plan cells 0.05 m from the map's corner cells."""
+    fp = ring(40, 30)
+    grid = OccupancyGrid(blurred_ring(), RES, np.zeros(2))
+    occupied = score_map(fp, RES, np.zeros(2), ~fp, grid, np.zeros(3),
+                         MapScoreParams(icp_iterations=0, walls="occupied"))  # fmt: skip
+    assert occupied.n_map_walls == 264
+    assert occupied.distance_map_m == pytest.approx(RES * 128 / 264)
+    padded = OccupancyGrid(
+        np.pad(blurred_ring(), 2, constant_values=np.nan), RES, -2 * RES * np.ones(2)
+    )
+    s = score_map(fp, RES, np.zeros(2), ~fp, padded, np.zeros(3), MapScoreParams(icp_iterations=0))
+    assert s.n_map_walls == 132
+    assert s.distance_map_m == pytest.approx(RES * 4 / 132)
+    assert s.distance_floorplan_m == pytest.approx(RES * 8 / 136)
+    assert (s.precision, s.recall) == (1.0, 1.0)
+
+
+def test_the_front_of_a_blurred_wall_is_its_face_towards_free_space():
+    """'front' keeps the occupied cells next to a free cell: the inner ring (128 cells, all
+    0.05 m inside) and the outer ring's cells that touch a free cell diagonally: none, the
+    inner ring separates them, so map -> plan is 0.05 m exactly."""
+    fp = ring(40, 30)
+    grid = OccupancyGrid(blurred_ring(), RES, np.zeros(2))
+    s = score_map(fp, RES, np.zeros(2), ~fp, grid, np.zeros(3),
+                  MapScoreParams(icp_iterations=0, walls="front"))  # fmt: skip
+    assert s.n_map_walls == 128
+    assert s.distance_map_m == pytest.approx(RES)
+
+
+def test_an_unknown_wall_extraction_is_refused():
+    with pytest.raises(ValueError, match="walls must be one of"):
+        MapScoreParams(walls="skeleton")
