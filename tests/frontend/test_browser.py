@@ -122,7 +122,7 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
 
     page.goto(f"{site.url}/jobs/{job_id}")
     images = page.locator(f"#run-{run_id} img")
-    assert images.count() == 3
+    assert images.count() == 4  # trajectories, errors, the map, the map over the floorplan
     page.wait_for_function(
         f"Array.from(document.querySelectorAll('#run-{run_id} img'))"
         ".every(i => i.complete && i.naturalWidth > 0)"
