@@ -73,7 +73,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"detail": str(exc)}, status_code=400)
 
     app.include_router(health.router)
-    for module in (worlds, jobs, runs, bags, stats):
+    # jobs first: routes are matched in order, and GET /jobs/{id} and POST /jobs are the hot
+    # paths (each route tried before them costs every such request a match)
+    for module in (jobs, worlds, runs, bags, stats):
         app.include_router(module.router, prefix=API_PREFIX)
     install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them
