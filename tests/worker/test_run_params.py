@@ -27,6 +27,7 @@ SETTINGS_SINCE_EXAMPLE = {
         "coverage_period",
         "goal_search_extra",
         "incomplete_area",
+        "incomplete_cell_loss",
         "incomplete_width",
         "look_fov_margin",
         "narrow_margin",

@@ -14,19 +14,25 @@ _FOUR = ndimage.generate_binary_structure(2, 1)
 
 
 def reachable_free(
-    occ: np.ndarray, resolution: float, start_cell: tuple[int, int], half_side: float
+    occ: np.ndarray,
+    resolution: float,
+    start_cell: tuple[int, int],
+    half_side: float,
+    clearance: float | None = None,
 ) -> np.ndarray:
     """`(H, W) bool` free cells the robot can map: near where its centre can go.
 
     occ: (H, W) bool world grid (True obstacle), start_cell (ix, iy). The robot's centre can
-    reach the 4-connected cells of clearance above the footprint's half side that contain the
-    start; a free cell counts when it lies within the circumscribed radius plus a cell of that
-    set (the robot's body sweeps it). Free space behind gaps narrower than the robot is left
-    out: the robot cannot get there, whatever it glimpses through the gap.
+    reach the 4-connected cells of clearance [m] above `clearance` (default: the footprint's
+    half side) that contain the start; a free cell counts when it lies within the
+    circumscribed radius plus a cell of that set (the robot's body sweeps it). Free space
+    behind gaps narrower than twice the clearance is left out: the robot cannot get there,
+    whatever it glimpses through the gap.
     """
+    clearance = half_side if clearance is None else clearance
     free = ~occ
     dist = ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
-    centre_ok = (dist - 0.5) * resolution > half_side
+    centre_ok = (dist - 0.5) * resolution > clearance
     labels, _ = ndimage.label(centre_ok, structure=_FOUR)
     ix, iy = start_cell
     lab = labels[iy, ix] if (0 <= iy < occ.shape[0] and 0 <= ix < occ.shape[1]) else 0

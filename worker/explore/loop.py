@@ -131,6 +131,10 @@ class Exploration:
             int(math.floor((start[1] - world.origin[1]) / world.resolution)),
         )
         self.reach = reachable_free(world.occ, world.resolution, start_cell, p.footprint_half_m)
+        # the part behind gaps the robot can drive through: what `incomplete` is judged on
+        self.passable = reachable_free(
+            world.occ, world.resolution, start_cell, p.footprint_half_m, p.passable_clearance_m
+        )
         self.rec = _Recorder()
         self.n_collisions0 = len(sim.collisions)
         self.rules = default_rules(p, start, self.n_collisions0)
@@ -208,7 +212,7 @@ class Exploration:
         self.on_progress(ExploreProgress(t, pose_gt, pose_est, self.last_cov, done, status, *live))
 
     def _judge(self, stop: StopReason, seen: np.ndarray, cov: float) -> tuple[RunOutcome, str]:
-        return judge_outcome(stop, self.reach, seen, self.world, cov, self.p)
+        return judge_outcome(stop, self.passable, seen, self.world, cov, self.p)
 
     def result(self, stop: StopReason) -> ExplorationResult:
         """The run, ended by `stop`: its recording, final map, coverage and counters."""
@@ -254,8 +258,10 @@ def judge_outcome(
     stop: StopReason, reach: np.ndarray, seen: np.ndarray, world, cov: float, p: ExploreParams
 ) -> tuple[RunOutcome, str]:
     """The outcome and its line: a run stopped as done (no frontier, map unchanged) that left
-    a reachable region unseen (`unseen_regions` with incomplete_area, incomplete_width) is
-    incomplete: the robot gave up frontiers it could have driven to."""
+    a region of `reach` unseen (`unseen_regions` with incomplete_area, incomplete_width) is
+    incomplete: the robot gave up frontiers it could have driven to. The run passes the
+    space behind gaps it can drive through (`passable_clearance_m`); `cov` stays the
+    coverage of all the reachable space."""
     if stop.outcome != RunOutcome.COMPLETED:
         return stop.outcome, stop.detail
     left = unseen_regions(

@@ -103,3 +103,23 @@ def test_success_table_counts_incomplete_runs_apart_from_completed_and_failed():
     (row,) = success_rows(records)
     assert (row["runs"], row["completed"], row["incomplete"], row["failed"]) == (5, 1, 2, 2)
     assert (row["stuck"], row["error"], row["collision"]) == (1, 1, 0)
+
+
+def test_rooms_behind_doors_narrower_than_the_robot_drives_through_do_not_make_it_incomplete():
+    # Histor4's rooms off the inner corridor have 0.5 m doors. The centre of the 0.4 m robot
+    # must keep 0.2 m (half side) + 0.02 m (padding) + 0.05 m (a SLAM cell lost each side)
+    # = 0.27 m: at 0.1 m per cell a cell 4 cells from both jambs has (4 - 0.5) 0.1 = 0.35 m,
+    # one 3 cells away 0.25 m; a door of n cells has a cell 4 away from both when n >= 7.
+    p = ExploreParams()
+    assert p.passable_clearance_m == pytest.approx(0.27)
+    world = SimpleNamespace(resolution=RES, origin=np.zeros(2))
+    for door, expected in ((5, RunOutcome.COMPLETED), (6, RunOutcome.COMPLETED), (7, "incomplete")):
+        occ = _two_rooms(door)
+        reach = reachable_free(occ, RES, (20, 20), 0.2)
+        assert reach[:, 62:].any()  # the bare half side passes all three doors
+        passable = reachable_free(occ, RES, (20, 20), 0.2, p.passable_clearance_m)
+        assert passable[:, 62:].any() == (door >= 7)
+        seen = reach.copy()
+        seen[:, 61:] = False  # the right room never seen
+        outcome, _ = judge_outcome(_stop("no_frontier"), passable, seen, world, 0.5, p)
+        assert outcome == expected
