@@ -63,10 +63,14 @@ def test_the_dashboard_form_lists_the_registry(scratch_registry):
     registry.register("plugin", lambda laser, p, rng: None, "a plugin SLAM")
     html = templates.get_template("jobs.html").render(
         worlds=[{"id": 1, "name": "w"}], jobs=[], total=0, user=None, csrf_token="x",
-        world_names={}, refresh=False, error=None,
+        world_names={}, refresh=False, error=None, external_programs=["mine"],
     )  # fmt: skip
     for e in registry.entries():
-        assert f'<option value="{e.name}">{e.description}</option>' in html
+        if e.name == "external":  # one choice per program an administrator registered
+            assert '<option value="external">' not in html
+            assert '<option value="external:mine">' in html
+        else:
+            assert f'<option value="{e.name}">{e.description}</option>' in html
     assert '<option value="plugin">a plugin SLAM</option>' in html
 
 
