@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
@@ -32,8 +35,9 @@ class Api:
         return {} if user is None else {"Authorization": f"Bearer {self.keys[user]}"}
 
 
-@pytest.fixture
-def api(db_url):
+@contextmanager
+def serving(db_url: str, **settings: Any) -> Iterator[Api]:
+    """The API on `db_url` with users alice, bob and admin, and `settings` on top."""
     # a Redis database of its own, emptied before and after, so queued messages can be counted
     redis_url = ensure_redis().rsplit("/", 1)[0] + "/13"
     import redis
@@ -45,8 +49,14 @@ def api(db_url):
             name: add_user(s, name, is_admin=(name == "admin"))[1]
             for name in ("alice", "bob", "admin")
         }
-    settings = Settings(DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on")
-    with TestClient(create_app(settings)) as client:
+    config = Settings(DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on", **settings)
+    with TestClient(create_app(config)) as client:
         yield Api(client, db_url, keys, broker)
     broker.flushdb()
     broker.close()
+
+
+@pytest.fixture
+def api(db_url):
+    with serving(db_url) as served:
+        yield served

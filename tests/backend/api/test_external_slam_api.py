@@ -6,38 +6,21 @@ from __future__ import annotations
 import json
 
 import pytest
-from fastapi.testclient import TestClient
 from sqlalchemy import select
 
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.main import create_app
-from backend.store import add_user
-from tests.backend.api.conftest import Api
+from tests.backend.api.conftest import serving
 from tests.backend.api.test_worlds_jobs import _world
-from tests.services import ensure_redis
 
 PROGRAMS = {"deadreck": ["/usr/bin/python3", "/opt/slam/dead_reckoning_slam.py"]}
 
 
 @pytest.fixture
 def api(db_url):
-    import redis
-
-    redis_url = ensure_redis().rsplit("/", 1)[0] + "/13"
-    broker = redis.Redis.from_url(redis_url)
-    broker.flushdb()
-    with session_scope(db_url) as s:
-        keys = {"alice": add_user(s, "alice")[1]}
-    settings = Settings(
-        DATABASE_URL=db_url, REDIS_URL=redis_url, MAPQUAL_AUTH="on",
-        MAPQUAL_EXTERNAL_SLAM=PROGRAMS,
-    )  # fmt: skip
-    with TestClient(create_app(settings)) as client:
-        yield Api(client, db_url, keys, broker)
-    broker.flushdb()
-    broker.close()
+    with serving(db_url, MAPQUAL_EXTERNAL_SLAM=PROGRAMS) as served:
+        yield served
 
 
 def _job(api, external, slam="external"):
