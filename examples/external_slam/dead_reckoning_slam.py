@@ -8,7 +8,6 @@ a hit/visit map built from the scans, answered as map patches. Speaks mapqual-sl
 
 from __future__ import annotations
 
-import math
 import struct
 import sys
 
@@ -95,29 +94,28 @@ class HitMap:
 
 
 class DeadReckoning:
-    """The pose is the odometry; the map is updated after linear_update [m] or
-    angular_update [rad] of motion (GMapping's gating), from the first scan on."""
+    """The pose is the odometry; the map is updated with every scan mapqual sends. The program
+    asks mapqual (in its ready) to send only the scans past GMapping's gate, linear_update [m]
+    or angular_update [rad] of motion since the last one sent: between them mapqual keeps the
+    pose as odometry composed with the last T_map_odom (0 here), as ROS's tf does."""
 
     def __init__(self, laser: dict, params: dict):
         n = laser["n_beams"]
         self.angles = laser["angle_min"] + laser["angle_increment"] * np.arange(n)
         self.max_range = params.get("max_range") or laser["range_max"] - 0.01
         self.usable = min(params.get("max_urange", 30.0), self.max_range)
-        self.lin, self.ang = params.get("linear_update", 1.0), params.get("angular_update", 0.25)
+        self.gate = {
+            "linear_update": params.get("linear_update", 1.0),
+            "angular_update": params.get("angular_update", 0.25),
+            "temporal_update": params.get("temporal_update", -1.0),
+        }
         self.map = HitMap(params.get("delta", 0.05), params.get("map_margin", 8.0))
-        self.last = None  # odometry pose of the last map update
 
     def step(self, msg: dict) -> dict:
         pose = np.array(msg["odom"], dtype=float)
         ranges = np.frombuffer(msg["ranges"], dtype="<f8")
         out = {"type": "estimate", "seq": msg["seq"], "pose": list(map(float, pose))}
         out["T_map_odom"] = [0.0, 0.0, 0.0]
-        moved = self.last is None or math.hypot(*(pose[:2] - self.last[:2])) >= self.lin
-        turn = self.last is not None and abs(math.remainder(pose[2] - self.last[2], math.tau))
-        if not (moved or turn >= self.ang):
-            out["updated"] = False
-            return out
-        self.last = pose
         grew, box = self.map.add_scan(pose, ranges, self.angles, self.usable, self.max_range)
         h, w = self.map.hits.shape
         m = {"resolution": self.map.res, "origin": list(map(float, self.map.origin))}
@@ -147,7 +145,7 @@ def main() -> int:
         elif kind == "config":
             slam = DeadReckoning(msg["laser"], msg["params"])
             print(f"dead reckoning: {msg['laser']['n_beams']} beams", file=sys.stderr)
-            write(stdout, {"type": "ready"})
+            write(stdout, {"type": "ready", "gate": slam.gate})
         elif kind == "step" and slam is not None:
             write(stdout, slam.step(msg))
         elif kind == "bye":

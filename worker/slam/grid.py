@@ -43,6 +43,25 @@ class OccupancyGrid:
         object.__setattr__(self, "origin", origin)
         object.__setattr__(self, "resolution", float(self.resolution))
 
+    @classmethod
+    def adopt(
+        cls, prob: np.ndarray, resolution: float, origin: np.ndarray, occ_thresh: float = 0.25
+    ) -> OccupancyGrid:
+        """A grid around `prob`, a (H, W) float32 array made for it that nobody else holds or
+        writes: made read-only in place, not copied (the constructor copies)."""
+        if prob.dtype != np.float32 or prob.ndim != 2 or not prob.flags.c_contiguous:
+            return cls(prob, resolution, origin, occ_thresh)
+        prob.setflags(write=False)
+        origin = np.array(origin, dtype=np.float64, copy=True).reshape(2)
+        origin.setflags(write=False)
+        grid = object.__new__(cls)
+        for name, value in (
+            ("prob", prob), ("resolution", float(resolution)), ("origin", origin),
+            ("occ_thresh", float(occ_thresh)),
+        ):  # fmt: skip
+            object.__setattr__(grid, name, value)
+        return grid
+
     @property
     def shape(self) -> tuple[int, int]:
         """(H, W) in cells."""

@@ -16,7 +16,9 @@ from worker.slam.base import LaserGeometry
 from worker.slam.external import protocol as proto
 from worker.slam.external.mapmsg import read_map
 from worker.slam.external.process import ChildGone, ChildProcess
+from worker.slam.gating import UpdateGate
 from worker.slam.grid import OccupancyGrid
+from worker.slam.motion import compose3
 from worker.slam.params import SlamParams
 
 
@@ -56,6 +58,8 @@ class ExternalSlam:
         self.updates = 0
         self.failure: SlamFailed | None = None
         self.protocol_wall_s = 0.0  # [s] spent waiting for, reading and writing frames
+        self._gate: UpdateGate | None = None  # the program's update gate, from its ready
+        self._trail: list[float] = []  # [t, x, y, theta] of the steps not sent since the last
 
     @property
     def pid(self) -> int | None:
@@ -75,9 +79,20 @@ class ExternalSlam:
             ranges = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
             if ranges.shape[0] != self._n_beams:
                 raise InputError(f"a scan has {ranges.shape[0]} beams, not {self._n_beams}")
+            gate = self._gate
+            if gate is not None and not gate.step(self._t, np.asarray(pose_odom, dtype=float)):
+                # not sent: the program's map -> odom correction stays, as ROS's tf does
+                self._trail.extend((self._t, pose_odom[0], pose_odom[1], pose_odom[2]))
+                self._pose = compose3(self._T, np.asarray(pose_odom, dtype=np.float64))
+                self._seq += 1
+                self.protocol_wall_s += time.perf_counter() - t0
+                return False
             deadline = time.monotonic() + self.ext.step_timeout_s
-            child.send(proto.step(seq, t, pose_odom, ranges), deadline)
-            answer = proto.unpack(child.recv(deadline))
+            trail = None
+            if gate is not None:
+                trail, self._trail = np.array(self._trail, dtype="<f8"), []
+            child.send(proto.step(seq, t, pose_odom, ranges, trail), deadline)
+            answer = child.recv_message(deadline)
             self.protocol_wall_s += time.perf_counter() - t0
             updated = self._read_estimate(answer, seq, np.asarray(pose_odom, dtype=np.float64))
         except (ChildGone, proto.ProtocolError) as exc:
@@ -91,9 +106,13 @@ class ExternalSlam:
         self._child = child = ChildProcess(self.ext.command)
         deadline = time.monotonic() + self.ext.start_timeout_s
         child.send(proto.frame(proto.hello()), deadline)
-        self.program_name = proto.check_hello(proto.unpack(child.recv(deadline)))
+        self.program_name = proto.check_hello(child.recv_message(deadline))
         child.send(proto.frame(self._config), deadline)
-        proto.expect(proto.unpack(child.recv(deadline)), "ready")
+        ready = child.recv_message(deadline)
+        proto.expect(ready, "ready")
+        if ready.get("gate") is not None:
+            linear, angular, temporal = proto.gate(ready["gate"])
+            self._gate = UpdateGate(linear, angular, temporal)
         self._started = True
 
     def _read_estimate(self, msg: dict[str, Any], seq: int, pose_odom: np.ndarray) -> bool:
@@ -151,7 +170,7 @@ class ExternalSlam:
         t0 = time.perf_counter()
         deadline = time.monotonic() + self.ext.step_timeout_s
         child.send(proto.frame({"type": "map"}), deadline)
-        answer = proto.unpack(child.recv(deadline))
+        answer = child.recv_message(deadline)
         self.protocol_wall_s += time.perf_counter() - t0
         proto.expect(answer, "map")
         if answer.get("map") is not None:

@@ -31,7 +31,7 @@ def read_map(m: Any, previous: OccupancyGrid | None, occ_thresh: float) -> Occup
             _lay(prob, patch, encoding, f"map patch {i}")
     else:
         raise ProtocolError("a map needs 'data' (the whole grid) or 'patches' (a list)")
-    return OccupancyGrid(prob, resolution, origin_xy, occ_thresh)
+    return OccupancyGrid.adopt(prob, resolution, origin_xy, occ_thresh)  # prob is ours alone
 
 
 def _lay(prob: np.ndarray, patch: Any, encoding: str, where: str) -> None:

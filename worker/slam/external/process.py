@@ -13,8 +13,9 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Sequence
+from typing import Any
 
-from worker.slam.external.protocol import HEADER, MAX_FRAME, ProtocolError
+from worker.slam.external.protocol import HEADER, MAX_FRAME, ProtocolError, unpack
 
 _PR_SET_PDEATHSIG = 1
 PIPE_BYTES = 1 << 20  # [bytes] pipe buffers asked for (Linux's default maximum)
@@ -69,6 +70,8 @@ class ChildProcess:
         for fd in (self._out, self._in):  # a map in a few wake-ups, not one per 64 KiB
             _grow_pipe(fd)
         self._buf = bytearray()
+        self._chunk = bytearray(PIPE_BYTES)  # what one read() takes
+        self._chunk_view = memoryview(self._chunk)
         self._pollers: dict[tuple[int, int], select.poll] = {}  # (fd, event): made once
         self.closed = False
         self._tail = ""  # the stderr tail, kept when the process is closed
@@ -93,6 +96,21 @@ class ChildProcess:
 
     def recv(self, deadline: float) -> bytes:
         """The payload of the next frame, read before `deadline`, or ChildGone."""
+        n = self._frame(deadline)
+        payload = bytes(memoryview(self._buf)[HEADER.size : HEADER.size + n])
+        del self._buf[: HEADER.size + n]
+        return payload
+
+    def recv_message(self, deadline: float) -> dict[str, Any]:
+        """The message of the next frame (see `recv`), decoded where it lies in the buffer."""
+        n = self._frame(deadline)
+        with memoryview(self._buf) as view:
+            message = unpack(view[HEADER.size : HEADER.size + n])
+        del self._buf[: HEADER.size + n]
+        return message
+
+    def _frame(self, deadline: float) -> int:
+        """Buffer the next whole frame; its payload's length."""
         size = HEADER.size
         while len(self._buf) < size:
             self._fill(deadline)
@@ -101,20 +119,18 @@ class ChildProcess:
             raise ProtocolError(f"a frame of {n} bytes announced (more than {MAX_FRAME})")
         while len(self._buf) < size + n:
             self._fill(deadline)
-        payload = bytes(self._buf[size : size + n])
-        del self._buf[: size + n]
-        return payload
+        return n
 
     def _fill(self, deadline: float) -> None:
         if not self._wait(self._out, select.POLLIN, deadline):
             raise ChildGone(self._late(deadline, "to answer"))
         try:
-            chunk = os.read(self._out, 1 << 20)
+            n = os.readv(self._out, [self._chunk])  # into a buffer made once: no allocation
         except BlockingIOError:
             return
-        if not chunk:
+        if not n:
             raise ChildGone(self._gone("closed its output"))
-        self._buf += chunk
+        self._buf += self._chunk_view[:n]
 
     def _wait(self, fd: int, event: int, deadline: float) -> bool:
         """Whether `fd` is ready (or hung up) before the deadline."""

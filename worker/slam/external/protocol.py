@@ -13,6 +13,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from worker.slam.external.kernels import copy_float32, copy_int8
+
 PROTOCOL = "mapqual-slam"
 VERSION = 1
 HEADER = struct.Struct(">I")  # payload length [bytes]
@@ -59,11 +61,31 @@ def check_hello(message: dict[str, Any]) -> str:
     return name if isinstance(name, str) else ""
 
 
-def step(seq: int, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bytes:
-    """The frame of step `seq`: time [s], odometry (3,) [x, y, theta], ranges (B,) [m] float64."""
+def step(
+    seq: int, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray, trail: np.ndarray | None = None
+) -> bytes:
+    """The frame of step `seq`: time [s], odometry (3,) [x, y, theta], ranges (B,) [m] float64;
+    with a gate, `trail` (K * 4,) float64 [t, x, y, theta] of the K steps not sent before it."""
     ranges = np.ascontiguousarray(ranges_m, dtype="<f8")
     odom = [float(pose_odom[0]), float(pose_odom[1]), float(pose_odom[2])]
-    return frame({"type": "step", "seq": seq, "t": float(t), "odom": odom, "ranges": ranges.data})
+    message = {"type": "step", "seq": seq, "t": float(t), "odom": odom, "ranges": ranges.data}
+    if trail is not None:
+        message["trail"] = np.ascontiguousarray(trail, dtype="<f8").data
+    return frame(message)
+
+
+def gate(value: Any) -> tuple[float, float, float]:
+    """(linear_update [m], angular_update [rad], temporal_update [s]) of a ready's `gate`:
+    two numbers >= 0 and one number (negative: no time rule)."""
+    if not isinstance(value, dict):
+        raise ProtocolError(f"ready 'gate' must be a map, got {_brief(value)}")
+    linear, angular = number(value, "linear_update"), number(value, "angular_update")
+    temporal = number(value, "temporal_update") if "temporal_update" in value else -1.0
+    if linear < 0 or angular < 0:
+        raise ProtocolError(
+            f"ready 'gate': linear_update and angular_update must be >= 0, got {linear}, {angular}"
+        )
+    return linear, angular, temporal
 
 
 def expect(message: dict[str, Any], kind: str) -> None:
@@ -121,20 +143,11 @@ def cells_into(out: np.ndarray, data: Any, encoding: str, where: str) -> None:
         raise ProtocolError(f"{where} 'data' must be {need} bytes of {encoding}, got {size}")
     raw = np.frombuffer(data, dtype=dtype).reshape(height, width)
     if encoding == "int8":
-        if np.any(raw > 100):
+        if copy_int8(raw, out):
             raise ProtocolError(f"{where} int8 cells must be -1 or 0..100")
-        np.divide(raw, np.float32(100.0), out=out, dtype=np.float32)
-        np.copyto(out, np.float32(np.nan), where=raw < 0)
         return
-    with np.errstate(invalid="ignore"):
-        bad = np.any(raw > 1.0)  # +inf included
-        negative = raw < 0
-        if not bad and negative.any():  # rare: unknown cells said by a negative value
-            bad = bool(np.isinf(raw[negative]).any())
-    if bad:
+    if copy_float32(raw, out):
         raise ProtocolError(f"{where} float32 cells must be probabilities in [0, 1] or NaN")
-    np.copyto(out, raw)
-    np.copyto(out, np.float32(np.nan), where=negative)
 
 
 def _brief(value: Any) -> str:

@@ -4,10 +4,14 @@ Dead reckoning (pose = odometry, no map) that, at step STEP, does what MODE says
 (bytes that are no msgpack), print (a stray line on stdout), stall (sleeps), crash (a message
 on stderr, exit code 3), sigkill (kills itself), seq (answers another step), nan (a NaN pose),
 mapreq (says the map changed, and answers the request for it with garbage); mode version2
-answers the hello with version 2; mode ok misbehaves never."""
+answers the hello with version 2; mode ok misbehaves never. Mode gate asks for GMapping's
+gate (linear_update 0.25 m, angular_update 10 rad) in its ready, answers with the map -> odom
+correction GATE_T, and logs "got SEQ trail K" on stderr for each step (K skipped steps before
+it); mode badgate asks for a gate with a negative linear_update."""
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import struct
@@ -15,6 +19,8 @@ import sys
 import time
 
 import msgpack
+
+GATE_T = (1.0, 2.0, math.pi / 2)  # [m, m, rad] the map -> odom correction of mode gate
 
 
 def send(out, message: dict) -> None:
@@ -58,9 +64,23 @@ def main() -> int:
             send(out, {"type": "hello", "protocol": "mapqual-slam", "version": version})
         elif msg["type"] == "config":
             print(f"fake program: mode {mode} at step {at}", file=sys.stderr, flush=True)
-            send(out, {"type": "ready"})
+            if mode == "gate":
+                send(out, {"type": "ready", "gate": {"linear_update": 0.25, "angular_update": 10}})
+            elif mode == "badgate":
+                send(out, {"type": "ready", "gate": {"linear_update": -1, "angular_update": 1}})
+            else:
+                send(out, {"type": "ready"})
         elif msg["type"] == "step":
             if msg["seq"] == at and misbehave(mode, out, msg["seq"]):
+                continue
+            if mode == "gate":
+                trail = len(msg.get("trail", b"")) // 32  # rows of 4 float64
+                print(f"got {msg['seq']} trail {trail}", file=sys.stderr, flush=True)
+                x, y, th = msg["odom"]
+                c, s = math.cos(GATE_T[2]), math.sin(GATE_T[2])
+                pose = [GATE_T[0] + c * x - s * y, GATE_T[1] + s * x + c * y, GATE_T[2] + th]
+                send(out, {"type": "estimate", "seq": msg["seq"], "pose": pose,
+                           "T_map_odom": list(GATE_T)})  # fmt: skip
                 continue
             send(out, {"type": "estimate", "seq": msg["seq"], "pose": msg["odom"]})
         elif msg["type"] == "map" and mode == "mapreq":

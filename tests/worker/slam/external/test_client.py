@@ -164,3 +164,29 @@ def test_the_program_dies_with_the_worker_that_started_it(tmp_path):
     while _state(pid) in ("R", "S", "D") and time.monotonic() < deadline:
         time.sleep(0.05)
     assert _state(pid) in ("Z", "X", "gone")  # killed (a zombie until init reaps it)
+
+
+def test_a_gated_program_gets_only_the_scans_past_its_gate_with_the_odometry_between():
+    """Steps of 0.1 m and a 0.25 m gate: the sums reach 0.3 m every third step, so steps 0, 3,
+    6 and 9 are sent, each after two skipped ones (hand-derived); between them the pose is the
+    program's last map -> odom correction composed with the odometry, as ROS's tf gives it."""
+    scans = _scans(11)
+    slam = _slam(fake("gate"))
+    try:
+        updated = [slam.process(t, odom, ranges) for t, odom, ranges in scans]
+        pose = slam.pose_estimate()
+        tail = slam._child.stderr_tail()
+    finally:
+        slam.close()
+    assert not any(updated)  # the program never says its map changed
+    got = [line for line in tail.splitlines() if line.startswith("got ")]
+    assert got == ["got 0 trail 0", "got 3 trail 2", "got 6 trail 2", "got 9 trail 2"]
+    x, y, th = scans[10][1]  # step 10, not sent: T = (1, 2, pi/2) (+) odometry by hand
+    assert pose == pytest.approx([1.0 - y, 2.0 + x, np.pi / 2 + th], abs=1e-12)
+
+
+def test_a_gate_with_a_negative_threshold_fails_at_start_up():
+    slam = _slam(fake("badgate"))
+    with pytest.raises(SlamFailed, match="linear_update and angular_update must be >= 0"):
+        slam.process(*_scans(1)[0])
+    slam.close()

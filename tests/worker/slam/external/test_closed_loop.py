@@ -18,6 +18,7 @@ from tests.worker.test_pipeline import two_rooms
 from worker.pipeline import RunCancelled, run_one
 from worker.report.folder import write_report
 from worker.run_params import RunParams
+from worker.slam.gating import UpdateGate
 
 
 def _params(command: list[str], **ext) -> RunParams:
@@ -72,9 +73,17 @@ def test_killing_the_program_mid_run_fails_the_run_as_slam_failed(tmp_path):
     assert (ex.outcome, ex.reason) == ("failed", "slam_failed")
     assert "the program was killed by signal 9" in ex.stop_detail
     assert "| stderr: dead reckoning: 541 beams" in ex.stop_detail
-    # the kill lands after the step of t = 3.0 s; the next step is the first to see it
-    assert ex.stop_detail.startswith("external SLAM 'prog' failed at step 31 (t=3.10 s)")
-    assert ex.t[-1] == pytest.approx(3.1) and len(ex.t) == 32
+    # the kill lands after the step of t = 3.0 s; the first step sent after it sees it: the
+    # example asks for GMapping's gate, so that is the first step past the gate after 3.0 s
+    # (pose_est is its odometry: dead reckoning), and the trajectory ends there
+    sp = _params(wrapper).slam
+    gate = UpdateGate(sp.linear_update, sp.angular_update, sp.temporal_update)
+    sent = [k for k in range(len(ex.t)) if gate.step(ex.t[k], ex.pose_est[k]) and ex.t[k] > 3.0]
+    step = sent[0] if sent else len(ex.t) - 1
+    assert ex.stop_detail.startswith(
+        f"external SLAM 'prog' failed at step {step} (t={ex.t[step]:.2f} s)"
+    )
+    assert len(ex.t) == step + 1 and ex.t[step] > 3.0
     assert time.monotonic() - t0 < 60 and children() == before
     assert not os.path.exists(f"/proc/{killed[0]}")
     write_report(result, tmp_path / "report")  # a failed run is reported like any other
