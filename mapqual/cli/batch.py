@@ -160,6 +160,13 @@ DryRunOpt = Annotated[
     bool, typer.Option("--dry-run", help="List the runs and how many are left; run none.")
 ]
 OutOpt = Annotated[Path, typer.Option("-o", "--out", help="Output folder.")]
+TrainOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--train-model",
+        help="Then train the map-quality model on this batch's runs and write it here (JSON).",
+    ),
+]
 
 
 @app.command("batch")
@@ -180,6 +187,7 @@ def batch(
     dry_run: DryRunOpt = False,
     out: OutOpt = Path("batch"),
     allow_outside: AllowOutsideOpt = False,
+    train_model: TrainOpt = None,
 ) -> None:
     """Run an experiment (WORLDS x seeds x --slam x --laser-noise) and write its tables,
     figures and report.html to OUT. Re-running the same command resumes it.
@@ -187,7 +195,9 @@ def batch(
     An experiment file (YAML) holds the keys worlds, runs or seeds, slam, laser_noise and
     params (sim, slam, explore, eval sections), and optionally a list of groups with the
     same keys: the experiment is the union of their products. Options override the file's
-    values; --only narrows its worlds.
+    values; --only narrows its worlds. --train-model FILE then fits the model of `mapqual
+    predict` on this batch's runs (all of them so far: a resumed batch trains on more) and
+    writes it to FILE, for `mapqual predict --model FILE`.
     """
     from worker.batch.state import BatchDir
 
@@ -211,6 +221,11 @@ def batch(
     bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
     _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log,
              allow_outside=allow_outside)  # fmt: skip
+    if train_model is not None:
+        from mapqual.cli.predict import train_to
+
+        dirs = sorted({Path(s.world_path).parent for s in specs})  # where its worlds lie
+        train_to([out], train_model, dirs, command, allow_outside)
 
 
 def _specs(

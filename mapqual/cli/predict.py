@@ -59,7 +59,6 @@ def predict_cmd(
 
 
 def _train(batches: list[str], out: Path | None, worlds, allow_outside: bool) -> None:
-    from worker.predict.fit import train_model
     from worker.world.catalogue import default_worlds_dir
 
     if not batches:
@@ -67,12 +66,19 @@ def _train(batches: list[str], out: Path | None, worlds, allow_outside: bool) ->
     if out is None:
         raise InputError("give -o model.json")
     command = "mapqual " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    data = train_model(
-        [Path(b) for b in batches],
-        worlds or [default_worlds_dir()],
-        command=command,
-        allow_outside=allow_outside,
-    )
+    train_to([Path(b) for b in batches], out, worlds or [default_worlds_dir()], command,
+             allow_outside)  # fmt: skip
+
+
+def train_to(
+    batches: list[Path], out: Path, world_dirs: list[Path], command: str, allow_outside: bool
+) -> None:
+    """Train the model on `batches` (their runs.csv, the worlds found in `world_dirs`), write
+    it to `out` (JSON) and print its cross-validated accuracy (`predict train`, `batch
+    --train-model`)."""
+    from worker.predict.fit import train_model
+
+    data = train_model(batches, world_dirs, command=command, allow_outside=allow_outside)
     out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     print(f"model: {out}  ({data['training']['description']})")
     for slam, part in data["slam"].items():

@@ -341,3 +341,30 @@ def test_a_killed_celery_batch_loses_nothing_and_sends_no_run_twice(
         runs = s.scalars(select(Run).where(Run.id.in_(sent))).all()
         assert len(runs) == 4 and {r.status for r in runs} == {"done"}
     assert len(_csv(tmp_path / "out" / "runs.csv")) == 4
+
+
+def test_a_batch_retrains_the_prediction_model_on_its_runs(tmp_path):
+    """--train-model: after the runs, the model of `mapqual predict` fitted on this batch's
+    runs.csv and its worlds, written where asked and usable by `predict --model`."""
+    folder = tmp_path / "worlds"
+    folder.mkdir()
+    for name, door in (("hall", 60), ("annex", 20), ("wing", 90)):  # three buildings
+        img = np.full((120, 200), 255, np.uint8)
+        img[[0, -1], :] = img[:, [0, -1]] = 0
+        img[:, 100] = 0
+        img[door : door + 20, 100] = 255
+        Image.fromarray(img).save(folder / f"{name}.png")
+        (folder / f"{name}.yaml").write_text(f"image: {name}.png\nresolution: 0.05\n")
+    env = {"DATABASE_URL": f"sqlite:///{tmp_path / 'm.db'}"}
+    args = ["--seeds", "1", "--slam", "odometry", "--time-limit", "20", "--workers", "2"]
+    r = _mapqual(tmp_path, env, "batch", str(folder), *args, "-o", "out",
+                 "--train-model", "model.json")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    model = json.loads((tmp_path / "model.json").read_text())
+    assert sorted(model["training"]["worlds"]["odometry"]) == ["annex", "hall", "wing"]
+    assert model["training"]["batches"] == ["out"] and "--train-model" in model["command"]
+    assert "odometry leave-one-building-out" in r.stdout
+    r = _mapqual(tmp_path, env, "predict", str(folder / "hall.yaml"), "--slam", "odometry",
+                 "--model", "model.json", "--json")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["b_mean_t"]["median"] > 0
