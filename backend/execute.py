@@ -137,8 +137,10 @@ class _Job:
         attempt no longer holds the run."""
         from worker.pipeline import run_one
         from worker.report.folder import write_report, write_report_zip
+        from worker.slam.threads import with_process_threads
 
         world, params, seed = job
+        params = with_process_threads(params)  # the cores a lone run was given; same result
         log_path = self.folder / self.place.sim_log if self.place.sim_log else None
         result = run_one(world, params, seed, on_progress, sim_log=log_path)
         write_report(result, self.folder)

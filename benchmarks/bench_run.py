@@ -8,11 +8,28 @@ Target (issue 6): >= 20x real time on one core.
 
 --slam-threads 2 gives the scan matcher both cores (slam.threads; the run is the same bit for
 bit): the figure a single run reaches on a 2-core machine, beside the one-core target.
+
+Side by side (issue 21: this machine's speed drifts by a third within an hour, so the figure
+is a ratio of runs timed alternately, the order swapped every round):
+
+    .venv/bin/python benchmarks/bench_run.py --against OTHER_CHECKOUT [--rounds 3]
+        [--this-threads N] [--other-threads N] [--time-limit S]
+
+times a whole run in this checkout and in OTHER (its own .venv's interpreter) with the same
+driver (benchmarks/run_once.py) and prints each round's real-time factors and their ratio,
+then the median. --this-threads defaults to the cores `mapqual run` gives a lone run
+(worker.slam.threads), --other-threads to the other tree's default; give both 1 for the
+one-core comparison.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -29,9 +46,18 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
     ap.add_argument("--slam-threads", type=int, default=1, help="scan-matching threads")
+    ap.add_argument("--against", type=Path, help="another checkout to time side by side")
+    ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
+    ap.add_argument("--this-threads", type=int, default=None, help="--against: this tree's")
+    ap.add_argument("--other-threads", type=int, default=None, help="--against: the other's")
     args = ap.parse_args()
     if args.slam_threads < 1:
         ap.error("--slam-threads must be >= 1")
+    if args.against is not None:
+        if not (args.against / "worker" / "pipeline.py").is_file():
+            ap.error(f"--against: {args.against} is no mapqual checkout")
+        _side_by_side(args)
+        return
 
     from worker.pipeline import run_one
     from worker.report.folder import SIM_LOG, write_report
@@ -75,6 +101,51 @@ def main() -> None:
         ("report files", t2 - t1),
     ):
         print(f"  {name:26s} {v:8.2f} s  {100 * v / total:5.1f} %")
+
+
+def _side_by_side(args: argparse.Namespace) -> None:
+    """Whole runs here and in args.against, alternately; the ratio of real-time factors."""
+    from worker.slam.threads import cores
+
+    other = args.against.resolve()
+    python = other / ".venv" / "bin" / "python"
+    trees = {
+        "this": (Path(sys.executable), ROOT, args.this_threads or cores()),
+        "other": (python if python.exists() else Path(sys.executable), other, args.other_threads),
+    }
+    world = Path(args.world)  # the same plan, found under each tree
+    if world.is_absolute():
+        world = world.resolve().relative_to(ROOT)
+    print(f"side by side: this = {ROOT}, other = {other}; {args.slam}, seed {args.seed}, {world}")
+    ratios = []
+    for r in range(args.rounds):
+        order = list(trees) if r % 2 == 0 else list(reversed(trees))
+        got = {}
+        for name in order:
+            py, tree, threads = trees[name]
+            cmd = [
+                str(py), str(ROOT / "benchmarks" / "run_once.py"), "--tree", str(tree),
+                "--world", str(world), "--slam", args.slam, "--seed", str(args.seed),
+            ]  # fmt: skip
+            if args.time_limit is not None:
+                cmd += ["--time-limit", str(args.time_limit)]
+            if threads is not None:
+                cmd += ["--threads", str(threads)]
+            out = subprocess.run(cmd, capture_output=True, text=True, cwd=tree)
+            if out.returncode != 0:
+                sys.exit(f"{name} ({tree}) failed ({out.returncode}):\n{out.stderr[-2000:]}")
+            got[name] = json.loads(out.stdout.strip().splitlines()[-1])
+        rtf = {k: v["sim_s"] / v["wall_s"] for k, v in got.items()}
+        ratios.append(rtf["this"] / rtf["other"])
+        print(
+            f"round {r + 1} ({order[0]} first, {time.strftime('%H:%M', time.gmtime())} UTC, load "
+            f"{os.getloadavg()[0]:.1f}): this x{rtf['this']:.1f} ({got['this']['threads']} "
+            f"thread(s), {got['this']['outcome']}, {got['this']['sim_s']:.0f} s), other "
+            f"x{rtf['other']:.1f} ({got['other']['threads']}, {got['other']['outcome']}, "
+            f"{got['other']['sim_s']:.0f} s); this / other {ratios[-1]:.3f}"
+        )
+    print(f"median real-time factor ratio this / other over {len(ratios)} rounds: "
+          f"{statistics.median(ratios):.3f}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -4,7 +4,6 @@ local process pool or through Celery; resumable; tables, figures and report.html
 from __future__ import annotations
 
 import fnmatch
-import os
 import shlex
 import signal
 import sys
@@ -23,10 +22,9 @@ from worker.status import RecordStatus
 
 
 def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
+    from worker.slam.threads import cores
+
+    return cores()
 
 
 class BatchProgress:

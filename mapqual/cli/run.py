@@ -123,8 +123,13 @@ def run(
     as_json: JsonOpt = False,
     allow_outside: AllowOutsideOpt = False,
 ) -> None:
-    """Simulate, explore with SLAM, evaluate, and store one run of WORLD."""
+    """Simulate, explore with SLAM, evaluate, and store one run of WORLD. The run's scan
+    matcher uses every core this process may run on (MAPQUAL_SLAM_THREADS=1 keeps it to one;
+    the result is the same)."""
+    from worker.slam.threads import claim_default
     from worker.world.loader import load_world
+
+    claim_default(1)
 
     if slam is not None and slam not in registry.names():
         raise InputError(f"--slam must be one of {', '.join(registry.names())}, not {slam!r}")

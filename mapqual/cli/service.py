@@ -41,7 +41,10 @@ def worker(
 ) -> None:
     """A Celery worker that executes runs from the queue."""
     from worker.celery_conf import QUEUE
+    from worker.slam.threads import claim_default
     from worker.tasks import app as celery_app  # configured from the settings on import
+
+    claim_default(concurrency)  # each process's share of the cores, inherited by the pool
 
     celery_app.worker_main(
         [

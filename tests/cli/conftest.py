@@ -12,6 +12,9 @@ from mapqual.cli import main
 
 @pytest.fixture
 def run(monkeypatch, capsys):
+    # `mapqual run` sets it for its process (its share of the cores): restored after the test
+    monkeypatch.delenv("MAPQUAL_SLAM_THREADS", raising=False)
+
     def _run(*argv) -> tuple[int, str, str]:
         monkeypatch.setattr(sys, "argv", ["mapqual", *map(str, argv)])
         try:

@@ -173,3 +173,8 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path, args, needle):
     r = _mapqual(tmp_path, *args, timeout=120)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr
+
+
+def test_a_lone_run_gives_the_scan_matcher_every_core_it_may_use(finished_run):
+    _, summary = finished_run  # the environment left MAPQUAL_SLAM_THREADS unset
+    assert summary["params"]["slam"]["threads"] == len(os.sched_getaffinity(0))

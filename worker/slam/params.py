@@ -41,8 +41,10 @@ class SlamParams:
     ogain: float = 3.0  # gain smoothing the likelihood when normalising weights
     lskip: int = 0  # beams skipped between two used ones when matching
     minimum_score: float = 0.0  # below this match score, keep the odometry guess
-    # scan-matching threads (numba prange over particles); results do not depend on it. Keep 1
-    # when runs already execute in parallel processes, or from several Python threads at once.
+    # scan-matching threads (numba prange over particles); results do not depend on it. At 1
+    # (the default) a run executed alone takes its process's share of the cores instead
+    # (worker.slam.threads: `mapqual run` and `mapqual worker --concurrency 1` use them all, a
+    # batch's pool one each); the summary records the number used.
     threads: int = 1
     # motion model (GMapping's MotionModel::drawFromMotion)
     srr: float = 0.1  # [m/m] translation noise from translation

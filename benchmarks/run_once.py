@@ -1,0 +1,59 @@
+"""One whole run in the checkout it is started in, for `bench_run.py --against`: prints one
+JSON line {sim_s, wall_s, cpu_s, outcome, threads}. Uses only what every checkout since
+39ad88e has (load_world, RunParams.from_json, run_one), so the same driver times both trees:
+
+    OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
+        [--seed 1] [--time-limit S] [--threads N]
+
+--threads N sets slam.threads (left out: the tree's own default). The numba caches are warmed
+by a 5 s run first; the report files are not written (the same in both trees).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tree", type=Path, required=True, help="the checkout whose code runs")
+    ap.add_argument("--world", default="worlds/bormann/office_a.yaml", help="under --tree")
+    ap.add_argument("--slam", default="rbpf")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
+    ap.add_argument("--threads", type=int, default=None, help="slam.threads")
+    args = ap.parse_args()
+    sys.path.insert(0, str(args.tree.resolve()))
+    from worker.pipeline import run_one
+    from worker.world.loader import load_world
+
+    try:
+        from worker.run_params import RunParams
+    except ImportError:  # older trees kept it in the pipeline
+        from worker.pipeline import RunParams
+
+    data: dict = {"algorithm": args.slam}
+    if args.threads is not None:
+        data["slam"] = {"threads": args.threads}
+    world = load_world(args.tree / args.world)
+    run_one(world, RunParams.from_json({**data, "explore": {"time_limit": 5.0}}), args.seed)
+    if args.time_limit is not None:
+        data["explore"] = {"time_limit": args.time_limit}
+    params = RunParams.from_json(data)
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = run_one(world, params, args.seed)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    s = result.summary
+    s = s if isinstance(s, dict) else s.to_dict()  # a dict in older trees
+    print(json.dumps({
+        "sim_s": s["timings"]["sim_time_s"], "wall_s": wall, "cpu_s": cpu,
+        "outcome": s["outcome"], "threads": params.slam.threads,
+    }))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
