@@ -9,9 +9,11 @@ per axis and 5 % per-step noise, seeded; ground truth = the corrected poses), ru
 rbpf (GMapping's defaults, the thesis's 40 particles) and through the odometry baseline, and
 scored with B relations (random pairs of ground-truth poses; at least 500 of them, so that
 the mean does not swing with the draw; the relations' seed is the problem's). Prints one row a
-log: mean translational [m] and rotational [rad] B error of each, rbpf / odometry, wall time,
-and the figures Kuemmerle et al. (2009) publish for RBPF on these buildings (their relations,
-with the robots' real odometry: comparable in kind, not in value).
+log: mean translational [m] and rotational [rad] B error of each (rbpf's final trajectory,
+along its best particle's path, and beside it its online estimate, each scan's when it was
+processed), rbpf / odometry (final), wall time, and the figures Kuemmerle et al. (2009)
+publish for RBPF on these buildings (their relations, with the robots' real odometry:
+comparable in kind, not in value).
 --scans N takes the first N scans only (the test's slices). Runs one log at a time (the
 machine is shared); the whole of Freiburg 079 (4,791 scans) takes minutes.
 """
@@ -30,6 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tests.shared_data import CARMEN  # noqa: E402
 from worker.evaluate.metric import evaluate_relations  # noqa: E402
 from worker.evaluate.relations import BParams, relations_B  # noqa: E402
 from worker.evaluate.trajectory import Trajectory  # noqa: E402
@@ -38,7 +41,7 @@ from worker.sim.drift import DriftParams, drifting_problem, log_slice  # noqa: E
 from worker.slam.params import SlamParams  # noqa: E402
 from worker.slam.run import run_slam  # noqa: E402
 
-DATA = ROOT.parent / "shared" / "data" / "carmen"
+DATA = CARMEN  # ../shared/data/carmen beside the checkout (or MAPQUAL_SHARED)
 LOGS = {
     "aces": "aces-corrected.log.gz",
     "csail": "csail-corrected.log.gz",
@@ -83,6 +86,9 @@ def run_log(name: str, args: argparse.Namespace) -> dict:
         wall = time.perf_counter() - t0
         trans, rot, n = b_errors(gt, result.trajectory, args.seed)
         row[algorithm] = {"trans_m": trans, "rot_rad": rot, "relations": n, "wall_s": wall}
+        if result.online is not result.trajectory:
+            trans, rot, _ = b_errors(gt, result.online, args.seed)
+            row[algorithm].update(online_trans_m=trans, online_rot_rad=rot)
     return row
 
 
@@ -95,6 +101,8 @@ def _print(rows: list[dict], args: argparse.Namespace) -> None:
     head = f"{'log':<13} {'scans':>5}"
     for a in args.algorithms:
         head += f" {a + ' t [m]':>14} {a + ' r [rad]':>15} {a + ' s':>10}"
+    if "rbpf" in args.algorithms:
+        head += f" {'online t [m]':>12} {'online r':>9}"
     if {"rbpf", "odometry"} <= set(args.algorithms):
         head += f" {'rbpf/odom t':>11} {'rbpf/odom r':>11}"
     print(head + "  published RBPF t [m]")
@@ -103,6 +111,9 @@ def _print(rows: list[dict], args: argparse.Namespace) -> None:
         for a in args.algorithms:
             r = row[a]
             line += f" {r['trans_m']:>14.3f} {r['rot_rad']:>15.4f} {r['wall_s']:>10.1f}"
+        if "rbpf" in args.algorithms:
+            r = row["rbpf"]
+            line += f" {r['online_trans_m']:>12.3f} {r['online_rot_rad']:>9.4f}"
         if {"rbpf", "odometry"} <= set(args.algorithms):
             t = row["rbpf"]["trans_m"] / row["odometry"]["trans_m"]
             r = row["rbpf"]["rot_rad"] / row["odometry"]["rot_rad"]

@@ -59,7 +59,9 @@ def slam(
 ) -> None:
     """Run SLAM over LOG with the odometry pose of each laser line; write DIR/map.pgm,
     DIR/map.yaml, DIR/map.png, DIR/trajectory.log (FLASER lines, the estimate at every laser
-    timestamp), DIR/trajectory.tum and DIR/slam.json."""
+    timestamp), DIR/trajectory.tum and DIR/slam.json. For rbpf and graph the trajectory is
+    the final one (the best particle's path; the optimised graph) and DIR/online.tum holds
+    the estimate each scan had when it was processed."""
     options = {
         "particles": particles, "linear_update": linear_update,
         "angular_update": angular_update, "temporal_update": temporal_update, "delta": delta,
@@ -114,6 +116,8 @@ def _run(
     result.grid.save_png(out / "map.png")
     write_carmen(out / "trajectory.log", result.trajectory)
     write_tum(out / "trajectory.tum", result.trajectory)
+    if result.online is not result.trajectory:
+        write_tum(out / "online.tum", result.online)
     summary = {
         "log": str(log),
         "algorithm": algorithm,

@@ -5,15 +5,15 @@ one-line errors."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.shared_data import CARMEN
 from worker.evaluate.trajio import read_trajectory
 from worker.sim.carmen import read_laser_log
 
-DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "carmen"
+DATA = CARMEN
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="no ../shared/data/carmen here")
 
 

@@ -54,6 +54,12 @@ def test_slam_writes_map_and_trajectory(run, sim_log, tmp_path):
     # the estimate stays near the ground truth in this small room
     gt = log.pose_gt[np.searchsorted(log.t_gt, log.t)]
     assert np.hypot(*(carmen.poses[:, :2] - gt[:, :2]).T).max() < 0.3
+    # the trajectory is the best particle's path; online.tum each scan's estimate at the time:
+    # the same times, and the same pose at the last scan (the best particle's, then)
+    online = read_trajectory(out / "online.tum")
+    assert np.array_equal(online.t, tum.t)
+    assert np.allclose(online.poses[-1], tum.poses[-1], atol=1e-6)
+    assert np.hypot(*(online.poses[:, :2] - gt[:, :2]).T).max() < 0.3
 
 
 def test_same_seed_same_bytes(run, sim_log, tmp_path):
@@ -87,6 +93,7 @@ def test_odometry_algorithm_and_params_file(run, sim_log, tmp_path):
     # odometry: the estimate is the log's odometry
     est = read_trajectory(tmp_path / "o" / "trajectory.log")
     assert np.allclose(est.poses, read_laser_log(sim_log).pose_odom, atol=1e-6)
+    assert not (tmp_path / "o" / "online.tum").exists()  # no final trajectory apart from it
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ from worker.evaluate.se2 import compose, inverse
 from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.grid import OccupancyGrid
+from worker.slam.keyposes import Lineage, relative_many
 from worker.slam.match_all_kernels import scan_match_all, scan_match_all_parallel
 from worker.slam.match_kernels import (
     C_ASTEP,
@@ -101,10 +102,12 @@ class RbpfSlam:
         self._raw_last = np.zeros(3)  # the raw odometry of the previous scan
         self._at_update = (np.zeros(3), self.poses.copy())  # raw odometry, poses at the update
         self._scale = ScaleEstimate()  # the odometry's learnt scale (sparse steps only)
+        self.lineage = Lineage()  # every particle's path, for the final trajectory
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, raw, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
         p = self.params
+        self.lineage.scan(raw)
         if self._odom_last is None:
             pose = raw
             self.poses[:] = pose  # the map frame starts at the first odometry pose
@@ -131,9 +134,10 @@ class RbpfSlam:
             self._proposal_and_weights(ranges, self._pred if self._sparse else None)
             if self._sparse:
                 self._learn_scale(raw)
-            same_as = self._maybe_resample()
+            same_as, parents = self._maybe_resample()
         else:  # the first scan: every particle at the same pose, with the same empty map
-            same_as = np.zeros(self.poses.shape[0], dtype=np.int64)
+            same_as, parents = np.zeros(self.poses.shape[0], dtype=np.int64), None
+        self.lineage.update(self.poses, parents)
         self.maps.register(
             self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range, same_as
         )
@@ -163,7 +167,7 @@ class RbpfSlam:
         matched step (before resampling: the rows still match those of the last update)."""
         raw_then, poses_then = self._at_update
         weights, _ = normalized_weights(self.log_weights, self.params.ogain)
-        matched = _relative_all(poses_then, self.poses)
+        matched = relative_many(poses_then, self.poses)
         self._scale.add(relative3(raw_then, raw), weights @ matched)
 
     def _predict(self, pose: np.ndarray) -> None:
@@ -207,23 +211,32 @@ class RbpfSlam:
         self.log_weights += likes
         self.log_weight_sums += likes
 
-    def _maybe_resample(self) -> np.ndarray | None:
-        """Resample when Neff is low. Returns None, or after resampling which particle each
-        one is a copy of (same_as for PatchMaps.register: the first copy of its parent)."""
+    def _maybe_resample(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Resample when Neff is low. Returns (None, None), or after resampling which particle
+        each one is a copy of (same_as for PatchMaps.register: the first copy of its parent)
+        and the index of its parent before."""
         weights, self.neff = normalized_weights(self.log_weights, self.params.ogain)
         n = self.poses.shape[0]
         if self.neff >= self.params.resample_threshold * n:
-            return None
+            return None, None
         idx = systematic_indices(weights, self.rng)  # sorted: copies of a parent are adjacent
         self.poses = self.poses[idx]
         self.log_weight_sums = self.log_weight_sums[idx]
         self.log_weights = np.zeros(n)
         self.maps.select(idx)
         self.resamplings += 1
-        return np.searchsorted(idx, idx, side="left")
+        return np.searchsorted(idx, idx, side="left"), idx
 
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)
+
+    def final_trajectory(self) -> np.ndarray:
+        """(N, 3) the pose at every scan processed so far along the best particle's path (its
+        pose at each update, as GMapping's trajectory tree keeps it, with the odometry between
+        updates blended as in worker.slam.keyposes.between_keys): offline SLAM's answer, the
+        path the final map was built along. pose_estimate gave the online one, the best
+        particle of each moment, which resampling may since have dropped."""
+        return self.lineage.trajectory(self._best)
 
     def T_map_odom(self) -> np.ndarray:
         return self._T_map_odom.copy()
@@ -246,11 +259,3 @@ def _compose_all(poses: np.ndarray, step: np.ndarray) -> np.ndarray:
             (th + np.pi) % (2 * np.pi) - np.pi,
         ]
     )
-
-
-def _relative_all(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, 3) inv(a_i) (+) b_i for (N, 3) poses."""
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    dth = (b[:, 2] - a[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])

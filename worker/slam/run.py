@@ -21,7 +21,9 @@ class SlamRunResult:
 
     trajectory: the estimate (map frame) at every laser timestamp, (N,) t and (N, 3) poses:
         the online one, or an algorithm's final one when it has one (graph SLAM's
-        `final_trajectory`, after every loop closure).
+        `final_trajectory`, after every loop closure; rbpf's, along its best particle).
+    online: the estimate each scan had when it was processed (the same object as trajectory
+        for an algorithm without a final one).
     grid: the final map. updates: filter updates; wall_s [s]: processing time;
     log_duration_s [s]: the log's span of simulated (or recorded) time.
     """
@@ -29,6 +31,7 @@ class SlamRunResult:
     algorithm: str
     params: SlamParams
     trajectory: Trajectory
+    online: Trajectory
     grid: OccupancyGrid
     updates: int
     wall_s: float
@@ -72,15 +75,18 @@ def run_slam(
             est[k] = slam.pose_estimate()
             if on_progress is not None and (k % every == 0 or k == n - 1):
                 on_progress(k + 1, n)
+        online = Trajectory.from_samples(t, est)
         final = getattr(slam, "final_trajectory", None)
-        if final is not None:  # graph SLAM: every scan as the final, optimised graph has it
-            est = final()
+        # graph SLAM: every scan as the final, optimised graph has it; rbpf: along the best
+        # particle's path
+        trajectory = online if final is None else Trajectory.from_samples(t, final())
         grid = slam.occupancy()
     wall = time.perf_counter() - wall0
     return SlamRunResult(
         algorithm=algorithm,
         params=params,
-        trajectory=Trajectory.from_samples(t, est),
+        trajectory=trajectory,
+        online=online,
         grid=grid,
         updates=updates,
         wall_s=wall,

@@ -8,18 +8,17 @@ from ROS itself: REP 117's +inf for no return, the md5sums ROS 1 publishes for t
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.shared_data import SHARED
 from worker.errors import InputError
 from worker.export.bag import export_bag, write_bag
 from worker.export.rosmsgs import body_twist
 from worker.sim.carmen import CarmenWriter, read_laser_log
 from worker.sim.laser import LaserSpec
 
-SHARED = Path(__file__).resolve().parents[4] / "shared"
 N = 30
 DT = 0.1
 V, W = 0.5, 0.2  # [m/s], [rad/s] a constant arc

@@ -3,11 +3,10 @@ the problem of `worker.sim.drift` (3 % scale, 5 % per-step noise), scored by B r
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from tests.shared_data import CARMEN
 from worker.evaluate.metric import evaluate_relations
 from worker.evaluate.relations import BParams, relations_B
 from worker.sim.carmen import read_laser_log
@@ -15,7 +14,7 @@ from worker.sim.drift import drifting_problem, log_slice
 from worker.slam.params import SlamParams
 from worker.slam.run import run_slam
 
-DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "carmen"
+DATA = CARMEN
 TARGET_RATIO = 0.35  # issue 17: rbpf at most 0.35x the odometry baseline's mean B error
 
 

@@ -15,6 +15,7 @@ from worker.slam.graph.nodes import EdgeList, LoopClosure, NodeStore, find_candi
 from worker.slam.graph.optimize import edge_errors, optimize
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.grid import OccupancyGrid
+from worker.slam.keyposes import between_keys
 from worker.slam.motion import compose3, relative3
 from worker.slam.params import SlamParams
 
@@ -202,25 +203,15 @@ class GraphSlam:
         odometry gives from each, (P_a (+) o_a^-1 o_s) and (P_b (+) o_b^-1 o_s), blended by
         the share of the odometry path from a to b travelled at the scan; scans after the
         last node from it alone."""
-        odom = np.array(self._scan_odom).reshape(-1, 3)
-        node = np.array(self._scan_node, dtype=np.int64)
-        out = odom.copy()  # before the first node (none: the first scan makes one)
-        has = node >= 0
-        if not has.any():
-            return out
-        nodes, a = self.nodes, node[has]
-        fwd = _compose_many(nodes.poses[a], _relative_many(nodes.odom[a], odom[has]))
-        b = np.minimum(a + 1, nodes.n - 1)
-        bwd = _compose_many(nodes.poses[b], _relative_many(nodes.odom[b], odom[has]))
-        span = nodes.path_m[b] - nodes.path_m[a]
-        along = np.array(self._scan_path)[has] - nodes.path_m[a]
-        w = np.clip(along / np.where(span > 0, span, np.inf), 0.0, 1.0)
-        d = bwd - fwd
-        d[:, 2] = (d[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
-        blend = fwd + w[:, None] * d
-        blend[:, 2] = (blend[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
-        out[has] = blend
-        return out
+        n = self.nodes.n
+        return between_keys(
+            self.nodes.poses[:n],
+            self.nodes.odom[:n],
+            self.nodes.path_m[:n],
+            np.array(self._scan_odom).reshape(-1, 3),
+            np.array(self._scan_node, dtype=np.int64),
+            np.array(self._scan_path),
+        )
 
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)
@@ -254,23 +245,6 @@ def _shift_frame(pose: np.ndarray, rival: np.ndarray, max_rotation: float) -> fl
     if abs(math.remainder(float(rival[2] - pose[2]), 2.0 * math.pi)) > max_rotation:
         return None
     return math.atan2(rival[1] - pose[1], rival[0] - pose[0]) - float(pose[2])
-
-
-def _relative_many(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, 3) inv(a_k) (+) b_k."""
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    dth = (b[:, 2] - a[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
-    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])
-
-
-def _compose_many(a: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """(N, 3) a_k (+) d_k."""
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    th = (a[:, 2] + d[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
-    return np.column_stack(
-        [a[:, 0] + c * d[:, 0] - s * d[:, 1], a[:, 1] + s * d[:, 0] + c * d[:, 1], th]
-    )
 
 
 def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):
