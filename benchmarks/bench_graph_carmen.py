@@ -56,10 +56,11 @@ def bench_log(name: str, args: argparse.Namespace) -> dict[str, float]:
         trans, rot, n = b_errors(gt, traj, args.seed)
         out[alg] = trans
         extra = ""
-        if final is not None:
-            extra = (
-                f"; online estimate {b_errors(gt, online, args.seed)[0]:.3f} m; "
-                f"{slam.nodes.n} nodes, {len(slam.closures)} closures, "
+        if final is not None:  # graph, and rbpf along its best particle
+            extra = f"; online estimate {b_errors(gt, online, args.seed)[0]:.3f} m"
+        if alg == "graph":
+            extra += (
+                f"; {slam.nodes.n} nodes, {len(slam.closures)} closures, "
                 f"{slam.ambiguous_closures} ambiguous, {slam.rejected_closures} rejected, "
                 f"{slam.match_failures} match failures"
             )
