@@ -64,6 +64,44 @@ def between_keys(
     return out
 
 
+class ScanTrack:
+    """Per scan processed: its odometry pose, the odometry path length so far [m], and the
+    latest key (node, update) at or before it (-1: none yet): what `between_keys` needs."""
+
+    def __init__(self) -> None:
+        self.path_m = 0.0  # [m] odometry path length at the latest scan
+        self._odom: list[np.ndarray] = []
+        self._path: list[float] = []
+        self._key: list[int] = []
+
+    def scan(self, pose_odom: np.ndarray) -> None:
+        """Note a scan (its key stays the latest one unless `keyed` follows)."""
+        if self._odom:
+            last = self._odom[-1]
+            self.path_m += math.hypot(pose_odom[0] - last[0], pose_odom[1] - last[1])
+        self._odom.append(np.array(pose_odom, dtype=np.float64))
+        self._path.append(self.path_m)
+        self._key.append(self._key[-1] if self._key else -1)
+
+    def keyed(self, key: int) -> None:
+        """The latest scan is key `key`."""
+        self._key[-1] = key
+
+    @property
+    def odom(self) -> np.ndarray:
+        """(3,) the latest scan's odometry pose."""
+        return self._odom[-1]
+
+    def trajectory(self, key_pose: np.ndarray, key_odom: np.ndarray, key_path: np.ndarray):
+        """(N, 3) every scan's pose from the keys' (see between_keys)."""
+        if not self._odom:
+            return np.zeros((0, 3))
+        return between_keys(
+            key_pose, key_odom, key_path, np.array(self._odom),
+            np.array(self._key, dtype=np.int64), np.array(self._path),
+        )  # fmt: skip
+
+
 class Lineage:
     """A particle filter's history: each particle's pose at every update and which particle of
     the update before it descends from, so that one particle's whole path can be read back
@@ -75,28 +113,20 @@ class Lineage:
         self._parents: list[np.ndarray | None] = []  # per update: (N,) index into the one before
         self._odom: list[np.ndarray] = []  # per update: (3,) the raw odometry at it
         self._path: list[float] = []  # per update: [m] odometry path length at it
-        self._scan_key: list[int] = []  # per scan: the latest update at or before it
-        self._scan_odom: list[np.ndarray] = []
-        self._scan_path: list[float] = []
-        self._path_m = 0.0
+        self._scans = ScanTrack()
 
     def scan(self, pose_odom: np.ndarray) -> None:
         """Note a scan's raw odometry (before `update`, when the scan is one)."""
-        if self._scan_odom:
-            last = self._scan_odom[-1]
-            self._path_m += math.hypot(pose_odom[0] - last[0], pose_odom[1] - last[1])
-        self._scan_odom.append(np.array(pose_odom, dtype=np.float64))
-        self._scan_path.append(self._path_m)
-        self._scan_key.append(len(self._poses) - 1)
+        self._scans.scan(pose_odom)
 
     def update(self, poses: np.ndarray, parents: np.ndarray | None) -> None:
         """Note the update of the latest scan: the particles' poses after it, and for each
         the particle of the previous update it descends from (None: the same index)."""
         self._poses.append(np.array(poses, dtype=np.float64))
         self._parents.append(None if parents is None else np.asarray(parents, dtype=np.int64))
-        self._odom.append(self._scan_odom[-1])
-        self._path.append(self._path_m)
-        self._scan_key[-1] = len(self._poses) - 1
+        self._odom.append(self._scans.odom)
+        self._path.append(self._scans.path_m)
+        self._scans.keyed(len(self._poses) - 1)
 
     def path(self, particle: int) -> np.ndarray:
         """(K, 3) the poses of `particle` (an index into the latest update) and its ancestors
@@ -113,13 +143,6 @@ class Lineage:
 
     def trajectory(self, particle: int) -> np.ndarray:
         """(N, 3) the pose at every scan noted, along `particle`'s path (see between_keys)."""
-        if not self._scan_odom:
-            return np.zeros((0, 3))
-        return between_keys(
-            self.path(particle),
-            np.array(self._odom).reshape(-1, 3),
-            np.array(self._path),
-            np.array(self._scan_odom),
-            np.array(self._scan_key, dtype=np.int64),
-            np.array(self._scan_path),
+        return self._scans.trajectory(
+            self.path(particle), np.array(self._odom).reshape(-1, 3), np.array(self._path)
         )

@@ -15,7 +15,7 @@ from worker.slam.graph.nodes import EdgeList, LoopClosure, NodeStore, find_candi
 from worker.slam.graph.optimize import edge_errors, optimize
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.grid import OccupancyGrid
-from worker.slam.keyposes import between_keys
+from worker.slam.keyposes import ScanTrack
 from worker.slam.motion import compose3, relative3
 from worker.slam.params import SlamParams
 
@@ -57,28 +57,19 @@ class GraphSlam:
         self.match_failures = 0  # nodes tied by odometry alone
         self.optimisations = 0
         self.updates = 0
-        self._path_m = 0.0
-        self._odom_prev: np.ndarray | None = None
         self._pose_odom = np.zeros(3)
         self._T_map_odom = np.zeros(3)
         self._grid: OccupancyGrid | None = None
-        self._scan_node: list[int] = []  # per scan processed: the latest node at that scan
-        self._scan_odom: list[np.ndarray] = []  # per scan processed: its odometry pose
-        self._scan_path: list[float] = []  # per scan processed: [m] odometry path so far
+        self._scans = ScanTrack()  # per scan processed: odometry, path so far, latest node
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
-        if self._odom_prev is not None:
-            self._path_m += math.hypot(pose[0] - self._odom_prev[0], pose[1] - self._odom_prev[1])
-        self._odom_prev = pose
         self._pose_odom = pose
-        self._scan_odom.append(pose)
-        self._scan_path.append(self._path_m)
+        self._scans.scan(pose)
         if not self._gate.step(t, pose):
-            self._scan_node.append(self.nodes.n - 1)
             return False
         k = self._add_node(t, pose, ranges)
-        self._scan_node.append(k)
+        self._scans.keyed(k)
         g = self.graph_params
         if g.do_loop_closing and k % g.loop_attempt_every == 0:
             self._try_loop_closure(k)
@@ -93,7 +84,7 @@ class GraphSlam:
         nrm = point_normals(pts, NORMAL_GAP)
         reach = scan_reach(ranges, self._usable, self._max_range)
         if nodes.n == 0:  # the map frame is the odometry frame of the first scan
-            return nodes.add(pose_odom, pose_odom, t, self._path_m, ranges, pts, nrm, reach)
+            return nodes.add(pose_odom, pose_odom, t, self._scans.path_m, ranges, pts, nrm, reach)
         prev = nodes.n - 1
         odo = relative3(nodes.odom[prev], pose_odom)
         prior = compose3(nodes.poses[prev], odo)
@@ -115,7 +106,7 @@ class GraphSlam:
             pose, z = prior, odo
             s_xy = max(0.01, g.odom_sigma_xy_per_m * math.hypot(odo[0], odo[1]))
             sigma = (s_xy, s_xy, 0.01 + g.odom_sigma_theta_per_rad * abs(odo[2]))
-        k = nodes.add(pose, pose_odom, t, self._path_m, ranges, pts, nrm, reach)
+        k = nodes.add(pose, pose_odom, t, self._scans.path_m, ranges, pts, nrm, reach)
         self.edges.add(prev, k, z, sigma, robust=False)
         return k
 
@@ -204,13 +195,8 @@ class GraphSlam:
         the share of the odometry path from a to b travelled at the scan; scans after the
         last node from it alone."""
         n = self.nodes.n
-        return between_keys(
-            self.nodes.poses[:n],
-            self.nodes.odom[:n],
-            self.nodes.path_m[:n],
-            np.array(self._scan_odom).reshape(-1, 3),
-            np.array(self._scan_node, dtype=np.int64),
-            np.array(self._scan_path),
+        return self._scans.trajectory(
+            self.nodes.poses[:n], self.nodes.odom[:n], self.nodes.path_m[:n]
         )
 
     def pose_estimate(self) -> np.ndarray:
