@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
+from scipy import ndimage
 
 from worker.explore.coverage import align_map_to_world
 from worker.explore.params import ExploreParams
@@ -34,48 +35,135 @@ def map_image(prob: np.ndarray, occ_thresh: float) -> np.ndarray:
     return img
 
 
-def snapshot_mse(a: np.ndarray, a_origin, b: np.ndarray, b_origin, resolution: float) -> float:
-    """Mean squared pixel difference of two map images placed on their common extent.
-
-    a, b: (H, W) uint8 images (bottom row first) with the world position of their lower-left
-    corner; both share `resolution`. The part only one of them covers counts as unknown in
-    the other, as a map that grew shows new pixels against the old image's background.
-    """
+def _common_extent(a: np.ndarray, a_origin, b: np.ndarray, b_origin, resolution: float):
+    """Two map images (bottom row first, lower-left corner at `*_origin` [m]) placed on their
+    common extent; the part only one covers is unknown in the other. `(H, W) uint8` each."""
     ax, ay = (int(round(v / resolution)) for v in np.asarray(a_origin)[:2])
     bx, by = (int(round(v / resolution)) for v in np.asarray(b_origin)[:2])
     x0, y0 = min(ax, bx), min(ay, by)
     x1 = max(ax + a.shape[1], bx + b.shape[1])
     y1 = max(ay + a.shape[0], by + b.shape[0])
-    ca = np.full((y1 - y0, x1 - x0), _UNKNOWN, dtype=np.float32)
+    ca = np.full((y1 - y0, x1 - x0), _UNKNOWN, dtype=np.uint8)
     cb = ca.copy()
     ca[ay - y0 : ay - y0 + a.shape[0], ax - x0 : ax - x0 + a.shape[1]] = a
     cb[by - y0 : by - y0 + b.shape[0], bx - x0 : bx - x0 + b.shape[1]] = b
-    return float(np.mean((ca - cb) ** 2))
+    return ca, cb
+
+
+def snapshot_mse(a: np.ndarray, a_origin, b: np.ndarray, b_origin, resolution: float) -> float:
+    """The thesis's measure: mean squared pixel difference of two map images placed on their
+    common extent.
+
+    a, b: (H, W) uint8 images (bottom row first) with the world position of their lower-left
+    corner; both share `resolution`. The part only one of them covers counts as unknown in
+    the other, as a map that grew shows new pixels against the old image's background.
+    """
+    ca, cb = _common_extent(a, a_origin, b, b_origin, resolution)
+    return float(np.mean((ca.astype(np.float32) - cb) ** 2))
+
+
+@dataclass(frozen=True)
+class SnapshotChange:
+    """How much a map changed between two snapshots.
+
+    changed_m2 [m^2]: cells whose class (free / occupied / unknown) changed and whose change
+    is not a boundary moved by at most `tolerance` cells (the new class is not within that
+    many cells in the old image, or the old class not within them in the new one).
+    share [-]: changed_m2 over the area known (free or occupied) in either snapshot.
+    mse [-]: the thesis's pixel MSE over all pixels of the common extent (map_saver levels).
+    """
+
+    changed_m2: float
+    share: float
+    mse: float
+
+
+_CLASSES = (_OCCUPIED, _FREE, _UNKNOWN)
+
+
+def snapshot_change(
+    a: np.ndarray, a_origin, b: np.ndarray, b_origin, resolution: float, tolerance: int
+) -> SnapshotChange:
+    """The change from snapshot a to snapshot b (map images as `snapshot_mse` takes them).
+
+    A wall the SLAM map draws a cell further out, a frontier that advanced by a cell: such
+    jitter is not the map changing, so a cell counts only when its new class is absent from
+    the old image within `tolerance` cells (8-neighbourhood), or its old class absent from
+    the new one. tolerance 0 counts every changed cell.
+    """
+    ca, cb = _common_extent(a, a_origin, b, b_origin, resolution)
+    mse = float(np.mean((ca.astype(np.float32) - cb) ** 2))
+    changed = ca != cb
+    if tolerance > 0 and changed.any():
+        square = np.ones((3, 3), dtype=bool)
+        explained_a = np.zeros_like(changed)  # b's class occurs near the cell in a
+        explained_b = np.zeros_like(changed)  # a's class occurs near the cell in b
+        for k in _CLASSES:
+            near_a = ndimage.binary_dilation(ca == k, square, iterations=tolerance)
+            near_b = ndimage.binary_dilation(cb == k, square, iterations=tolerance)
+            explained_a |= (cb == k) & near_a
+            explained_b |= (ca == k) & near_b
+        changed &= ~(explained_a & explained_b)
+    n_known = np.count_nonzero((ca != _UNKNOWN) | (cb != _UNKNOWN))
+    n_changed = int(np.count_nonzero(changed))
+    share = n_changed / n_known if n_known else math.inf  # nothing known: not unchanged
+    return SnapshotChange(n_changed * resolution * resolution, share, mse)
 
 
 class SnapshotRule:
-    """Takes a map snapshot every `period` s; fires when two consecutive differ by < `mse`."""
+    """Takes a map snapshot every `period` s; fires when two consecutive differ by little.
 
-    def __init__(self, period: float, mse: float):
+    measure "changed_share" (the default): less than `change` of the known map changed
+    class beyond `tolerance` cells (`snapshot_change`); "mse": the thesis's pixel MSE below
+    `mse` (`snapshot_mse`).
+    """
+
+    def __init__(
+        self,
+        period: float,
+        mse: float,
+        measure: str = "changed_share",
+        change: float = 0.01,
+        tolerance: int = 1,
+    ):
         self.period = period
         self.mse = mse
+        self.measure = measure
+        self.change = change
+        self.tolerance = tolerance
         self.next_t = period
         self._last: tuple[np.ndarray, np.ndarray] | None = None
-        self.last_mse = math.nan
+        self.last: SnapshotChange | None = None
+
+    @property
+    def last_mse(self) -> float:
+        return math.nan if self.last is None else self.last.mse
 
     def due(self, t: float) -> bool:
         return t >= self.next_t - 1e-9
 
     def check(self, t: float, prob: np.ndarray, origin, resolution: float, occ_thresh: float):
-        """Take the snapshot due at t; True when it differs from the previous by less than mse."""
+        """Take the snapshot due at t; True when it differs from the previous by little."""
         self.next_t += self.period
         img = map_image(prob, occ_thresh)
         origin = np.asarray(origin, dtype=float)[:2].copy()
         last, self._last = self._last, (img, origin)
         if last is None:
             return False
-        self.last_mse = snapshot_mse(last[0], last[1], img, origin, resolution)
-        return self.last_mse < self.mse
+        self.last = c = snapshot_change(last[0], last[1], img, origin, resolution, self.tolerance)
+        if self.measure == "mse":
+            return c.mse < self.mse
+        return c.share < self.change
+
+    def describe(self) -> str:
+        """The last comparison, in one line."""
+        c = self.last
+        if c is None:
+            return f"map snapshots {self.period:g} s apart"
+        return (
+            f"map snapshots {self.period:g} s apart: {100 * c.share:.2f} % of the known map "
+            f"changed ({c.changed_m2:.1f} m^2), MSE {c.mse:.2f}"
+        )
 
 
 @dataclass(frozen=True)
@@ -191,10 +279,10 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    a mean squared error below `mse`."""
+    little (SnapshotRule's measures)."""
 
-    def __init__(self, period: float, mse: float):
-        self.snapshots = SnapshotRule(period, mse)
+    def __init__(self, period: float, mse: float, **measure):
+        self.snapshots = SnapshotRule(period, mse, **measure)
 
     def check(self, s: LoopState) -> StopReason | None:
         rule = self.snapshots
@@ -203,8 +291,7 @@ class MapUnchangedRule:
         grid = s.occupancy()
         if not rule.check(s.t, grid.prob, grid.origin, grid.resolution, grid.occ_thresh):
             return None
-        detail = f"map snapshots {rule.period:g} s apart: MSE {rule.last_mse:.2f}"
-        return StopReason("map_unchanged", detail)
+        return StopReason("map_unchanged", rule.describe())
 
 
 class TimeLimitRule:
@@ -227,7 +314,13 @@ def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> 
         GoalFailuresRule(p.max_goal_failures),
         NoFrontierRule(p.no_frontier_time),
         NotMovingRule(start_xy, p.stuck_distance, p.stuck_timeout),
-        MapUnchangedRule(p.snapshot_period, p.snapshot_mse),
+        MapUnchangedRule(
+            p.snapshot_period,
+            p.snapshot_mse,
+            measure=p.snapshot_measure,
+            change=p.snapshot_change,
+            tolerance=p.snapshot_tolerance,
+        ),  # fmt: skip
         TimeLimitRule(p.time_limit),
     ]
 

@@ -23,6 +23,7 @@ from worker.explore.stop_rules import (
     default_rules,
     first_stop,
     map_image,
+    snapshot_change,
     snapshot_mse,
 )
 
@@ -50,7 +51,7 @@ def test_a_grown_map_counts_its_new_pixels_against_unknown():
 
 
 def test_rule_takes_a_snapshot_every_period_and_fires_on_a_small_change():
-    rule = SnapshotRule(period=300.0, mse=5.0)
+    rule = SnapshotRule(period=300.0, mse=5.0, measure="mse")  # the thesis's rule
     prob = np.full((10, 10), 0.1, dtype=np.float32)
     assert not rule.due(299.9) and rule.due(300.0)
     assert not rule.check(300.0, prob, (0.0, 0.0), 0.05, 0.25)  # the first: nothing to compare
@@ -63,15 +64,83 @@ def test_rule_takes_a_snapshot_every_period_and_fires_on_a_small_change():
     assert rule.last_mse == 0.0
 
 
+def _room(shape=(40, 40), wall_x=30):
+    """A free room with a vertical wall (occupied column) at wall_x, unknown beyond it."""
+    img = np.full(shape, 205, dtype=np.uint8)
+    img[:, :wall_x] = 254
+    img[:, wall_x] = 0
+    return img
+
+
+def test_a_wall_drawn_one_cell_further_out_is_not_a_change():
+    a, b = _room(wall_x=30), _room(wall_x=31)
+    c = snapshot_change(a, (0.0, 0.0), b, (0.0, 0.0), 0.05, tolerance=1)
+    assert c.changed_m2 == 0.0 and c.share == 0.0
+    # the thesis's MSE sees the 40 cells free -> ... each changed: 40 (254^2) + 40 (205^2)
+    assert c.mse == pytest.approx((40 * 254**2 + 40 * 205**2) / 1600)
+    # counted cell by cell (tolerance 0): the two changed columns, 80 cells of 0.0025 m^2
+    c0 = snapshot_change(a, (0.0, 0.0), b, (0.0, 0.0), 0.05, tolerance=0)
+    assert c0.changed_m2 == pytest.approx(80 * 0.0025)
+    # known in either: 32 columns of 40 cells
+    assert c0.share == pytest.approx(80 / (32 * 40))
+
+
+def test_a_wall_moved_two_cells_and_new_free_space_count():
+    a, b = _room(wall_x=20), _room(wall_x=22)
+    c = snapshot_change(a, (0.0, 0.0), b, (0.0, 0.0), 0.05, tolerance=1)
+    # a cell counts unless its new class is within one cell in a AND its old class within
+    # one cell in b. Column 20 (0 -> 254): free at 19 in a, but occupied only at 22 in b
+    # (2 off): counts. Column 21 (205 -> 254): free only at 19 in a (2 off): counts. Column
+    # 22 (205 -> 0): occupied only at 20 in a (2 off): counts.
+    assert c.changed_m2 == pytest.approx(3 * 40 * 0.0025)
+    assert c.share == pytest.approx(3 * 40 / (23 * 40))
+
+
+def test_a_map_that_grew_counts_its_new_area_past_the_first_cell():
+    a = _room(wall_x=10)
+    b = np.full((40, 50), 205, dtype=np.uint8)  # seen 10 cells further, extent grown right
+    b[:, :20] = 254
+    b[:, 20] = 0
+    c = snapshot_change(a, (0.0, 0.0), b, (0.0, 0.0), 0.05, tolerance=1)
+    # columns 10..20 changed. Column 10 (0 -> 254): b's nearest occupied is column 20:
+    # counts. Columns 11..19 (205 -> 254): a's nearest free is column 9, 2 or more off:
+    # count. Column 20 (205 -> 0): a's occupied is column 10: counts. 11 columns of 40 cells
+    assert c.changed_m2 == pytest.approx(11 * 40 * 0.0025)
+    assert c.share == pytest.approx(11 * 40 / (21 * 40))
+
+
+def test_nothing_known_is_never_unchanged():
+    a = np.full((4, 4), 205, dtype=np.uint8)
+    assert snapshot_change(a, (0.0, 0.0), a, (0.0, 0.0), 0.05, 1).share == float("inf")
+
+
+def test_the_default_rule_fires_on_the_share_of_the_known_map():
+    rule = SnapshotRule(period=300.0, mse=5.0)  # default: changed_share < 0.01, 1 cell
+    prob = np.full((20, 20), 0.1, dtype=np.float32)  # 400 known free cells
+    assert not rule.check(300.0, prob, (0.0, 0.0), 0.05, 0.25)
+    moved = prob.copy()
+    # a 4 x 4 obstacle appears where the old map had no obstacle near: all 16 cells count
+    moved[5:9, 5:9] = 0.9
+    assert not rule.check(600.0, moved, (0.0, 0.0), 0.05, 0.25)
+    assert rule.last.share == pytest.approx(16 / 400)
+    assert rule.last.changed_m2 == pytest.approx(16 * 0.0025)
+    # a single cell that turns occupied is 1 cell of 400 (0.25 %): unchanged, though its MSE
+    # 254^2 / 400 = 161 is far above the thesis's e = 5
+    one = moved.copy()
+    one[15, 15] = 0.9
+    assert rule.check(900.0, one, (0.0, 0.0), 0.05, 0.25)
+    assert rule.last.mse == pytest.approx(254**2 / 400)
+
+
 def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unseen():
     # a threshold no pair of snapshots can miss: the run ends at the second snapshot, 6 s
     # in, with the 7.8 m corridor (1.2 m wide, > 2 m^2) never seen: a done-rule that fired
     # early is incomplete, not completed
-    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_mse=1e9)
+    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9)
     assert result.outcome == "incomplete" and result.reason == "map_unchanged"
     assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
-    assert "MSE" in result.stop_detail
+    assert "of the known map changed" in result.stop_detail and "MSE" in result.stop_detail
 
 
 def _state(t=0.0, pose_gt=(0.0, 0.0, 0.0), pose_est=None, status="driving", **kw):
@@ -163,8 +232,9 @@ def test_map_unchanged_rule_reads_the_map_only_when_a_snapshot_is_due():
     rule = MapUnchangedRule(period=300.0, mse=5.0)
     assert rule.check(_state(299.9, occupancy=occupancy)) is None and not reads
     assert rule.check(_state(300.0, occupancy=occupancy)) is None and len(reads) == 1
-    stop = rule.check(_state(600.0, occupancy=occupancy))  # the same map: MSE 0
-    assert stop == StopReason("map_unchanged", "map snapshots 300 s apart: MSE 0.00")
+    stop = rule.check(_state(600.0, occupancy=occupancy))  # the same map: nothing changed
+    detail = "map snapshots 300 s apart: 0.00 % of the known map changed (0.0 m^2), MSE 0.00"
+    assert stop == StopReason("map_unchanged", detail)
     assert stop.outcome == "completed"
 
 
