@@ -183,7 +183,7 @@ def test_the_matrix_covers_every_route_of_the_schema(site):
         ("GET", "/login"), ("POST", "/login"), ("POST", "/logout"), ("GET", "/"),
         ("POST", "/jobs"), ("GET", "/jobs/{job_id}"), ("GET", "/runs/{run_id}/plot/{name}.png"),
         ("GET", "/worlds"), ("POST", "/worlds"), ("GET", "/compare"),
-        ("GET", "/compare/{kind}.png"),
+        ("GET", "/compare/{kind}.png"), ("POST", "/worlds/bundled/{dataset}/{name:path}"),
     }  # fmt: skip
     assert pages == known, f"pages the matrix does not know: {pages - known}"
 
