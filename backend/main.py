@@ -13,13 +13,13 @@ from sqlalchemy.exc import SQLAlchemyError
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.limits import BodyLimit
-from backend.api.routes import bags, health, jobs, runs, stats, worlds
+from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
+from backend.schemas import API_PREFIX
 from backend.world_analysis import recover_pending, world_pool
 from frontend.dashboard import install as install_dashboard
 from worker.errors import InputError
 
-API_PREFIX = "/api/v1"
 log = logging.getLogger("mapqual.api")
 
 
@@ -75,7 +75,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     # jobs first: routes are matched in order, and GET /jobs/{id} and POST /jobs are the hot
     # paths (each route tried before them costs every such request a match)
-    for module in (jobs, worlds, runs, bags, stats):
+    for module in (jobs, worlds, datasets, runs, bags, stats):
         app.include_router(module.router, prefix=API_PREFIX)
     install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them

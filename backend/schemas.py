@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from datetime import datetime
 from typing import Annotated, Any
+from urllib.parse import quote
 
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 
@@ -13,6 +14,7 @@ from worker.report.summary import RunSummary
 from worker.run_params import run_params_schema
 from worker.slam import registry
 from worker.status import JobStatus, RunOutcome, RunStatus, WorldStatus
+from worker.world.datasets import BundledWorld, Dataset
 
 MAX_RUNS_PER_JOB = 1000
 # Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
@@ -63,6 +65,70 @@ class WorldOut(BaseModel):
             out.height_m = w.height_px * w.resolution
             out.start_pose = list(w.start_pose)
         return out
+
+
+API_PREFIX = "/api/v1"  # where the routes below live (backend.main mounts them there)
+
+
+class BundledWorldOut(BaseModel):
+    """A world of a bundled data set: its facts as `load_world` gives them."""
+
+    name: str = Field(description="its file's path in the data set's folder, without suffix")
+    source_format: str = Field(description="yaml (map_server) or stage (.world)")
+    resolution: float = Field(description="metres per pixel")
+    origin: list[float] = Field(description="[x, y] of the image's lower-left corner, metres")
+    width_px: int
+    height_px: int
+    width_m: float
+    height_m: float
+    start_pose: list[float] = Field(description="[x, y, theta] in metres and radians")
+    facts: dict[str, Any]
+    image_url: str = Field(description="its picture (add ?max_px=N for a thumbnail)")
+    import_url: str = Field(description="POST: make it a world of yours (201, or 200 if it is)")
+
+    @classmethod
+    def of(cls, dataset: str, w: BundledWorld) -> BundledWorldOut:
+        base = f"{API_PREFIX}/datasets/{quote(dataset)}/worlds/{quote(w.name)}"
+        return cls(
+            name=w.name,
+            source_format=w.source_format,
+            resolution=w.facts.resolution,
+            origin=list(w.origin),
+            width_px=w.facts.width_px,
+            height_px=w.facts.height_px,
+            width_m=w.facts.width_m,
+            height_m=w.facts.height_m,
+            start_pose=list(w.start_pose),
+            facts=w.facts_dict(),
+            image_url=f"{base}/image",
+            import_url=f"{base}/import",
+        )
+
+
+class DatasetOut(BaseModel):
+    """A data set bundled with mapqual (a folder under worlds/) and its worlds."""
+
+    name: str = Field(description="the folder's name")
+    title: str
+    licence: str | None = Field(description="the licence in a few words")
+    licence_file: str | None = Field(description="the file of the data set with its licence")
+    licence_url: str | None = Field(description="that file's text")
+    worlds: list[BundledWorldOut]
+    problems: list[str] = Field(description="files of the data set that did not load")
+
+    @classmethod
+    def of(cls, d: Dataset) -> DatasetOut:
+        return cls(
+            name=d.name,
+            title=d.title,
+            licence=d.licence,
+            licence_file=d.licence_file,
+            licence_url=(
+                f"{API_PREFIX}/datasets/{quote(d.name)}/licence" if d.licence_file else None
+            ),
+            worlds=[BundledWorldOut.of(d.name, w) for w in d.worlds],
+            problems=list(d.problems),
+        )
 
 
 def _run_params_schema(schema: dict[str, Any]) -> None:

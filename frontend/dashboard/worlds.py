@@ -1,15 +1,18 @@
-"""The dashboard's worlds page: thumbnails with their facts, and the upload form."""
+"""The dashboard's worlds page: thumbnails with their facts, the upload form, and the bundled
+data sets with a button that makes one of their worlds yours."""
 
 from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile
+from fastapi import APIRouter, File, Form, HTTPException, Path, Request, UploadFile
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
 from backend.api.deps import SessionDep, SettingsDep
 from backend.api.routes import worlds as worlds_api
+from backend.datasets import bundled, import_bundled, imported_ids
 from backend.db.models import World
+from backend.schemas import DatasetOut
 from backend.world_analysis import world_pool
 from frontend.dashboard.pages import PageUser, render, user_worlds
 from worker.errors import InputError
@@ -61,7 +64,23 @@ def _worlds_page(request, session, user, error=None, notice=None, status_code=20
         request, "worlds.html", status_code, user=user, worlds=worlds,
         error=error, notice=notice, fact_labels=FACT_LABELS, refresh=refresh,
         predictions=_predictions(request, session, worlds), feature_docs=FEATURE_DOCS,
+        **_bundled(session, user),
     )  # fmt: skip
+
+
+def _bundled(session, user) -> dict:
+    """The bundled data sets as the API lists them (the process's catalogue, loaded once; no
+    predictions: 63 of them would slow every visit), and which of their worlds the user has
+    already, as (data set, world) -> world id."""
+    sets = bundled().datasets()
+    mine = imported_ids(session, user)
+    have = {
+        (d.name, w.name): mine[w.fingerprint]
+        for d in sets
+        for w in d.worlds
+        if w.fingerprint in mine
+    }
+    return {"datasets": [DatasetOut.of(d) for d in sets], "imported": have}
 
 
 _STATE = {
@@ -78,14 +97,19 @@ def worlds_page(
     user: PageUser,
     uploaded: int | None = None,
     again: bool = False,
+    bundled: bool = False,
 ) -> HTMLResponse:
-    """Worlds as thumbnails with their facts; an upload form. After an upload (`uploaded`),
-    a notice says where that world stands."""
+    """Worlds as thumbnails with their facts; an upload form; the bundled data sets. After an
+    upload or an import (`uploaded`, `bundled`), a notice says where that world stands."""
     notice = None
     w = session.get(World, uploaded) if uploaded is not None else None
     if w is not None and (user.is_admin or w.owner_id == user.id):
-        verb = "already stored" if again else "stored"
-        notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]}"
+        if bundled:
+            verb = "is already yours" if again else "added to your worlds"
+            notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]} for jobs"
+        else:
+            verb = "already stored" if again else "stored"
+            notice = f"world {w.name!r} {verb} as #{w.id}; it {_STATE[w.status]}"
     return _worlds_page(request, session, user, None, notice)
 
 
@@ -120,3 +144,23 @@ def upload_world_form(
     # POST, redirect, GET: the page then reloads itself while the world is pending
     again = "" if fresh else "&again=1"
     return RedirectResponse(f"/worlds?uploaded={row.id}{again}", status_code=303)
+
+
+@router.post("/worlds/bundled/{dataset}/{name:path}", response_class=HTMLResponse)
+def import_bundled_form(
+    request: Request,
+    session: SessionDep,
+    user: PageUser,
+    settings: SettingsDep,
+    dataset: Annotated[str, Path(max_length=100)],
+    name: Annotated[str, Path(max_length=200)],
+) -> Response:
+    """Import a bundled world through the API's own handler; then back to the page."""
+    try:
+        row, fresh = import_bundled(session, user, settings, dataset, name)
+    except HTTPException as exc:  # no such data set or world (404), over the quota (429)
+        session.rollback()
+        return _worlds_page(request, session, user, str(exc.detail), None, exc.status_code)
+    session.commit()
+    again = "" if fresh else "&again=1"
+    return RedirectResponse(f"/worlds?uploaded={row.id}&bundled=1{again}", status_code=303)

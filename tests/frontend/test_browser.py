@@ -1,13 +1,15 @@
 """The dashboard and the viewer in headless Chromium, over a real Celery worker, Redis and
 PostgreSQL: upload a world through the form, submit a job, watch it run to done, open the job
 page and the viewer, and check that the viewer's scene holds the map, both paths and the
-robots while the run is live. Screenshots go to tests/artifacts/."""
+robots while the run is live; add a bundled world from the worlds page. Screenshots go to
+tests/artifacts/."""
 
 from __future__ import annotations
 
 import io
 import re
 import time
+from pathlib import Path
 
 import numpy as np
 from PIL import Image
@@ -15,6 +17,7 @@ from PIL import Image
 from tests.frontend.test_pages import rooms
 
 LIVE_TIMEOUT_S = 60.0
+WORLDS = Path(__file__).resolve().parents[2] / "worlds"
 
 
 def _wait(predicate, timeout: float, what: str, step: float = 0.2):
@@ -154,4 +157,34 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     for name in ("worlds", "viewer-live", "job-running", "jobs", "job", "viewer-replay"):
         shot = Image.open(io.BytesIO((artifacts / f"{name}.png").read_bytes()))
         assert shot.size[0] == 1400, name
+    context.close()
+
+
+def test_the_bundled_data_sets_on_the_worlds_page(browser, site, artifacts):
+    context = browser.new_context(viewport={"width": 1400, "height": 900})
+    page = context.new_page()
+    _sign_in(page, site)
+    page.goto(site.url + "/worlds")
+    stems = sorted(p.stem for p in (WORLDS / "schools").glob("*.yaml"))
+    summary = page.locator("#dataset-schools summary")
+    assert f"{len(stems)} worlds" in summary.inner_text()
+    imgs = "Array.from(document.querySelectorAll('#dataset-schools img'))"
+    # closed, the section's lazy thumbnails are not fetched; open, the visible ones are
+    assert page.evaluate(f"{imgs}.every(i => i.naturalWidth === 0)")
+    summary.click()
+    page.wait_for_function(f"{imgs}.slice(0, 6).every(i => i.complete && i.naturalWidth > 0)")
+    assert page.evaluate(f"{imgs}.length") == len(stems)
+    page.locator('#dataset-schools [data-world="Borchen4"] button').click()
+    notice = page.locator(".notice").inner_text()
+    world_id = int(re.search(r"'Borchen4' added to your worlds as #(\d+)", notice).group(1))
+    thumb = f"document.querySelector('#world-{world_id} img')"
+    page.wait_for_function(f"{thumb} && {thumb}.complete && {thumb}.naturalWidth > 0")
+    page.locator("#dataset-schools summary").click()
+    card = page.locator('#dataset-schools [data-world="Borchen4"]')
+    card.scroll_into_view_if_needed()
+    assert card.locator(".in-mine").inner_text() == f"in your worlds as #{world_id}"
+    page.wait_for_function(f"{imgs}.slice(0, 6).every(i => i.complete && i.naturalWidth > 0)")
+    page.screenshot(path=artifacts / "worlds-bundled.png", full_page=True)
+    page.goto(site.url + "/")
+    assert page.locator(f'select[name="world_id"] option[value="{world_id}"]').count() == 1
     context.close()

@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hashlib
-import io
 import re
 import tempfile
 from pathlib import Path
@@ -37,6 +36,7 @@ from backend.store import create_pending_world, world_occupancy
 from backend.world_analysis import pack_upload, without_folder, world_pool
 from worker.errors import InputError
 from worker.world.image_io import ImageTooLarge
+from worker.world.picture import occupancy_png
 from worker.world.refs import check_floorplan
 
 router = APIRouter(tags=["worlds"])
@@ -221,18 +221,6 @@ def not_ready(w: World) -> str:
     return f"world {w.id} is invalid: {w.error}"
 
 
-def shrink_occupancy(occ: np.ndarray, max_px: int) -> np.ndarray:
-    """occ (H, W) bool reduced by a whole factor until both sides are <= max_px; a block is an
-    obstacle when any of its cells is (one-cell walls survive, as they would not a resize)."""
-    f = -(-max(occ.shape) // max_px)
-    if f <= 1:
-        return occ
-    h, w = -(-occ.shape[0] // f) * f, -(-occ.shape[1] // f) * f
-    padded = np.zeros((h, w), dtype=bool)
-    padded[: occ.shape[0], : occ.shape[1]] = occ
-    return padded.reshape(h // f, f, w // f, f).any(axis=(1, 3))
-
-
 @router.get("/worlds/{world_id}/image", response_class=Response)
 def world_image(
     world_id: IdPath,
@@ -242,18 +230,10 @@ def world_image(
 ) -> Response:
     """The floorplan as the pipeline sees it: PNG, obstacles black, free white; with max_px,
     a thumbnail no side of which exceeds it (obstacles kept)."""
-    from PIL import Image
-
     w = owned(user, session.get(World, world_id), "world", world_id)
     if w.status != "ready":
         raise HTTPException(status.HTTP_409_CONFLICT, not_ready(w))
-    occ = world_occupancy(w)
-    if max_px is not None:
-        occ = shrink_occupancy(occ, max_px)
-    img = Image.fromarray(np.where(np.flipud(occ), 0, 255).astype(np.uint8), mode="L")
-    buf = io.BytesIO()
-    img.save(buf, format="PNG", optimize=True)
-    return Response(buf.getvalue(), media_type="image/png")
+    return Response(occupancy_png(world_occupancy(w), max_px), media_type="image/png")
 
 
 def prediction_cache(app) -> Any:

@@ -34,6 +34,7 @@ CALLERS = ("alice", "bob", "admin", None)
 # What each operation of the schema is, for the matrix. A route added to the API without a
 # line here fails `test_the_matrix_covers_every_route_of_the_schema`.
 OPEN, LIST, CREATE, OWNED = "open", "list", "create", "owned"
+BUNDLED = "bundled"  # the bundled data sets: the same for every signed-in user
 ROUTES: dict[tuple[str, str], str] = {
     ("GET", "/healthz"): OPEN,
     ("GET", "/readyz"): OPEN,
@@ -55,6 +56,11 @@ ROUTES: dict[tuple[str, str], str] = {
     ("GET", "/api/v1/runs/{run_id}/estimates"): OWNED,
     # owner-only too: tests/backend/api/test_bags_estimates.py calls it as each caller
     ("POST", "/api/v1/runs/{run_id}/estimates"): OWNED,
+    ("GET", "/api/v1/datasets"): BUNDLED,
+    ("GET", "/api/v1/datasets/{dataset}/licence"): BUNDLED,
+    ("GET", "/api/v1/datasets/{dataset}/worlds/{name}/image"): BUNDLED,
+    # the import is the caller's world: test_an_imported_world_belongs_to_the_importer
+    ("POST", "/api/v1/datasets/{dataset}/worlds/{name}/import"): CREATE,
     ("GET", "/api/v1/stats"): LIST,
     # public, like the OpenAPI document that holds it too: it describes the API, no one's data
     ("GET", "/api/v1/schemas/summary"): OPEN,
@@ -177,7 +183,7 @@ def test_the_matrix_covers_every_route_of_the_schema(site):
         ("GET", "/login"), ("POST", "/login"), ("POST", "/logout"), ("GET", "/"),
         ("POST", "/jobs"), ("GET", "/jobs/{job_id}"), ("GET", "/runs/{run_id}/plot/{name}.png"),
         ("GET", "/worlds"), ("POST", "/worlds"), ("GET", "/compare"),
-        ("GET", "/compare/{kind}.png"),
+        ("GET", "/compare/{kind}.png"), ("POST", "/worlds/bundled/{dataset}/{name:path}"),
     }  # fmt: skip
     assert pages == known, f"pages the matrix does not know: {pages - known}"
 
@@ -262,6 +268,30 @@ def test_uploads_belong_to_the_uploader_and_need_a_key(site):
         if caller is None:
             assert r.status_code == 401
             continue
+        assert r.status_code == 201, r.text
+        world_id = r.json()["id"]
+        for other in CALLERS:
+            seen = site.call("GET", f"/api/v1/worlds/{world_id}", other).status_code
+            assert seen == (200 if other in (caller, "admin") else 401 if other is None else 404)
+
+
+BUNDLED_READS = [op for op, kind in ROUTES.items() if kind == BUNDLED and op[0] == "GET"]
+BUNDLED_WORLD = {"dataset": "bormann", "name": "Freiburg52_scan"}
+
+
+@pytest.mark.parametrize("method,path", BUNDLED_READS, ids=[p for _, p in BUNDLED_READS])
+def test_the_bundled_data_sets_answer_every_signed_in_user_alike(site, method, path):
+    target = path.format(**BUNDLED_WORLD)
+    answers = [site.call(method, target, caller) for caller in CALLERS]
+    assert [r.status_code for r in answers] == [200, 200, 200, 401], target
+    assert answers[0].content == answers[1].content == answers[2].content
+
+
+def test_an_imported_world_belongs_to_the_importer(site):
+    url = "/api/v1/datasets/{dataset}/worlds/{name}/import".format(**BUNDLED_WORLD)
+    assert site.call("POST", url, None).status_code == 401
+    for caller in ("alice", "bob", "admin"):
+        r = site.call("POST", url, caller)
         assert r.status_code == 201, r.text
         world_id = r.json()["id"]
         for other in CALLERS:
