@@ -9,6 +9,7 @@ import numpy as np
 
 from worker.explore import frontier_kernels as fk
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.costmap_kernels import INSCRIBED
 from worker.explore.params import ExploreParams
 from worker.explore.planner import (
     DijkstraSearch,
@@ -156,10 +157,21 @@ class FrontierSearch:
     def _valid_cells(
         self, costmap: GlobalCostmap, cells: np.ndarray, labels: np.ndarray, blacklist
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve."""
+        """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve.
+
+        A cell is open when it borders unknown space larger than min_unknown_area, was not
+        looked at dead_frontier_looks times, and lies outside the inscribed radius of every
+        obstacle (a place the robot's centre could be). The last keeps out the free cells a
+        particle filter's map leaves inside a wall's face, between occupied cells, next to
+        the wall's unseen inside: goals for them had the robot crawl along the walls. A real
+        frontier (a corridor's end, a room seen through a door) has such cells across its
+        width; explore_lite asks more, a neighbour of cost 0 (about 0.94 m from obstacles
+        with the thesis's inflation), which would drop corridors' ends too.
+        """
         p = self.params
         is_open = self.open_cells(costmap, cells)
         is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
+        is_open &= costmap.inflated[cells[:, 0], cells[:, 1]] < INSCRIBED
         sizes = np.bincount(labels, weights=is_open) * costmap.resolution
         cell_valid = is_open & (sizes[labels] >= p.min_frontier_size)
         if blacklist:
