@@ -159,21 +159,22 @@ class FrontierSearch:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve.
 
-        A cell is open when it borders unknown space larger than min_unknown_area, was not
-        looked at dead_frontier_looks times, and lies outside the inscribed radius of every
-        obstacle (a place the robot's centre could be). The last keeps out the free cells a
-        particle filter's map leaves inside a wall's face, between occupied cells, next to
-        the wall's unseen inside: goals for them had the robot crawl along the walls. A real
-        frontier (a corridor's end, a room seen through a door) has such cells across its
-        width; explore_lite asks more, a neighbour of cost 0 (about 0.94 m from obstacles
-        with the thesis's inflation), which would drop corridors' ends too.
+        A cell is open when it borders unknown space larger than min_unknown_area and was not
+        looked at dead_frontier_looks times; clusters are measured by their open cells. A
+        goal may serve an open cell of a big enough cluster that lies outside the inscribed
+        radius of every obstacle, where the robot's centre could be. That keeps out the free
+        cells a particle filter's map leaves inside a wall's face, between occupied cells,
+        next to the wall's unseen inside: goals for them had the robot crawl along the walls.
+        A real frontier (a corridor's end, a room seen through a door 0.45 m wide or more)
+        has such cells across its middle. explore_lite asks more, a neighbour of cost 0
+        (about 0.94 m from obstacles with the thesis's inflation), which would drop doors.
         """
         p = self.params
         is_open = self.open_cells(costmap, cells)
         is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
-        is_open &= costmap.inflated[cells[:, 0], cells[:, 1]] < INSCRIBED
         sizes = np.bincount(labels, weights=is_open) * costmap.resolution
-        cell_valid = is_open & (sizes[labels] >= p.min_frontier_size)
+        clear = costmap.inflated[cells[:, 0], cells[:, 1]] < INSCRIBED
+        cell_valid = is_open & clear & (sizes[labels] >= p.min_frontier_size)
         if blacklist:
             # A cluster with a cell near a failed goal is dropped whole: a shifted goal on the
             # same frontier would most likely fail the same way.

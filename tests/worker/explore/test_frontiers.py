@@ -57,10 +57,7 @@ def test_clusters_and_minimum_size():
     goal = fs.choose(cm, (1.0, 1.5), [])
     assert goal is not None and goal.n_clusters == 1
     assert goal.goal_xy[0] > 2.0  # the big opening on the right, although the gap is nearer
-    # its size counts the cells outside the 0.2 m (4 cell) inscribed radius of every wall:
-    # column 54's two and column 53's rows 20-22 and 37-39 are within 4 cells of the wall
-    # cells (19, 55) and (40, 55); rows 23-36 (4.47 cells away at the ends) are not
-    assert abs(goal.cluster_size_m - 14 * RES) < 1e-9
+    assert abs(goal.cluster_size_m - 22 * RES) < 1e-9
 
 
 def test_free_cells_inside_a_wall_face_are_no_frontier():
@@ -219,18 +216,17 @@ def test_goal_candidates_match_a_plain_implementation():
 
 
 def test_frontier_looked_at_from_close_by_repeatedly_is_dead():
-    # a closed room with a 1 m hole in its right wall's face; behind it, a 2.5 m x 0.5 m
-    # unknown slab (the wall's unseen inside, too big for the enclosed-unknown rule). The
-    # hole's frontier cells more than 0.2 m from the face, rows 23-36, make 0.7 m
+    # a closed room with a 0.6 m hole in its right wall's face; behind it, a 2.5 m x 0.5 m
+    # unknown slab (the wall's unseen inside, too big for the enclosed-unknown rule)
     prob = np.full((60, 80), 0.9)
     prob[5:55, 5:60] = 0.05
     prob[5:55, 61:71] = np.nan
-    prob[20:40, 60] = np.nan  # the hole in the face
+    prob[25:37, 60] = np.nan  # the hole in the face
     cm, fs = _setup(prob)
-    assert fs.frontier[20:40, 59].all()
+    assert fs.frontier[25:37, 59].all()
     assert fs.choose(cm, (2.0, 1.5), []) is not None
     p = ExploreParams()
-    behind = np.array([2.3, 1.525, np.pi])  # 0.7 m away but facing away: out of view
+    behind = np.array([2.5, 1.525, np.pi])  # 0.5 m away but facing away: out of view
     for _ in range(2 * p.dead_frontier_looks):
         fs.observe(cm, behind, np.radians(135.0) - 0.05)
     assert not fs.seen.any()
@@ -241,5 +237,5 @@ def test_frontier_looked_at_from_close_by_repeatedly_is_dead():
     for _ in range(p.dead_frontier_looks):
         assert fs.choose(cm, near[:2], []) is not None
         fs.observe(cm, near, np.radians(135.0) - 0.05)
-    assert (fs.seen[20:40, 59] == p.dead_frontier_looks).all()
+    assert (fs.seen[25:37, 59] == p.dead_frontier_looks).all()
     assert fs.choose(cm, near[:2], []) is None  # its only frontier is dead
