@@ -205,6 +205,7 @@ def test_local_costmap_clears_the_marks_a_later_beam_passes_through():
         zip(
             np.round(local.origin[0] + (xs + 0.5) * RES, 2),
             np.round(local.origin[1] + (ys + 0.5) * RES, 2),
+            strict=True,
         )
     )
     assert len(marks) == 2
