@@ -99,7 +99,6 @@ class Navigator:
         if self.state is NavState.WAITING:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
-        self.safety.see(t, ranges)
         self.local.build(pose[0], pose[1], self.costmap, pose[2])
         self.trail.grow(pose)
         if self._map_updated:
