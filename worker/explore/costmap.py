@@ -216,24 +216,8 @@ class LocalCostmap:
     def add_scan(
         self, t: float, pose: np.ndarray, ranges_m: np.ndarray, angles: np.ndarray, range_max: float
     ) -> None:
-        """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`, after
-        clearing the earlier marks its beams pass through (raytrace clearing, as the
-        thesis's obstacle layer: a noisy short reading of one scan is gone with the next
-        beam through it, not kept for local_persistence; it used to pile up from every scan
-        of the last second and close doorways under laser noise). `angles` evenly spaced."""
+        """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
-        if self._marks and len(angles) > 1:
-            dangle = (angles[-1] - angles[0]) / (len(angles) - 1)
-            kept = []
-            for tm, pts in self._marks:
-                seen_through = lk.beams_clear(
-                    np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
-                    float(pose[0]), float(pose[1]), float(pose[2]), float(angles[0]),
-                    float(dangle), np.asarray(ranges_m, dtype=float), float(range_max),
-                    self.resolution,
-                )  # fmt: skip
-                kept.append((tm, pts[~seen_through]))
-            self._marks = kept
         # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
         # put the mark in the free cell in front
         r = ranges_m[hit] + 0.2 * self.resolution

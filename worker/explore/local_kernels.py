@@ -140,28 +140,3 @@ def local_layers(
                 if 0 <= gy < gh and 0 <= gx < gw:
                     cost[iy, ix] = g_cost[gy, gx]
     return lethal, near, inner, cost
-
-
-@njit(cache=True)
-def beams_clear(px, py, x, y, theta, angle0, dangle, ranges, range_max, tol):
-    """`(K,) bool`: the points (px, py) [m] that a scan taken at (x, y, theta) sees through:
-    the beam nearest in bearing got a return (below range_max) more than `tol` [m] beyond
-    the point. That is the costmap_2d obstacle layer's raytrace clearing (cells along a beam
-    up to its hit are free; the hit's own cell stays); points outside the field of view, on
-    beams without a return, or at or beyond the reading are kept. Beams at angle0 +
-    k dangle, k = 0..len(ranges)-1."""
-    n = ranges.shape[0]
-    out = np.zeros(px.shape[0], dtype=np.bool_)
-    two_pi = 2.0 * math.pi
-    for i in range(px.shape[0]):
-        dx = px[i] - x
-        dy = py[i] - y
-        a = math.atan2(dy, dx) - theta - angle0
-        a -= two_pi * math.floor(a / two_pi)  # [0, 2 pi): from the first beam on
-        k = int(math.floor(a / dangle + 0.5))
-        if k >= n:
-            continue
-        r = ranges[k]
-        if r < range_max * 0.999 and math.hypot(dx, dy) < r - tol:
-            out[i] = True
-    return out

@@ -189,35 +189,6 @@ def test_local_costmap_marks_hits_only_and_clears():
     assert local.lethal.sum() == 1
 
 
-def test_local_costmap_clears_the_marks_a_later_beam_passes_through():
-    p = ExploreParams()
-    local = LocalCostmap(p, RES)
-    angles = np.array([0.0, math.pi / 2])
-    pose = np.array([5.0, 5.0, 0.0])
-    # a short (noisy) reading at 1.0 m ahead, and a hit 1.0 m to the left
-    local.add_scan(0.0, pose, np.array([1.0, 1.0]), angles, 30.0)
-    # 0.1 s later the beam ahead reaches 2.0 m: the mark at 1.0 m is gone (raytrace
-    # clearing); the left beam gets no return: its mark stays (no return clears nothing)
-    local.add_scan(0.1, pose, np.array([2.0, 30.0]), angles, 30.0)
-    local.build(5.0, 5.0)
-    ys, xs = np.nonzero(local.lethal)
-    marks = sorted(
-        zip(
-            np.round(local.origin[0] + (xs + 0.5) * RES, 2),
-            np.round(local.origin[1] + (ys + 0.5) * RES, 2),
-            strict=True,
-        )
-    )
-    assert len(marks) == 2
-    assert abs(marks[0][0] - 5.0) <= RES and abs(marks[0][1] - 6.0) <= RES  # left, kept
-    assert abs(marks[1][0] - 7.0) <= RES and abs(marks[1][1] - 5.0) <= RES  # the new hit
-    # the robot turned round at (6, 5): the marks now behind it and to its side lie outside
-    # its two beams' bearings and are kept
-    local.add_scan(0.2, np.array([6.0, 5.0, math.pi]), np.array([0.98, 30.0]), angles, 30.0)
-    local.build(5.0, 5.0)
-    assert local.lethal.sum() == 3  # (5, 6) and (7, 5) kept, (5.02, 5) new
-
-
 def test_local_costmap_includes_map_obstacles_and_inflation():
     p = ExploreParams()
     cm = GlobalCostmap(p)
