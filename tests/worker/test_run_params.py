@@ -17,13 +17,15 @@ EXAMPLE = ROOT / "examples" / "office_a" / "summary.json"
 
 
 # parameters added after examples/office_a was written: exploration constants that became
-# settings (issue 16) and rbpf's sub-stepped motion noise for sparse logs (issue 17)
+# settings (issue 16), rbpf's sub-stepped motion noise for sparse logs (issue 17), and
+# exploration settings of issue 18
 SETTINGS_SINCE_EXAMPLE = {
     "explore": [
         "back_out_check_time",
         "back_out_gain",
         "back_out_speed_ratio",
         "blacklist_arrivals",
+        "closed_gap_radius",
         "coverage_period",
         "goal_search_extra",
         "incomplete_area",

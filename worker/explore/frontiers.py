@@ -12,6 +12,7 @@ from worker.explore.costmap import GlobalCostmap
 from worker.explore.costmap_kernels import INSCRIBED
 from worker.explore.params import ExploreParams
 from worker.explore.planner import (
+    ClosedGaps,
     DijkstraSearch,
     cells_in_radius,
     narrow_params,
@@ -37,8 +38,9 @@ class FrontierGoal:
 class FrontierSearch:
     """Keeps the frontier mask up to date and picks the nearest frontier cluster by travel cost."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: ExploreParams, closed: ClosedGaps | None = None):
         self.params = params
+        self.closed = closed if closed is not None else ClosedGaps()  # the narrow search's
         self.frontier = np.zeros((0, 0), dtype=np.bool_)
         self.n_frontier_cells = 0
         self.search = DijkstraSearch()
@@ -196,7 +198,8 @@ class FrontierSearch:
         if found.size == 0:
             found = self._search_with(*args, p, p.pocket_escape_radius)
         if found.size == 0 and p.planner_margin > p.narrow_margin:
-            found = self._search_with(*args, narrow_params(p), None)
+            with self.closed.applied(costmap):
+                found = self._search_with(*args, narrow_params(p), None)
         return found
 
     def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, p, escape_m):

@@ -17,7 +17,7 @@ from worker.explore.nav_state import (
     Retrace,
 )
 from worker.explore.params import ExploreParams
-from worker.explore.planner import GlobalPlanner, path_length
+from worker.explore.planner import ClosedGaps, GlobalPlanner, path_length
 from worker.explore.recovery import Trail, back_out, safe_override, unwedge
 from worker.explore.safety import SafetyController
 from worker.explore.shim import HeadingShim
@@ -38,8 +38,10 @@ class Navigator:
         self.angles = np.asarray(angles, dtype=float)
         self.range_max = float(range_max)
         self.costmap = GlobalCostmap(params)
-        self.frontiers = FrontierSearch(params)
-        self.planner = GlobalPlanner(params)
+        # narrow gaps the robot failed to pass: closed to both narrow fallbacks
+        self.closed = ClosedGaps()
+        self.frontiers = FrontierSearch(params, self.closed)
+        self.planner = GlobalPlanner(params, self.closed)
         self.dwa = DwaPlanner(params)
         self.shim = HeadingShim(params)
         self.safety = SafetyController(params, self.angles, self.range_max)
@@ -143,7 +145,7 @@ class Navigator:
         if shim is not None:
             self._command_found()
             if self._no_progress(t, pose):
-                self._give_up(t, "no progress")
+                self._give_up(t, "no progress", pose)
                 return NavCommand(0.0, 0.0, "recovering")
             status = "aligning" if shim[2] == "rotate" else "recovering"
             return NavCommand(shim[0], shim[1], status)
@@ -156,11 +158,11 @@ class Navigator:
             if vw is not None:
                 self._enter(NavState.ESCAPING)
                 return NavCommand(vw[0], vw[1], "recovering")
-            return self._controller_failed(t)
+            return self._controller_failed(t, pose)
         self._command_found()
         self._recovered = False
         if self._no_progress(t, pose):
-            self._give_up(t, "no progress")
+            self._give_up(t, "no progress", pose)
             return NavCommand(0.0, 0.0, "recovering")
         override = self.safety.check(t, ranges, cmd.v)
         if override is not None:
@@ -239,8 +241,10 @@ class Navigator:
         mem = self.memory
         self._next_choice_t = t + p.frontier_period
         new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist, mem.avoid())
-        # before giving up on the building, give the blacklisted frontiers another chance
+        # before giving up on the building, give the blacklisted frontiers (and the closed
+        # gaps) another chance
         if new is None and mem.retry():
+            self.closed.clear()
             new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist)
         g = self.pursuit
         if new is None:
@@ -279,7 +283,7 @@ class Navigator:
         if path is None or self.state is NavState.PLANNING:
             self._enter(self._goal_layer_state())
 
-    def _controller_failed(self, t: float) -> NavCommand:
+    def _controller_failed(self, t: float, pose: np.ndarray) -> NavCommand:
         """move_base: no legal command -> clear the local costmap and replan; later give up."""
         g = self.pursuit
         if g.ctrl_fail_since is None:
@@ -287,7 +291,7 @@ class Navigator:
         self._enter(NavState.RECOVERING)
         elapsed = t - g.ctrl_fail_since
         if elapsed >= self.params.controller_patience:
-            self._give_up(t, "no legal command")
+            self._give_up(t, "no legal command", pose)
         elif not self._recovered and elapsed >= self.params.recovery_delay:
             self._recovered = True
             self.stats.recoveries += 1
@@ -339,7 +343,15 @@ class Navigator:
             self._enter(self._goal_layer_state())
         return vw
 
-    def _give_up(self, t: float, why: str) -> None:
+    def _give_up(self, t: float, why: str, pose: np.ndarray | None = None) -> None:
+        """The goal given up: back out, blacklist its frontier; when the robot could not get
+        on (no progress, no legal command) with its plan through a gap under the planner's
+        margin near it, close that gap to the narrow fallback (`ClosedGaps`)."""
+        g = self.pursuit
+        if pose is not None and g.path is not None:
+            self.closed.close(
+                self.costmap, self.params, g.path, pose[:2], self.params.closed_gap_radius
+            )
         self._start_retrace(t)
         self.memory.blacklist.append(self.pursuit.goal.frontier_xy.copy())
         self.stats.consecutive_failures += 1

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -104,8 +105,9 @@ class DijkstraSearch:
 class GlobalPlanner:
     """Plans on the global costmap with navfn's cost model, from the robot to one goal cell."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: ExploreParams, closed: ClosedGaps | None = None):
         self.params = params
+        self.closed = closed if closed is not None else ClosedGaps()
         self.search = DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
 
@@ -137,7 +139,8 @@ class GlobalPlanner:
                 # a door narrower than the margin allows: navfn's own rule (any cell below
                 # the inscribed cost), as move_base would plan through it
                 p = narrow_params(p)
-                found = attempt()
+                with self.closed.applied(costmap):
+                    found = attempt()
         finally:
             self._target[gy, gx] = False
         if found.size == 0:
@@ -145,6 +148,71 @@ class GlobalPlanner:
         cells = self.search.path_to(found[0])
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
         return np.column_stack((xs, ys))
+
+
+class ClosedGaps:
+    """Gaps under the planner's margin the robot failed to get through (a goal given up
+    with its plan through one near the robot): closed to the narrow fallback, which plans
+    through any cell below the inscribed cost, so that it does not send the robot back to
+    them goal after goal. Kept as points (map frame); `clear` opens them all again."""
+
+    def __init__(self):
+        self.points = np.zeros((0, 2))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def clear(self) -> None:
+        self.points = np.zeros((0, 2))
+
+    def close(self, costmap, params: ExploreParams, path_xy, robot_xy, radius: float) -> int:
+        """Close the cells of `path_xy (K, 2)` within `radius` [m] of the robot that only the
+        narrow fallback lets a plan through (cost at or above the margin's blocked cost,
+        below INSCRIBED); returns how many."""
+        from worker.explore.costmap_kernels import INSCRIBED
+
+        if path_xy is None or len(path_xy) == 0:
+            return 0
+        pts = np.asarray(path_xy, dtype=float)
+        near = np.hypot(pts[:, 0] - robot_xy[0], pts[:, 1] - robot_xy[1]) <= radius
+        ix, iy = self._cells(costmap, pts[near])
+        if ix.size == 0:
+            return 0
+        c = costmap.inflated[iy, ix]
+        narrow = (c >= planner_blocked_cost(params)) & (c < INSCRIBED)
+        xs, ys = costmap.cell_to_world(ix[narrow], iy[narrow])
+        self.points = np.concatenate([self.points, np.column_stack((xs, ys))])
+        return int(np.count_nonzero(narrow))
+
+    @staticmethod
+    def _cells(costmap, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """In-bounds cells `(ix, iy)` of points `(K, 2)`."""
+        ix = np.floor((pts[:, 0] - costmap.origin[0]) / costmap.resolution).astype(np.int64)
+        iy = np.floor((pts[:, 1] - costmap.origin[1]) / costmap.resolution).astype(np.int64)
+        h, w = costmap.shape
+        ok = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        return ix[ok], iy[ok]
+
+    @contextmanager
+    def applied(self, costmap):
+        """While inside: the closed cells and their 8 neighbours at INSCRIBED in the costmap
+        (a one-cell gap must not open beside a closed cell); restored after."""
+        from worker.explore.costmap_kernels import INSCRIBED
+
+        if len(self.points) == 0:
+            yield
+            return
+        ix, iy = self._cells(costmap, self.points)
+        h, w = costmap.shape
+        dx, dy = np.meshgrid(np.arange(-1, 2), np.arange(-1, 2))
+        ix = np.clip((ix[:, None] + dx.ravel()).ravel(), 0, w - 1)
+        iy = np.clip((iy[:, None] + dy.ravel()).ravel(), 0, h - 1)
+        saved = costmap.inflated[iy, ix].copy()
+        costmap.inflated[iy, ix] = np.maximum(saved, INSCRIBED)
+        try:
+            yield
+        finally:
+            costmap.inflated[iy, ix] = saved
 
 
 def narrow_params(params: ExploreParams) -> ExploreParams:

@@ -68,3 +68,33 @@ def test_a_frontier_behind_a_narrow_door_is_a_goal(cells, narrow_margin, expecte
         assert goal is not None and goal.goal_xy[0] > 3.3
     else:
         assert goal is None
+
+
+def test_a_narrow_gap_the_robot_failed_to_pass_is_closed_to_the_fallback_until_cleared():
+    p = ExploreParams()
+    cm = _costmap(_door(10), p)
+    planner = GlobalPlanner(p)
+    path = planner.plan(cm, (0.5, 0.5), (4.5, 0.5))
+    assert path is not None
+    # the robot stood 0.3 m before the door (x = 2.5 m) and got no further: the door's
+    # cells on its plan within 1 m are the ones under the margin's blocked cost
+    robot = (2.2, 1.5)
+    n = planner.closed.close(cm, p, path, robot, p.closed_gap_radius)
+    blocked = planner_blocked_cost(p)
+    on_plan = [
+        cm.inflated[cm.world_to_cell(*q)[::-1]] for q in path if np.hypot(*(q - robot)) <= 1.0
+    ]
+    assert n == sum(1 for c in on_plan if c >= blocked) > 0
+    before = cm.inflated.copy()
+    assert planner.plan(cm, (0.5, 0.5), (4.5, 0.5)) is None  # the only way is closed
+    np.testing.assert_array_equal(cm.inflated, before)  # and the costmap is left as it was
+    # the frontier search's fallback sees the same closed door
+    prob = _door(10)
+    prob[:, 80:] = np.nan
+    cm2 = _costmap(prob, p)
+    fs = FrontierSearch(p, planner.closed)
+    fs.update(cm2, None)
+    assert fs.choose(cm2, (0.5, 1.5), []) is None
+    planner.closed.clear()  # the blacklist's retry opens it again
+    assert planner.plan(cm, (0.5, 0.5), (4.5, 0.5)) is not None
+    assert fs.choose(cm2, (0.5, 1.5), []) is not None
