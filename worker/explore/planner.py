@@ -159,9 +159,6 @@ class ClosedGaps:
     def __init__(self):
         self.points = np.zeros((0, 2))
 
-    def __len__(self) -> int:
-        return len(self.points)
-
     def clear(self) -> None:
         self.points = np.zeros((0, 2))
 
