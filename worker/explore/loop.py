@@ -140,6 +140,9 @@ class Exploration:
         self.rules = default_rules(p, start, self.n_collisions0)
         self.prev_odom: np.ndarray | None = None
         self.last_map_t = -math.inf  # [s] the last costmap update
+        # an algorithm that can send its map with the update it is read after (an external
+        # program: one round trip, not two) is told beforehand when that will be
+        self.map_hint = getattr(slam, "will_read_map", None)
         self.last_full_t = 0.0  # [s] the last whole-map re-read
         self.last_cov = 0.0
         self.next_progress = 0.0  # [s]
@@ -151,6 +154,8 @@ class Exploration:
         pose_gt = sim.pose_gt
         pose_odom = sim.pose_odom
         ranges = sim.scan()
+        if self.map_hint is not None:  # whether _feed_map reads the map if this scan updates it
+            self.map_hint(t - self.last_map_t >= 1.0 / self.p.global_costmap_rate - 1e-9)
         try:
             updated = slam.process(t, pose_gt if self.oracle else pose_odom, ranges)
         except SlamFailed as exc:  # an external program crashed, stalled or broke the protocol
@@ -188,7 +193,7 @@ class Exploration:
         full_map_check_period); its (wall, CPU) time [s]."""
         p = self.p
         nav_s = cpu_s = 0.0
-        if updated and t - self.last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:
+        if updated and t - self.last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:  # as map_hint
             grid = self.slam.occupancy()
             full = t - self.last_full_t >= p.full_map_check_period
             c0, u0 = time.perf_counter(), time.thread_time()

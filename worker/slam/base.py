@@ -32,6 +32,10 @@ class SlamAlgorithm(Protocol):
 
     Frames as in ROS: `odom` (the robot's dead reckoning), `map` (the SLAM map; equal to the
     odometry frame at the first scan), and T_map_odom, the correction between the two.
+
+    Optional: `will_read_map(due: bool)`, called by the exploration before `process` with
+    whether it reads the map if that scan is an update (an external program then sends the
+    map with its estimate: worker.slam.external.client).
     """
 
     name: str

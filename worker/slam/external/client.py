@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 import time
 from dataclasses import replace
 from typing import Any
@@ -23,7 +24,9 @@ from worker.slam.params import SlamParams
 
 
 class ExternalSlam:
-    """Starts the program at the first scan, then one `step` frame and one `estimate` answer
+    """Starts the program and says hello when made (so that the program's own start-up, an
+    interpreter, its imports, a model loaded, overlaps the run's set-up), reads its answer
+    and sends the config at the first scan, then one `step` frame and one `estimate` answer
     per scan; the map comes with an estimate, or is asked for (`map`) when it is read after an
     update that came without it. Any failure (exit, time-out, bad answer) raises SlamFailed
     naming the step, once the program is stopped (a failed map request: at the next scan); the
@@ -55,15 +58,19 @@ class ExternalSlam:
         empty = np.full((1, 1), np.nan, dtype=np.float32)
         self._grid = OccupancyGrid(empty, params.delta, np.zeros(2), params.occ_thresh)
         self.program_name = ""  # as the program's hello gave it
+        self.version = 0  # the protocol version the program chose (0: not started)
         self.updates = 0
         self.failure: SlamFailed | None = None
         self.protocol_wall_s = 0.0  # [s] spent waiting for, reading and writing frames
         self._gate: UpdateGate | None = None  # the program's update gate, from its ready
         self._trail: list[float] = []  # [t, x, y, theta] of the steps not sent since the last
+        self._spawn_error: ChildGone | None = None  # the program could not be started
+        self._map_due = False  # the next scan's map will be read if it is an update
+        self._spawn()
 
     @property
     def pid(self) -> int | None:
-        """The running program's process id (None before the first scan and once closed)."""
+        """The running program's process id (None when it could not start, and once closed)."""
         return None if self._child is None or self._child.closed else self._child.pid
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
@@ -71,7 +78,7 @@ class ExternalSlam:
             raise self.failure
         seq, self._t = self._seq, float(t)
         try:
-            if self._child is None:
+            if not self._started:
                 self._start()
             child = self._child
             assert child is not None
@@ -91,7 +98,8 @@ class ExternalSlam:
             trail = None
             if gate is not None:
                 trail, self._trail = np.array(self._trail, dtype="<f8"), []
-            child.send(proto.step(seq, t, pose_odom, ranges, trail), deadline)
+            due = self._map_due and self.version >= 2
+            child.send(proto.step(seq, t, pose_odom, ranges, trail, map_due=due), deadline)
             answer = child.recv_message(deadline)
             self.protocol_wall_s += time.perf_counter() - t0
             updated = self._read_estimate(answer, seq, np.asarray(pose_odom, dtype=np.float64))
@@ -99,14 +107,36 @@ class ExternalSlam:
             raise self._fail(seq, t, exc) from None
         self._seq += 1
         self.updates += updated
+        self._map_due = False
         return updated
 
+    def will_read_map(self, due: bool) -> None:
+        """The caller says, before the next `process`, whether it will read the map if that
+        scan updates it: a program speaking version 2 is then asked to attach the map to its
+        estimate (`map_due`), which spares the `map` request's round trip."""
+        self._map_due = bool(due)
+
+    def _spawn(self) -> None:
+        """Start the program and send mapqual's hello (a failure is raised at the first scan,
+        as a failed start-up)."""
+        try:
+            self._child = ChildProcess(self.ext.command)
+            # a few bytes into an empty pipe: never waits
+            self._child.send(
+                proto.frame(proto.hello()), time.monotonic() + self.ext.start_timeout_s
+            )
+        except ChildGone as exc:
+            self._spawn_error = exc
+
     def _start(self) -> None:
-        """Spawn the program; hello both ways, then the laser and parameters."""
-        self._child = child = ChildProcess(self.ext.command)
+        """The program's hello, then the laser and parameters and its ready, within
+        start_timeout_s of the first scan."""
+        if self._spawn_error is not None:
+            raise self._spawn_error
+        child = self._child
+        assert child is not None
         deadline = time.monotonic() + self.ext.start_timeout_s
-        child.send(proto.frame(proto.hello()), deadline)
-        self.program_name = proto.check_hello(child.recv_message(deadline))
+        self.program_name, self.version = proto.check_hello(child.recv_message(deadline))
         child.send(proto.frame(self._config), deadline)
         ready = child.recv_message(deadline)
         proto.expect(ready, "ready")
@@ -124,7 +154,7 @@ class ExternalSlam:
         T = proto.pose3(msg, "T_map_odom") if "T_map_odom" in msg else _correction(pose, pose_odom)
         grid = None
         if msg.get("map") is not None:
-            grid = read_map(msg["map"], self._grid, self.params.occ_thresh)
+            grid = self._read_map(msg["map"])
         updated = msg.get("updated", grid is not None)
         if not isinstance(updated, bool):
             raise proto.ProtocolError(f"'updated' must be true or false, got {updated!r}")
@@ -174,7 +204,14 @@ class ExternalSlam:
         self.protocol_wall_s += time.perf_counter() - t0
         proto.expect(answer, "map")
         if answer.get("map") is not None:
-            self._grid = read_map(answer["map"], self._grid, self.params.occ_thresh)
+            self._grid = self._read_map(answer["map"])
+
+    def _read_map(self, m: Any) -> OccupancyGrid:
+        """The grid a map message describes over the current one, whose cells are written in
+        place when nobody else holds that grid or its cells (no whole-grid copy per map: the
+        costmap reads the map and lets it go, a grid kept elsewhere is copied first)."""
+        reuse = _sole_reference(self._grid)
+        return read_map(m, self._grid, self.params.occ_thresh, version=self.version, reuse=reuse)
 
     def close(self) -> None:
         """Say bye and stop the program (killed past close_timeout_s); safe to call twice."""
@@ -194,6 +231,19 @@ class ExternalSlam:
     def __del__(self) -> None:
         with contextlib.suppress(Exception):  # interpreter shutdown: nothing left to report to
             self.close()
+
+
+def _sole_reference(grid: OccupancyGrid) -> bool:
+    """Whether `grid` (held in an attribute) and its cells are referenced from nowhere else: no
+    caller keeps the grid, its `prob`, or a view of it (a view holds its base). The reference
+    count check numpy's own `ndarray.resize(refcheck=True)` makes; on an interpreter without
+    reference counts the answer is False (copy)."""
+    getrefcount = getattr(sys, "getrefcount", None)
+    if getrefcount is None:
+        return False
+    # the grid: the attribute, this frame's argument and getrefcount's; its cells: the grid's
+    # attribute and getrefcount's
+    return getrefcount(grid) <= 3 and getrefcount(grid.prob) <= 2
 
 
 def _correction(pose_map: np.ndarray, pose_odom: np.ndarray) -> np.ndarray:

@@ -3,11 +3,13 @@
 Dead reckoning (pose = odometry, no map) that, at step STEP, does what MODE says: garbage
 (bytes that are no msgpack), print (a stray line on stdout), stall (sleeps), crash (a message
 on stderr, exit code 3), sigkill (kills itself), seq (answers another step), nan (a NaN pose),
-mapreq (says the map changed, and answers the request for it with garbage); mode version2
-answers the hello with version 2; mode ok misbehaves never. Mode gate asks for GMapping's
+mapreq (says the map changed, and answers the request for it with garbage); mode version3
+answers the hello with version 3; mode ok misbehaves never. Mode gate asks for GMapping's
 gate (linear_update 0.25 m, angular_update 10 rad) in its ready, answers with the map -> odom
 correction GATE_T, and logs "got SEQ trail K" on stderr for each step (K skipped steps before
-it); mode badgate asks for a gate with a negative linear_update."""
+it); mode badgate asks for a gate with a negative linear_update. Modes due1 and due2 speak
+version 1 or 2, say every scan changed the map, log "due SEQ true|false" (whether the step
+carried map_due) and "map request" on stderr, and answer a map request with an unchanged map."""
 
 from __future__ import annotations
 
@@ -60,7 +62,7 @@ def main() -> int:
     while len(header := stdin.read(4)) == 4:
         msg = msgpack.unpackb(stdin.read(struct.unpack(">I", header)[0]), raw=False)
         if msg["type"] == "hello":
-            version = 2 if mode == "version2" else 1
+            version = {"version3": 3, "due2": 2}.get(mode, 1)
             send(out, {"type": "hello", "protocol": "mapqual-slam", "version": version})
         elif msg["type"] == "config":
             print(f"fake program: mode {mode} at step {at}", file=sys.stderr, flush=True)
@@ -82,7 +84,16 @@ def main() -> int:
                 send(out, {"type": "estimate", "seq": msg["seq"], "pose": pose,
                            "T_map_odom": list(GATE_T)})  # fmt: skip
                 continue
+            if mode in ("due1", "due2"):
+                due = "true" if msg.get("map_due") else "false"
+                print(f"due {msg['seq']} {due}", file=sys.stderr, flush=True)
+                send(out, {"type": "estimate", "seq": msg["seq"], "pose": msg["odom"],
+                           "updated": True})  # fmt: skip
+                continue
             send(out, {"type": "estimate", "seq": msg["seq"], "pose": msg["odom"]})
+        elif msg["type"] == "map" and mode in ("due1", "due2"):
+            print("map request", file=sys.stderr, flush=True)
+            send(out, {"type": "map", "map": None})
         elif msg["type"] == "map" and mode == "mapreq":
             out.write(struct.pack(">I", 1) + b"\xc1")
             out.flush()

@@ -71,7 +71,10 @@ def test_the_twin_answers_exactly_what_the_algorithm_in_process_gives():
         ("nan", "protocol error at step 3 (t=0.30 s): 'pose' must be three finite numbers"),
         ("crash", "failed at step 3 (t=0.30 s): the program exited with code 3 | stderr: "),
         ("sigkill", "failed at step 3 (t=0.30 s): the program was killed by signal 9"),
-        ("version2", "protocol error at start-up: the program speaks version 2; mapqual speaks 1"),
+        (
+            "version3",
+            "protocol error at start-up: the program speaks version 3; mapqual speaks 1 and 2",
+        ),
     ],
 )
 def test_a_failing_program_is_one_slam_failed_that_names_the_step(mode, needle):
@@ -84,14 +87,14 @@ def test_a_failing_program_is_one_slam_failed_that_names_the_step(mode, needle):
     message = str(info.value)
     assert message.startswith("external SLAM 'prog' ") and needle in message
     assert "\n" not in message
-    assert info.value.step == (None if mode == "version2" else 3)
+    assert info.value.step == (None if mode == "version3" else 3)
     if mode == "crash":  # the stderr tail, in the message and in full
         assert message.endswith("| stderr: fake program: mode crash at step 3 | "
                                 "matcher: segmentation fault in scan 42")  # fmt: skip
         assert info.value.stderr_tail.splitlines()[-1] == "matcher: segmentation fault in scan 42"
     assert children() == before  # stopped and reaped: no zombie
     np.testing.assert_array_equal(
-        slam.pose_estimate(), [-0.8, 0.2, 0.1] if mode != "version2" else 0
+        slam.pose_estimate(), [-0.8, 0.2, 0.1] if mode != "version3" else 0
     )
     with pytest.raises(SlamFailed):  # and it stays failed
         slam.process(1.0, np.zeros(3), np.ones(LASER.n_beams))

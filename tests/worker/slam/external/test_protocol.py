@@ -46,9 +46,14 @@ def test_garbage_is_a_protocol_error(payload, needle):
 
 def test_hello_checks_protocol_and_version():
     ok = {"type": "hello", "protocol": "mapqual-slam", "version": 1, "name": "x"}
-    assert proto.check_hello(ok) == "x"
-    with pytest.raises(proto.ProtocolError, match="speaks version 2; mapqual speaks 1"):
-        proto.check_hello({**ok, "version": 2})
+    assert proto.check_hello(ok) == ("x", 1)
+    assert proto.check_hello({**ok, "version": 2}) == ("x", 2)
+    assert proto.hello()["versions"] == [1, 2]
+    for bad in (3, 0, True, "2", None):
+        with pytest.raises(
+            proto.ProtocolError, match=f"speaks version {bad!r}; mapqual speaks 1 and 2"
+        ):
+            proto.check_hello({**ok, "version": bad})
     with pytest.raises(proto.ProtocolError, match="protocol 'ros'"):
         proto.check_hello({**ok, "protocol": "ros"})
     with pytest.raises(proto.ProtocolError, match="reported an error: no licence"):
