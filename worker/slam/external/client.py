@@ -152,12 +152,12 @@ class ExternalSlam:
             raise proto.ProtocolError(f"the estimate answers seq {msg.get('seq')!r}, not {seq}")
         pose = proto.pose3(msg, "pose")
         T = proto.pose3(msg, "T_map_odom") if "T_map_odom" in msg else _correction(pose, pose_odom)
-        grid = None
-        if msg.get("map") is not None:
-            grid = self._read_map(msg["map"])
-        updated = msg.get("updated", grid is not None)
+        has_map = msg.get("map") is not None
+        updated = msg.get("updated", has_map)
         if not isinstance(updated, bool):
             raise proto.ProtocolError(f"'updated' must be true or false, got {updated!r}")
+        # the map last: it may be written into the current grid's cells, once all else is good
+        grid = self._read_map(msg["map"]) if has_map else None
         self._pose, self._T = pose, T
         if grid is not None:
             self._grid = grid
