@@ -139,37 +139,26 @@ def check_cells(raw, is_int8):
 
 
 @njit(cache=True)
-def scatter_float32(index, raw, out):
-    """Write float32 `raw` (K,) into the flat float32 `out` at `index` (K,) uint32, as
-    copy_float32 does (NaN and negatives unknown), or nothing: BAD_INDEX when an index lies
-    past the end, BAD_ABOVE_ONE when a value is above 1 or infinite, else 0 (all written)."""
+def scatter(index, raw, out, is_int8):
+    """Write `raw` (K,) into the flat float32 `out` at `index` (K,) uint32, as copy_float32
+    (float32 cells, NaN and negatives unknown) or copy_int8 (is_int8: ROS's percent, negatives
+    unknown) do, or nothing: BAD_INDEX when an index lies past the end, BAD_ABOVE_ONE /
+    BAD_INT8 when a value is out of range, else 0 (all written)."""
     size = out.shape[0]
     for k in range(index.shape[0]):
         if index[k] >= size:
             return BAD_INDEX
-    bad = check_cells(raw, False)
-    if bad:
-        return bad
-    nan = np.float32(np.nan)
-    for k in range(index.shape[0]):
-        v = raw[k]
-        out[index[k]] = nan if v < 0.0 else v
-    return 0
-
-
-@njit(cache=True)
-def scatter_int8(index, raw, out):
-    """scatter_float32 for int8 `raw` (ROS's percent, negative unknown); BAD_INT8 above 100."""
-    size = out.shape[0]
-    for k in range(index.shape[0]):
-        if index[k] >= size:
-            return BAD_INDEX
-    bad = check_cells(raw, True)
+    bad = check_cells(raw, is_int8)
     if bad:
         return bad
     nan = np.float32(np.nan)
     hundred = np.float32(100.0)
     for k in range(index.shape[0]):
         v = raw[k]
-        out[index[k]] = nan if v < 0 else np.float32(v) / hundred
+        if v < 0:
+            out[index[k]] = nan
+        elif is_int8:
+            out[index[k]] = np.float32(v) / hundred
+        else:
+            out[index[k]] = v
     return 0

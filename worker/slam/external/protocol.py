@@ -19,8 +19,7 @@ from worker.slam.external.kernels import (
     check_cells,
     copy_float32,
     copy_int8,
-    scatter_float32,
-    scatter_int8,
+    scatter,
 )
 
 PROTOCOL = "mapqual-slam"
@@ -200,7 +199,7 @@ def scatter_into(flat: np.ndarray, index: Any, data: Any, encoding: str, where: 
         raise ProtocolError(f"{where} 'data' must be {need} bytes of {encoding}, got {size}")
     idx = np.frombuffer(index, dtype="<u4")
     raw = np.frombuffer(data, dtype=dtype)
-    status = (scatter_int8 if encoding == "int8" else scatter_float32)(idx, raw, flat)
+    status = scatter(idx, raw, flat, encoding == "int8")
     if status == BAD_INDEX:
         raise ProtocolError(f"{where} 'index' holds a cell past the map's {flat.shape[0]} cells")
     if status:

@@ -11,7 +11,7 @@ import pytest
 
 from worker.slam.external import twin as twin_mod
 from worker.slam.external.client import _sole_reference
-from worker.slam.external.kernels import changed_cells, scatter_float32, scatter_int8
+from worker.slam.external.kernels import changed_cells, scatter
 from worker.slam.external.mapmsg import read_map
 from worker.slam.external.protocol import ProtocolError, unpack
 from worker.slam.grid import OccupancyGrid
@@ -66,19 +66,19 @@ def test_changed_cells_lists_what_numpy_finds_in_a_window_of_the_map(seed):
 def test_scatter_writes_probabilities_and_unknowns_or_nothing_at_all():
     out = np.zeros(5, dtype=np.float32)
     idx = np.array([4, 0, 2], dtype="<u4")
-    assert scatter_float32(idx, np.array([0.5, -1.0, nan], dtype="<f4"), out) == 0
+    assert scatter(idx, np.array([0.5, -1.0, nan], dtype="<f4"), out, False) == 0
     np.testing.assert_array_equal(out, [nan, 0, nan, 0, 0.5])
     out = np.zeros(4, dtype=np.float32)
-    assert scatter_int8(np.array([1, 3], dtype="<u4"), np.array([50, -1], "i1"), out) == 0
+    assert scatter(np.array([1, 3], dtype="<u4"), np.array([50, -1], "i1"), out, True) == 0
     np.testing.assert_array_equal(out, [0, 0.5, 0, nan])
-    for index, values, kernel in (
-        ([0, 4], np.array([0.5, 0.5], "<f4"), scatter_float32),  # index 4 of 4 cells
-        ([0, 1], np.array([0.5, 1.5], "<f4"), scatter_float32),
-        ([0, 1], np.array([0.5, -np.inf], "<f4"), scatter_float32),
-        ([0, 1], np.array([5, 101], "i1"), scatter_int8),
+    for index, values, is_int8 in (
+        ([0, 4], np.array([0.5, 0.5], "<f4"), False),  # index 4 of 4 cells
+        ([0, 1], np.array([0.5, 1.5], "<f4"), False),
+        ([0, 1], np.array([0.5, -np.inf], "<f4"), False),
+        ([0, 1], np.array([5, 101], "i1"), True),
     ):
         out = np.zeros(4, dtype=np.float32)
-        assert kernel(np.array(index, dtype="<u4"), values, out) != 0
+        assert scatter(np.array(index, dtype="<u4"), values, out, is_int8) != 0
         np.testing.assert_array_equal(out, 0)  # the good first cell was not written either
 
 
