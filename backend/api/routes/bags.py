@@ -3,6 +3,7 @@ run's own relations (POST / GET /runs/{id}/estimates)."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import tempfile
@@ -44,32 +45,51 @@ def get_bag(
     format: Literal["rosbag2", "rosbag1"] = Query("rosbag2", description="bag format"),
 ) -> FileResponse:
     """The run's sim.log as a bag: rosbag1 (one .bag) or rosbag2 (MCAP; its directory as a
-    zip). Written to a temporary folder and streamed from disk, then deleted."""
-    from worker.export.bag import export_bag, find_sim_log
+    zip). Built once into the run's folder (`export/`), then served from there until the log
+    changes (a 2 h run's bag takes a minute to build); where that folder cannot be written,
+    built in a temporary folder for this response and deleted afterwards."""
+    from worker.export.bag import find_sim_log
 
     folder = _report_dir(_run(session, user, run_id))
     try:
         log = find_sim_log(folder)
     except InputError:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no sim.log") from None
-    tmp = Path(tempfile.mkdtemp(prefix="mapqual-bag-"))
-    cleanup = BackgroundTask(shutil.rmtree, tmp, ignore_errors=True)
+    name = f"run{run_id}"
+    file_name = f"{name}.bag" if format == "rosbag1" else f"{name}_rosbag2.zip"
+    media = "application/octet-stream" if format == "rosbag1" else "application/zip"
+    cached = folder / "export" / file_name
+    if cached.is_file() and cached.stat().st_mtime_ns >= log.stat().st_mtime_ns:
+        return FileResponse(cached, media_type=media, filename=file_name)
     try:
-        name = f"run{run_id}"
-        if format == "rosbag1":
-            path = export_bag(log, tmp / f"{name}.bag", "rosbag1").path
-            return FileResponse(path, media_type="application/octet-stream",
-                                filename=path.name, background=cleanup)  # fmt: skip
-        bag = export_bag(log, tmp / name, "rosbag2").path
-        path = tmp / f"{name}_rosbag2.zip"
-        with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:
-            for f in sorted(bag.iterdir()):
-                zf.write(f, f"{name}/{f.name}")
-        return FileResponse(path, media_type="application/zip", filename=path.name,
-                            background=cleanup)  # fmt: skip
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        cached.parent.mkdir(exist_ok=True)
+        work = Path(tempfile.mkdtemp(prefix=".building-", dir=cached.parent))
+    except OSError:  # a read-only report folder
+        work = Path(tempfile.mkdtemp(prefix="mapqual-bag-"))
+        built = _build_bag(log, work, name, format)
+        cleanup = BackgroundTask(shutil.rmtree, work, ignore_errors=True)
+        return FileResponse(built, media_type=media, filename=file_name, background=cleanup)
+    try:
+        # built aside, then renamed into place: a request served meanwhile gets a whole file
+        os.replace(_build_bag(log, work, name, format), cached)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return FileResponse(cached, media_type=media, filename=file_name)
+
+
+def _build_bag(log: Path, work: Path, name: str, format: str) -> Path:
+    """The bag of `log` in the folder `work`: `name`.bag, or `name`_rosbag2.zip holding the
+    rosbag2 directory `name`/."""
+    from worker.export.bag import export_bag
+
+    if format == "rosbag1":
+        return export_bag(log, work / f"{name}.bag", "rosbag1").path
+    bag = export_bag(log, work / name, "rosbag2").path
+    path = work / f"{name}_rosbag2.zip"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:
+        for f in sorted(bag.iterdir()):
+            zf.write(f, f"{name}/{f.name}")
+    return path
 
 
 def _unzip_bag(data: bytes, folder: Path) -> Path:

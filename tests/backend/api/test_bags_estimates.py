@@ -4,6 +4,7 @@ read back with rosbags, estimates scored on the run's relations, owner-only, hos
 from __future__ import annotations
 
 import io
+import os
 import tempfile
 import zipfile
 from pathlib import Path
@@ -67,8 +68,39 @@ def test_the_bag_of_a_run_in_both_formats(api, run_id, run_folder, tmp_path):
         zf.extractall(tmp_path / "b")
     assert _counts(tmp_path / "b" / f"run{run_id}")["/scan"] == n
     left = [p for p in Path(tempfile.gettempdir()).glob("mapqual-bag-*")]
-    assert left == []  # the bag was streamed from a temporary folder, deleted afterwards
+    assert left == []  # built in the run's folder, no temporary folder left behind
     assert api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag3"}).status_code == 422
+
+
+def test_a_bag_is_built_once_and_again_only_when_the_log_changes(api, run_id, tmp_path):
+    folder = tmp_path / "report"  # the run's folder (the run_id fixture's)
+    first = api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag1"})
+    assert first.status_code == 200
+    cached = folder / "export" / f"run{run_id}.bag"
+    inode = cached.stat().st_ino
+    again = api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag1"})
+    assert again.content == first.content and cached.stat().st_ino == inode  # served, not built
+    assert sorted(p.name for p in (folder / "export").iterdir()) == [cached.name]  # no leftovers
+    log = folder / "sim.log"
+    later = cached.stat().st_mtime_ns + 10**9
+    os.utime(log, ns=(later, later))  # the log rewritten after the bag: built anew
+    rebuilt = api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag1"})
+    assert rebuilt.status_code == 200 and cached.stat().st_ino != inode
+    assert rebuilt.content == first.content  # the same log, the same bag
+
+
+def test_a_run_folder_that_cannot_be_written_still_gets_its_bag(api, run_id, tmp_path):
+    folder = tmp_path / "report"
+    folder.chmod(0o555)
+    try:
+        if os.access(folder, os.W_OK):  # root writes anywhere: make export/ a file instead
+            folder.chmod(0o755)
+            (folder / "export").write_text("not a folder")
+        r = api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag1"})
+    finally:
+        folder.chmod(0o755)
+    assert r.status_code == 200 and len(r.content) > 1000
+    assert list(Path(tempfile.gettempdir()).glob("mapqual-bag-*")) == []
 
 
 def test_an_estimate_is_scored_on_the_runs_relations_and_listed(api, run_id, run_folder):
