@@ -9,6 +9,7 @@ import numpy as np
 
 from worker.slam.external.protocol import (
     ENCODINGS,
+    MAX_FRAME,
     ProtocolError,
     cells,
     cells_into,
@@ -18,6 +19,8 @@ from worker.slam.external.protocol import (
     scatter_into,
 )
 from worker.slam.grid import OccupancyGrid
+
+MAX_MAP_CELLS = MAX_FRAME  # the largest map a frame can carry whole (int8: a byte a cell)
 
 
 def read_map(
@@ -40,6 +43,11 @@ def read_map(
         raise ProtocolError("map 'origin' must be two numbers [x, y] [m]")
     origin_xy = np.array([number({"x": v}, "x") for v in origin])
     width, height = count(m, "width"), count(m, "height")
+    if width * height > MAX_MAP_CELLS:  # patches or cells would make mapqual allocate it
+        raise ProtocolError(
+            f"a map of {width} x {height} cells is larger than mapqual takes "
+            f"({MAX_MAP_CELLS} cells, a whole int8 map in one frame)"
+        )
     encoding = m.get("encoding", "float32")
     if encoding not in ENCODINGS:
         raise ProtocolError(f"map 'encoding' must be one of {sorted(ENCODINGS)}, not {encoding!r}")

@@ -322,3 +322,16 @@ def test_a_map_kept_by_the_caller_is_never_written_over():
     np.testing.assert_array_equal(kept.prob, kept_copy)
     assert not kept.prob.flags.writeable
     assert in_place >= 3  # rewritten in place while nobody kept them
+
+
+@pytest.mark.parametrize("form", ["patches", "cells"])
+def test_a_map_too_large_to_allocate_is_refused_before_anything_is_allocated(form):
+    """A program claiming a 10^6 x 10^6 map (4 TB of float32) with an empty patch list or
+    cell list: a protocol error, not a worker killed by the memory it asked for."""
+    body = {"patches": []} if form == "patches" else {"cells": _cells([], [])}
+    m = {**_header(1_000_000, 1_000_000), **body}
+    with pytest.raises(ProtocolError, match="a map of 1000000 x 1000000 cells is larger"):
+        read_map(m, _grid([[0.0]]), 0.25, version=2)
+    largest = 8192 * 8192  # 64 Mi cells: a whole int8 map in one 64 MiB frame
+    ok = {**_header(8192, 8192), "cells": _cells([largest - 1], [0.5])}
+    assert read_map(ok, None, 0.25, version=2).prob[-1, -1] == 0.5
