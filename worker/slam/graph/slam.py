@@ -8,6 +8,7 @@ import numpy as np
 
 from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
+from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.mapping import NodeMap, scan_reach
 from worker.slam.graph.match_kernels import point_normals, scan_points
 from worker.slam.graph.matcher import MatchResult, point_map_around
@@ -61,6 +62,9 @@ class GraphSlam:
         self._T_map_odom = np.zeros(3)
         self._grid: OccupancyGrid | None = None
         self._scans = ScanTrack()  # per scan processed: odometry, path so far, latest node
+        # ((nodes, edges) counts, (N, 3) poses) of the last final optimisation
+        self._final: tuple[tuple[int, int], np.ndarray] | None = None
+        self.final_matched = 0  # nodes the final optimisation matched again
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -201,14 +205,49 @@ class GraphSlam:
     def final_trajectory(self) -> np.ndarray:
         """(N, 3) the pose at every scan processed so far as the final graph has it (offline
         SLAM's answer; pose_estimate gave the online one, before later closures). A node's
-        scan is at its optimised pose; a scan between nodes a and b at the two poses the
-        odometry gives from each, (P_a (+) o_a^-1 o_s) and (P_b (+) o_b^-1 o_s), blended by
-        the share of the odometry path from a to b travelled at the scan; scans after the
-        last node from it alone."""
+        scan is at its optimised pose (`final_node_poses`); a scan between nodes a and b at
+        the two poses the odometry gives from each, (P_a (+) o_a^-1 o_s) and
+        (P_b (+) o_b^-1 o_s), blended by the share of the odometry path from a to b travelled
+        at the scan; scans after the last node from it alone."""
         n = self.nodes.n
         return self._scans.trajectory(
-            self.nodes.poses[:n], self.nodes.odom[:n], self.nodes.path_m[:n]
+            self.final_node_poses(), self.nodes.odom[:n], self.nodes.path_m[:n]
         )
+
+    def final_node_poses(self) -> np.ndarray:
+        """(N, 3) the nodes' poses after the offline final optimisation (worker.slam.graph.final;
+        the online ones with run_final_optimization off). Computed once per state of the
+        graph (it changes only in `process`); the online graph, and the map `occupancy`
+        draws from it, are left as they are."""
+        key = (self.nodes.n, len(self.edges))
+        if self._final is None or self._final[0] != key:
+            self._final = (key, self._final_optimisation())
+        return self._final[1].copy()
+
+    def _final_optimisation(self) -> np.ndarray:
+        g, nodes = self.graph_params, self.nodes
+        n = nodes.n
+        poses = nodes.poses[:n].copy()
+        self.final_matched = 0
+        if not g.run_final_optimization or n < 2:
+            return poses
+        matched = np.zeros(n, dtype=bool)
+        pose_match = poses.copy()
+        for k in range(n):
+            idx = two_sided_nodes(
+                poses, k, g.final_scan_buffer_size, g.scan_buffer_maximum_scan_distance
+            )
+            if idx.size == 0:
+                continue
+            match = self._link_match(idx, nodes.points[k], poses[k], poses)
+            if match.score >= g.link_match_minimum_response_fine:
+                matched[k], pose_match[k] = True, match.pose
+        self.final_matched = int(matched.sum())
+        sigma = (g.match_sigma_xy, g.match_sigma_xy, g.match_sigma_theta)
+        edges = relink_edges(self.edges.arrays(), matched, pose_match, sigma)
+        return optimize(
+            poses, edges, g.huber_delta, g.max_num_final_iterations, g.optimizer_tolerance
+        ).poses
 
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)
