@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_graph.py [--world office_a] [--minutes 30] [--seed 1]
         [--log FILE --gt GT.tum] [--algorithms graph,rbpf] [--relations 2000] [--json]
+        [--params FILE]
 
 1. simulates a wander log of --minutes simulated minutes in worlds/bormann/<world>.yaml
    (or takes --log and its ground truth --gt);
@@ -44,10 +45,12 @@ def _load() -> str:
     return "load averages " + " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
-def run_cli(log: Path, out: Path, algorithm: str) -> dict:
+def run_cli(log: Path, out: Path, algorithm: str, params: Path | None = None) -> dict:
     """`mapqual slam` in a child: its summary plus wall [s], CPU [s] and peak RSS [MB]."""
     mapqual = Path(sys.executable).with_name("mapqual")
     cmd = [str(mapqual), "slam", str(log), "-o", str(out), "--algorithm", algorithm, "--json"]
+    if params is not None:
+        cmd += ["--params", str(params)]
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
     t0 = time.perf_counter()
     with open(out.with_suffix(".out"), "w+") as fh:
@@ -100,6 +103,7 @@ def main() -> None:
     ap.add_argument("--algorithms", default="graph,rbpf")
     ap.add_argument("--relations", type=int, default=2000, help="at least this many B relations")
     ap.add_argument("--json", action="store_true", help="one JSON line per algorithm")
+    ap.add_argument("--params", type=Path, help="SLAM parameters file for mapqual slam --params")
     args = ap.parse_args()
     algorithms = [a for a in args.algorithms.split(",") if a]
     if (args.log is None) != (args.gt is None):
@@ -122,7 +126,7 @@ def main() -> None:
         if not args.json:
             print(f"{what}; {stamp}; {_load()}")
         for alg in algorithms:
-            r = run_cli(log, tmp / alg, alg)
+            r = run_cli(log, tmp / alg, alg, args.params)
             r |= b_errors(gt, tmp / alg / "trajectory.tum", args.relations, args.seed)
             if args.json:
                 print(json.dumps({k: v for k, v in r.items() if k != "params"}))

@@ -165,3 +165,29 @@ def icp_point_to_line(
         if np.abs(step[:2]).max() < 1e-4 and abs(step[2]) < 1e-5:
             break
     return x
+
+
+def point_map_around(
+    points: np.ndarray,
+    normals: np.ndarray,
+    centre: np.ndarray,
+    reach: float,
+    res: float,
+    sigma: float,
+    depth: int,
+) -> PointMap:
+    """The PointMap of map points (K, 2) [m] with their normals (K, 2), kept within `reach`
+    [m] of `centre` (3,) in x and y (what a scan matched near there can reach) and cut to the
+    points' extent (the grid need not cover empty space)."""
+    bounds = (centre[0] - reach, centre[1] - reach, centre[0] + reach, centre[1] + reach)
+    return PointMap(points, res, sigma, depth, _clip_bounds(points, bounds), normals)
+
+
+def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):
+    """bounds cut to the points' extent."""
+    if len(pts) == 0:
+        return bounds
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    x0, y0 = max(bounds[0], lo[0]), max(bounds[1], lo[1])
+    x1, y1 = min(bounds[2], hi[0]), min(bounds[3], hi[1])
+    return (x0, y0, max(x0, x1), max(y0, y1))

@@ -47,12 +47,15 @@ class NodeStore:
         self.n += 1
         return k
 
-    def map_points(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(K, 2) [m] the scan points of nodes `idx` placed at their poses, and their normals
-        (K, 2) in the map frame."""
+    def map_points(
+        self, idx: np.ndarray, poses: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 2) [m] the scan points of nodes `idx` placed at `poses` (N, 3) (None: their
+        current poses), and their normals (K, 2) in the map frame."""
+        poses = self.poses if poses is None else poses
         out, nrm = [], []
         for k in idx:
-            p, pts, n = self.poses[k], self.points[k], self.normals[k]
+            p, pts, n = poses[k], self.points[k], self.normals[k]
             c, s = np.cos(p[2]), np.sin(p[2])
             out.append(np.column_stack([p[0] + c * pts[:, 0] - s * pts[:, 1],
                                         p[1] + s * pts[:, 0] + c * pts[:, 1]]))  # fmt: skip

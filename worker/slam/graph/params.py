@@ -89,6 +89,19 @@ class GraphSlamParams:
     # back end (Levenberg-Marquardt, slam_toolbox's Ceres solver)
     optimizer_iterations: int = 20
     optimizer_tolerance: float = 1e-6  # stop when the cost falls by less than this fraction
+    # offline only (the final trajectory; the online estimate never sees it): Cartographer's
+    # final optimisation, run when an offline trajectory is finished (cartographer_ros's
+    # offline node): each node matched again, as the front end matches, against the nodes on
+    # both sides at their settled poses, the links between consecutive nodes replaced by
+    # these matches, and the graph optimised again (worker.slam.graph.final)
+    # Off by default: on the three CARMEN logs (bench_graph_carmen, seeds 0-2) it moved the
+    # mean B error by -0.009 to -0.011 m on Freiburg 079 but by -0.005 to +0.007 m on ACES
+    # and CSAIL, no general gain there (on 30-minute simulated logs, with exact ground truth,
+    # it cut it by 0-38 %, for 40 % more CPU; figures in the commit that added it)
+    run_final_optimization: bool = False
+    final_scan_buffer_size: int = 5  # [nodes] each side: a map as large as the front end's
+    # (scan_buffer_size 10), half of it from after the node
+    max_num_final_iterations: int = 200  # Cartographer POSE_GRAPH.max_num_final_iterations
 
     def __post_init__(self) -> None:
         positive = (
@@ -129,6 +142,8 @@ class GraphSlamParams:
             "loop_branch_and_bound_depth": (0, 10),
             "loop_attempt_every": (1, 1000),
             "optimizer_iterations": (1, 1000),
+            "final_scan_buffer_size": (1, 1000),
+            "max_num_final_iterations": (1, 10000),
         }
         for name, (lo, hi) in counts.items():
             value = getattr(self, name)

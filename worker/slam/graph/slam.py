@@ -8,9 +8,10 @@ import numpy as np
 
 from worker.slam.base import LaserGeometry, beam_angles, beam_limits
 from worker.slam.gating import UpdateGate, check_scan
+from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.mapping import NodeMap, scan_reach
 from worker.slam.graph.match_kernels import point_normals, scan_points
-from worker.slam.graph.matcher import PointMap
+from worker.slam.graph.matcher import MatchResult, point_map_around
 from worker.slam.graph.nodes import EdgeList, LoopClosure, NodeStore, find_candidate, search_window
 from worker.slam.graph.optimize import edge_errors, optimize
 from worker.slam.graph.params import GraphSlamParams
@@ -61,6 +62,9 @@ class GraphSlam:
         self._T_map_odom = np.zeros(3)
         self._grid: OccupancyGrid | None = None
         self._scans = ScanTrack()  # per scan processed: odometry, path so far, latest node
+        # ((nodes, edges) counts, (N, 3) poses) of the last final optimisation
+        self._final: tuple[tuple[int, int], np.ndarray] | None = None
+        self.final_matched = 0  # nodes the final optimisation matched again
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
         t, pose, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
@@ -88,15 +92,7 @@ class GraphSlam:
         prev = nodes.n - 1
         odo = relative3(nodes.odom[prev], pose_odom)
         prior = compose3(nodes.poses[prev], odo)
-        match = self._local_map(prev, prior).match(
-            pts,
-            prior,
-            0.5 * g.correlation_search_space_dimension,
-            g.coarse_search_angle_offset,
-            g.link_match_minimum_response_fine,
-            (g.distance_variance_penalty, g.minimum_distance_penalty),
-            (g.angle_variance_penalty, g.minimum_angle_penalty),
-        )
+        match = self._link_match(self._local_nodes(prev, prior), pts, prior)
         if match.score >= g.link_match_minimum_response_fine:
             pose = match.pose
             z = relative3(nodes.poses[prev], pose)
@@ -110,20 +106,41 @@ class GraphSlam:
         self.edges.add(prev, k, z, sigma, robust=False)
         return k
 
-    def _local_map(self, last: int, prior: np.ndarray) -> PointMap:
-        """The smeared map of the last scan_buffer_size nodes within
-        scan_buffer_maximum_scan_distance of the prior, cut to what the scan can reach."""
+    def _local_nodes(self, last: int, prior: np.ndarray) -> np.ndarray:
+        """(K,) the last scan_buffer_size nodes up to `last` within
+        scan_buffer_maximum_scan_distance of the prior (and `last` always)."""
         g, nodes = self.graph_params, self.nodes
         idx = np.arange(max(0, last - g.scan_buffer_size + 1), last + 1)
         d = np.hypot(nodes.poses[idx, 0] - prior[0], nodes.poses[idx, 1] - prior[1])
-        idx = idx[(d <= g.scan_buffer_maximum_scan_distance) | (idx == last)]
+        return idx[(d <= g.scan_buffer_maximum_scan_distance) | (idx == last)]
+
+    def _link_match(
+        self,
+        idx: np.ndarray,
+        points: np.ndarray,
+        prior: np.ndarray,
+        poses: np.ndarray | None = None,
+    ) -> MatchResult:
+        """The front end's match of scan `points` (M, 2) [robot frame] near `prior` (3,)
+        against the smeared map of nodes `idx` placed at `poses` (N, 3) (None: the nodes'
+        current poses), cut to what the scan can reach: the correlative window around the
+        prior with Karto's penalties for leaving it."""
+        g, nodes = self.graph_params, self.nodes
+        pts, nrm = nodes.map_points(idx, poses)
         reach = self._match_max + 0.5 * g.correlation_search_space_dimension
-        bounds = (prior[0] - reach, prior[1] - reach, prior[0] + reach, prior[1] + reach)
-        pts, nrm = nodes.map_points(idx)
-        return PointMap(
-            pts, self.params.delta, g.correlation_search_space_smear_deviation,
-            g.branch_and_bound_depth, _clip_bounds(pts, bounds), nrm,
+        point_map = point_map_around(
+            pts, nrm, prior, reach, self.params.delta,
+            g.correlation_search_space_smear_deviation, g.branch_and_bound_depth,
         )  # fmt: skip
+        return point_map.match(
+            points,
+            prior,
+            0.5 * g.correlation_search_space_dimension,
+            g.coarse_search_angle_offset,
+            g.link_match_minimum_response_fine,
+            (g.distance_variance_penalty, g.minimum_distance_penalty),
+            (g.angle_variance_penalty, g.minimum_angle_penalty),
+        )
 
     def _try_loop_closure(self, k: int) -> None:
         g, nodes = self.graph_params, self.nodes
@@ -132,12 +149,10 @@ class GraphSlam:
             return
         lin, ang = search_window(cand.path_m, g)
         cur = nodes.poses[k].copy()
-        reach = self._match_max + lin
-        bounds = (cur[0] - reach, cur[1] - reach, cur[0] + reach, cur[1] + reach)
         pts, nrm = nodes.map_points(cand.chain)
-        chain_map = PointMap(
-            pts, self.params.delta, g.loop_search_space_smear_deviation,
-            g.loop_branch_and_bound_depth, _clip_bounds(pts, bounds), nrm,
+        chain_map = point_map_around(
+            pts, nrm, cur, self._match_max + lin, self.params.delta,
+            g.loop_search_space_smear_deviation, g.loop_branch_and_bound_depth,
         )  # fmt: skip
         min_score = g.loop_match_minimum_response_fine
         match = chain_map.match(nodes.points[k], cur, lin, ang, min_score)
@@ -190,14 +205,49 @@ class GraphSlam:
     def final_trajectory(self) -> np.ndarray:
         """(N, 3) the pose at every scan processed so far as the final graph has it (offline
         SLAM's answer; pose_estimate gave the online one, before later closures). A node's
-        scan is at its optimised pose; a scan between nodes a and b at the two poses the
-        odometry gives from each, (P_a (+) o_a^-1 o_s) and (P_b (+) o_b^-1 o_s), blended by
-        the share of the odometry path from a to b travelled at the scan; scans after the
-        last node from it alone."""
+        scan is at its optimised pose (`final_node_poses`); a scan between nodes a and b at
+        the two poses the odometry gives from each, (P_a (+) o_a^-1 o_s) and
+        (P_b (+) o_b^-1 o_s), blended by the share of the odometry path from a to b travelled
+        at the scan; scans after the last node from it alone."""
         n = self.nodes.n
         return self._scans.trajectory(
-            self.nodes.poses[:n], self.nodes.odom[:n], self.nodes.path_m[:n]
+            self.final_node_poses(), self.nodes.odom[:n], self.nodes.path_m[:n]
         )
+
+    def final_node_poses(self) -> np.ndarray:
+        """(N, 3) the nodes' poses after the offline final optimisation (worker.slam.graph.final;
+        the online ones with run_final_optimization off). Computed once per state of the
+        graph (it changes only in `process`); the online graph, and the map `occupancy`
+        draws from it, are left as they are."""
+        key = (self.nodes.n, len(self.edges))
+        if self._final is None or self._final[0] != key:
+            self._final = (key, self._final_optimisation())
+        return self._final[1].copy()
+
+    def _final_optimisation(self) -> np.ndarray:
+        g, nodes = self.graph_params, self.nodes
+        n = nodes.n
+        poses = nodes.poses[:n].copy()
+        self.final_matched = 0
+        if not g.run_final_optimization or n < 2:
+            return poses
+        matched = np.zeros(n, dtype=bool)
+        pose_match = poses.copy()
+        for k in range(n):
+            idx = two_sided_nodes(
+                poses, k, g.final_scan_buffer_size, g.scan_buffer_maximum_scan_distance
+            )
+            if idx.size == 0:
+                continue
+            match = self._link_match(idx, nodes.points[k], poses[k], poses)
+            if match.score >= g.link_match_minimum_response_fine:
+                matched[k], pose_match[k] = True, match.pose
+        self.final_matched = int(matched.sum())
+        sigma = (g.match_sigma_xy, g.match_sigma_xy, g.match_sigma_theta)
+        edges = relink_edges(self.edges.arrays(), matched, pose_match, sigma)
+        return optimize(
+            poses, edges, g.huber_delta, g.max_num_final_iterations, g.optimizer_tolerance
+        ).poses
 
     def pose_estimate(self) -> np.ndarray:
         return compose3(self._T_map_odom, self._pose_odom)
@@ -231,13 +281,3 @@ def _shift_frame(pose: np.ndarray, rival: np.ndarray, max_rotation: float) -> fl
     if abs(math.remainder(float(rival[2] - pose[2]), 2.0 * math.pi)) > max_rotation:
         return None
     return math.atan2(rival[1] - pose[1], rival[0] - pose[0]) - float(pose[2])
-
-
-def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):
-    """bounds cut to the points' extent (the grid need not cover empty space)."""
-    if len(pts) == 0:
-        return bounds
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    x0, y0 = max(bounds[0], lo[0]), max(bounds[1], lo[1])
-    x1, y1 = min(bounds[2], hi[0]), min(bounds[3], hi[1])
-    return (x0, y0, max(x0, x1), max(y0, y1))
