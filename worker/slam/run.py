@@ -80,7 +80,9 @@ def run_slam(
         # graph SLAM: every scan as the final, optimised graph has it; rbpf: along the best
         # particle's path
         trajectory = online if final is None else Trajectory.from_samples(t, final())
-        grid = slam.occupancy()
+        # the map of that trajectory where the algorithm draws one (graph SLAM's final
+        # optimisation), else its current map
+        grid = getattr(slam, "final_occupancy", slam.occupancy)()
     wall = time.perf_counter() - wall0
     return SlamRunResult(
         algorithm=algorithm,

@@ -259,6 +259,20 @@ class GraphSlam:
         """(N, 3) [x, y, theta] the nodes' current (optimised) poses."""
         return self.nodes.poses[: self.nodes.n].copy()
 
+    def final_occupancy(self) -> OccupancyGrid:
+        """The map drawn at `final_node_poses` (offline SLAM's map, beside `final_trajectory`);
+        with run_final_optimization off, the online map itself."""
+        if not self.graph_params.run_final_optimization:
+            return self.occupancy()
+        n = self.nodes.n
+        final = NodeMap(
+            self.params.delta, self.params.map_margin, self.params.occ_thresh,
+            self._cos_a, self._sin_a, self._usable, self._max_range,
+        )  # fmt: skip
+        if n:
+            final.update(self.final_node_poses(), self.nodes.ranges[:n], self.nodes.reach[:n])
+        return final.occupancy()
+
     def occupancy(self) -> OccupancyGrid:
         # incremental while the poses stay; a closure moved them: rebuilt from every node
         if self._grid is None:

@@ -147,3 +147,27 @@ def test_two_sided_nodes_and_relinked_edges():
     assert np.allclose(out.z[0], [1.1, 0.1, 0.05])
     assert np.allclose(out.sigma[0], [0.05, 0.05, 0.02])
     assert np.array_equal(out.z[1:], z[1:]) and np.array_equal(out.sigma[1:], sigma[1:])
+
+
+def test_the_final_map_is_drawn_where_the_final_step_put_the_nodes(box_run):
+    """mapqual slam writes final_trajectory beside final_occupancy: with the step on, the map
+    of a mis-registered node's scan moves with the node; with it off, it is the online map."""
+    slam, _, _, _ = box_run
+    k = slam.nodes.n // 2
+    online_ok = slam.final_occupancy()  # every node in place: both maps of the same poses
+    saved = _mis_register(slam, k, np.array([0.1, 0.0, 0.02]))
+    try:
+        slam._grid = None  # the online map, redrawn with the node where it now is (0.1 m off)
+        online = slam.occupancy()
+        final = slam.final_occupancy()
+    finally:
+        _restore(slam, k, saved)
+        slam._grid = None
+    assert online_ok.shape == final.shape and np.array_equal(online_ok.origin, final.origin)
+    # the final map is the map of the poses in place (the node was pulled back to within
+    # 5 mm, a tenth of a cell), the online one has the node's walls 0.1 m and 0.02 rad off:
+    # whole wall segments a cell or two away (the room's walls are 612 occupied cells)
+    assert np.array_equal(final.occupied, online_ok.occupied)
+    assert np.sum(online.occupied != online_ok.occupied) > 100
+    off, _, _, _ = _feed(GraphSlamParams())
+    assert off.final_occupancy() is off.occupancy()
