@@ -1,7 +1,7 @@
 """Benchmark on real laser data: rbpf against dead reckoning on the three corrected Radish logs.
 
     .venv/bin/python benchmarks/bench_reallogs.py [--logs aces csail freiburg-079] [--seed 0]
-        [--scans N] [--particles 40] [--algorithms rbpf odometry] [--json]
+        [--scans N] [--particles 40] [--algorithms rbpf odometry] [--json] [--proposal]
 
 For each log of ../shared/data/carmen/ (README there): the SLAM problem of
 `worker.sim.drift.drifting_problem` (its real scans, odometry drifting by a 3 % scale error
@@ -14,6 +14,7 @@ along its best particle's path, and beside it its online estimate, each scan's w
 processed), rbpf / odometry (final), wall time, and the figures Kuemmerle et al. (2009)
 publish for RBPF on these buildings (their relations, with the robots' real odometry:
 comparable in kind, not in value).
+--proposal runs rbpf with its sampled improved proposal (off by default: SampledProposal).
 --scans N takes the first N scans only (the test's slices). Runs one log at a time (the
 machine is shared); the whole of Freiburg 079 (4,791 scans) takes minutes.
 """
@@ -38,7 +39,7 @@ from worker.evaluate.relations import BParams, relations_B  # noqa: E402
 from worker.evaluate.trajectory import Trajectory  # noqa: E402
 from worker.sim.carmen import read_laser_log  # noqa: E402
 from worker.sim.drift import DriftParams, drifting_problem, log_slice  # noqa: E402
-from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.params import SampledProposal, SlamParams  # noqa: E402
 from worker.slam.run import run_slam  # noqa: E402
 
 DATA = CARMEN  # ../shared/data/carmen beside the checkout (or MAPQUAL_SHARED)
@@ -72,7 +73,10 @@ def run_log(name: str, args: argparse.Namespace) -> dict:
     problem, gt = drifting_problem(log, args.seed, DriftParams())
     row: dict = {"log": name, "scans": int(log.t.shape[0])}
     for algorithm in args.algorithms:
-        params = SlamParams(particles=args.particles)
+        params = SlamParams(
+            particles=args.particles,
+            proposal=SampledProposal() if args.proposal else None,
+        )
         t0 = time.perf_counter()
         result = run_slam(
             problem.t,
@@ -131,6 +135,9 @@ def main() -> None:
         "--algorithms", nargs="+", choices=["rbpf", "odometry"], default=["rbpf", "odometry"]
     )
     parser.add_argument("--json", action="store_true", help="print the rows as JSON too")
+    parser.add_argument(
+        "--proposal", action="store_true", help="rbpf with the sampled proposal (SampledProposal)"
+    )
     args = parser.parse_args()
     rows = []
     for name in args.logs:

@@ -83,6 +83,21 @@ def draw_from_motion(
     delta = relative3(
         np.asarray(odom_old, dtype=np.float64), np.asarray(odom_new, dtype=np.float64)
     )
+    std = motion_std(delta, srr, srt, str_, stt, substep)
+    noise = rng.standard_normal((poses.shape[0], 3))
+    return _noisy_steps(poses, delta, std, noise)
+
+
+def motion_std(
+    delta: np.ndarray,
+    srr: float,
+    srt: float,
+    str_: float,
+    stt: float,
+    substep: tuple[float, float] = (0.0, 0.0),
+) -> np.ndarray:
+    """(3,) the standard deviations [m, m, rad] draw_from_motion gives the step delta (3,)
+    (robot frame of the pose before it), divided by sqrt(k) for a step of k substeps."""
     dx, dy, dth = abs(delta[0]), abs(delta[1]), abs(delta[2])
     sxy = 0.3 * srr
     std = np.array(
@@ -95,5 +110,4 @@ def draw_from_motion(
     k = motion_substeps(math.hypot(dx, dy), dth, substep)
     if k > 1:
         std = std / math.sqrt(k)
-    noise = rng.standard_normal((poses.shape[0], 3))
-    return _noisy_steps(poses, delta, std, noise)
+    return std

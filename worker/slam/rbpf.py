@@ -21,10 +21,17 @@ from worker.slam.match_kernels import (
     C_LSTEP,
     match_config,
 )
-from worker.slam.motion import compose3, draw_from_motion, motion_substeps, relative3
+from worker.slam.motion import (
+    compose3,
+    draw_from_motion,
+    motion_std,
+    motion_substeps,
+    relative3,
+)
 from worker.slam.odomcal import ScaleEstimate
-from worker.slam.params import SlamParams
+from worker.slam.params import SampledProposal, SlamParams
 from worker.slam.patchmap import PatchMaps
+from worker.slam.proposal_kernels import fit_proposals, fit_proposals_parallel, sample_offsets
 from worker.slam.resample import normalized_weights, systematic_indices
 
 
@@ -83,6 +90,12 @@ class RbpfSlam:
             (C_LSKIP, max(wide.lskip, params.lskip)),
         ):
             self._wide_cfg[key] = value
+        prop = params.proposal
+        if prop is not None:
+            self._offsets = sample_offsets(
+                prop.llsamplerange, prop.llsamplestep, prop.lasamplerange, prop.lasamplestep
+            )
+            self._steps = np.array([prop.llsamplestep, prop.llsamplestep, prop.lasamplestep])
         self._gate = UpdateGate(params.linear_update, params.angular_update, params.temporal_update)
         n = params.particles
         self.maps = PatchMaps(n, params.delta, params.map_margin, params.occ_thresh)
@@ -189,13 +202,13 @@ class RbpfSlam:
         particle's fine climb is also started from its noise-free odometry prediction and from
         the end of a wide climb (WideSearch), and the best-scoring of the three results is
         kept: a wider search where the odometry moved more than a robot's step between two
-        scans."""
+        scans. Then, with params.proposal, each particle's pose is drawn from the Gaussian
+        fitted around that optimum (`_sampled`)."""
         m = self.maps
-        if self.params.threads > 1:
+        parallel = self.params.threads > 1
+        if parallel:
             numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
-            match = scan_match_all_parallel
-        else:
-            match = scan_match_all
+        match = scan_match_all_parallel if parallel else scan_match_all
         args = (ranges, self._cos_a, self._sin_a, self._match_cfg)
         maps = (m.mean, m.bits, m.tables, m.tpx0, m.tpy0)
         poses, scores, likes = match(*maps, self.poses, *args)
@@ -207,9 +220,57 @@ class RbpfSlam:
                 poses[better] = alt[better]
                 scores = np.where(better, alt_scores, scores)
                 likes = np.where(better, alt_likes, likes)
+            if self.params.proposal is not None:
+                poses, likes = self._sampled(ranges, poses, pred, parallel, self.params.proposal)
         self.poses = poses
         self.log_weights += likes
         self.log_weight_sums += likes
+
+    def _sampled(
+        self,
+        ranges: np.ndarray,
+        modes: np.ndarray,
+        pred: np.ndarray,
+        parallel: bool,
+        prop: SampledProposal,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(poses (N, 3), log weight factors (N,)): each particle's pose drawn from the Gaussian
+        of scan likelihood x motion model fitted on the sampling grid around its optimum
+        `modes`, and the log of its normaliser (Grisetti et al. 2007, eqs. (9)-(11)). Keeping
+        the optimum alone puts every copy of a parent at one place along a featureless
+        corridor, where only the odometry knows the distance (README "Real laser logs"); the
+        draw is meant to keep the motion model's spread there and the match's precision across
+        (what it did on the real logs: SampledProposal)."""
+        m = self.maps
+        fit = fit_proposals_parallel if parallel else fit_proposals
+        mus, covs, log_eta = fit(
+            m.mean, m.bits, m.tables, m.tpx0, m.tpy0, modes, pred, self._prior_information(pred),
+            ranges, self._cos_a, self._sin_a, self._offsets, self._steps, prop.shifts,
+            self._match_cfg,
+        )  # fmt: skip
+        return draw_gaussians(mus, covs, self.rng), log_eta
+
+    def _prior_information(self, pred: np.ndarray) -> np.ndarray:
+        """(N, 3, 3) the inverse covariance, map frame, of each particle's motion model since
+        the last update: draw_from_motion's deviations for the whole (calibrated) odometry step
+        as one step of its k substeps (exact for the one step a sparse log makes between two
+        updates; for a dense stretch ended by a sparse step, its k robot-sized steps' noise as
+        the sum of the dense steps' would be), rotated by the particle's heading then."""
+        p = self.params
+        poses_then = self._at_update[1]
+        step = relative3(poses_then[0], pred[0])  # the same odometry step for every particle
+        std = motion_std(
+            step, p.srr, p.srt, p.str_, p.stt, (p.motion_substep, p.motion_substep_angle)
+        )
+        vx, vy, vt = np.maximum(std * std, _MIN_PRIOR_VAR)
+        c, s = np.cos(poses_then[:, 2]), np.sin(poses_then[:, 2])
+        # inv(R diag(vx, vy) R^T) = R diag(1/vx, 1/vy) R^T
+        info = np.zeros((poses_then.shape[0], 3, 3))
+        info[:, 0, 0] = c * c / vx + s * s / vy
+        info[:, 1, 1] = s * s / vx + c * c / vy
+        info[:, 0, 1] = info[:, 1, 0] = c * s * (1.0 / vx - 1.0 / vy)
+        info[:, 2, 2] = 1.0 / vt
+        return info
 
     def _maybe_resample(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Resample when Neff is low. Returns (None, None), or after resampling which particle
@@ -246,6 +307,23 @@ class RbpfSlam:
         if self._grid is None:
             self._grid = self.maps.occupancy(self._best)
         return self._grid
+
+
+# [m^2 or rad^2] the smallest motion-model variance of the proposal's prior: a noise-free model
+# (srr = ... = 0, as some tests set) pins the draw to the odometry instead of dividing by zero
+_MIN_PRIOR_VAR = 1e-12
+
+
+def draw_gaussians(mus: np.ndarray, covs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N, 3) one draw from each N(mus[i] (3,), covs[i] (3, 3)): mu + A z with A A^T = Sigma
+    from the eigen-decomposition (a fitted covariance may be singular: all the weight on one
+    grid pose gives Sigma = 0, the optimum itself); one (N, 3) standard normal draw."""
+    lam, vec = np.linalg.eigh(covs)
+    a = vec * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]
+    z = rng.standard_normal(mus.shape)
+    out = mus + np.einsum("nij,nj->ni", a, z)
+    out[:, 2] = (out[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return out
 
 
 def _compose_all(poses: np.ndarray, step: np.ndarray) -> np.ndarray:
