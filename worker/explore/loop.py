@@ -155,7 +155,7 @@ class Exploration:
         pose_odom = sim.pose_odom
         ranges = sim.scan()
         if self.map_hint is not None:  # whether _feed_map reads the map if this scan updates it
-            self.map_hint(t - self.last_map_t >= 1.0 / self.p.global_costmap_rate - 1e-9)
+            self.map_hint(self._map_due(t))
         try:
             updated = slam.process(t, pose_gt if self.oracle else pose_odom, ranges)
         except SlamFailed as exc:  # an external program crashed, stalled or broke the protocol
@@ -188,12 +188,17 @@ class Exploration:
         rec.add(t, pose_gt, pose_est, 0.0, 0.0)
         return StopReason("slam_failed", str(exc))
 
+    def _map_due(self, t: float) -> bool:
+        """Whether the costmap takes the SLAM map at `t` if the SLAM updated it (at
+        global_costmap_rate)."""
+        return t - self.last_map_t >= 1.0 / self.p.global_costmap_rate - 1e-9
+
     def _feed_map(self, t: float, updated: bool) -> tuple[float, float]:
         """Give the navigator the SLAM map at global_costmap_rate (whole every
         full_map_check_period); its (wall, CPU) time [s]."""
         p = self.p
         nav_s = cpu_s = 0.0
-        if updated and t - self.last_map_t >= 1.0 / p.global_costmap_rate - 1e-9:  # as map_hint
+        if updated and self._map_due(t):
             grid = self.slam.occupancy()
             full = t - self.last_full_t >= p.full_map_check_period
             c0, u0 = time.perf_counter(), time.thread_time()

@@ -109,15 +109,7 @@ class SlamParams:
     proposal: SampledProposal | None = field(default=None, metadata={"omit_if_none": True})
 
     def __post_init__(self) -> None:
-        positive = (
-            "delta",
-            "max_urange",
-            "sigma",
-            "lstep",
-            "astep",
-            "lsigma",
-            "ogain",
-        )
+        positive = ("delta", "max_urange", "sigma", "lstep", "astep", "lsigma", "ogain")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):

@@ -25,7 +25,7 @@ import msgpack  # noqa: E402
 import numpy as np  # noqa: E402
 
 from worker.params import from_dict  # noqa: E402
-from worker.slam.base import beam_limits, make_slam  # noqa: E402
+from worker.slam.base import beam_angles, beam_limits, make_slam  # noqa: E402
 from worker.slam.external import protocol as proto  # noqa: E402
 from worker.slam.external.kernels import changed_box, changed_cells  # noqa: E402
 from worker.slam.external.mapmsg import placed  # noqa: E402
@@ -178,7 +178,7 @@ class _Reach:
     cell the scans since the last map message touched."""
 
     def __init__(self, laser: _Laser, params: SlamParams):
-        angles = laser.angle_min + laser.angle_increment * np.arange(laser.n_beams)
+        angles = beam_angles(laser)  # as the algorithm's own registration has them
         self._cos, self._sin = np.cos(angles), np.sin(angles)
         self._max_range, self._usable = beam_limits(laser, params)
         self.box: list[float] | None = None  # [x0, y0, x1, y1] [m], None: nothing yet
@@ -189,10 +189,8 @@ class _Reach:
         c, s = np.cos(pose[2]), np.sin(pose[2])
         x = pose[0] + d * (c * self._cos[ok] - s * self._sin[ok])
         y = pose[1] + d * (s * self._cos[ok] + c * self._sin[ok])
-        box = [
-            min(pose[0], x.min(initial=pose[0])), min(pose[1], y.min(initial=pose[1])),
-            max(pose[0], x.max(initial=pose[0])), max(pose[1], y.max(initial=pose[1])),
-        ]  # fmt: skip
+        box = [x.min(initial=pose[0]), y.min(initial=pose[1]),
+               x.max(initial=pose[0]), y.max(initial=pose[1])]  # fmt: skip
         if self.box is not None:
             box = [min(box[0], self.box[0]), min(box[1], self.box[1]),
                    max(box[2], self.box[2]), max(box[3], self.box[3])]  # fmt: skip
