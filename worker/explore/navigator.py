@@ -297,7 +297,7 @@ class Navigator:
             self.stats.recoveries += 1
             self.local.clear()
             g.next_plan_t = t  # replan now
-            self._start_retrace(t)
+            self._start_retrace(t, pose)
         return NavCommand(0.0, 0.0, "recovering")
 
     def _no_progress(self, t: float, pose: np.ndarray) -> bool:
@@ -321,9 +321,9 @@ class Navigator:
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
-    def _start_retrace(self, t: float) -> None:
+    def _start_retrace(self, t: float, pose: np.ndarray | None = None) -> None:
         """Recovery: back out along the way the robot came (that space was free)."""
-        target = self.trail.back_target()
+        target = self.trail.back_target(None if pose is None else pose[:2])
         if target is None:
             return
         self.retrace = Retrace(target, t + self.params.retrace_time)
@@ -335,7 +335,7 @@ class Navigator:
         d = self.retrace.target - pose[:2]
         vw = None
         if np.hypot(*d) < self.params.retrace_tolerance or t >= self.retrace.until:
-            self.trail.clear()
+            self.trail.cut_to(self.retrace.target)
         else:
             vw = back_out(self.params, self.local, pose, d)
         if vw is None:
@@ -352,7 +352,7 @@ class Navigator:
             self.closed.close(
                 self.costmap, self.params, g.path, pose[:2], self.params.closed_gap_radius
             )
-        self._start_retrace(t)
+        self._start_retrace(t, pose)
         self.memory.blacklist.append(self.pursuit.goal.frontier_xy.copy())
         self.stats.consecutive_failures += 1
         self._end_goal(t, "failed", why)

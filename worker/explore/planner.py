@@ -36,7 +36,9 @@ class DijkstraSearch:
         escape_m: float | None = None,
     ) -> np.ndarray:
         """Search from `start_cell (ix, iy)`; settled target flat indices, nearest first.
-        escape_m: the escape radius [m] (default params.escape_radius)."""
+        escape_m: the escape radius [m] (default params.escape_radius); a wider one lets the
+        plan cross cells under the margin that far, inscribed cells only within
+        params.escape_radius."""
         if costmap.shape != self.shape:
             self.shape = costmap.shape
             self.potential = np.zeros(self.shape)
@@ -64,6 +66,7 @@ class DijkstraSearch:
             -1 if goal_cell is None else goal_cell[0],
             planner_blocked_cost(params),
             int(round(escape / costmap.resolution)),
+            int(round(min(escape, params.escape_radius) / costmap.resolution)),
         )
 
     def sealed_off(

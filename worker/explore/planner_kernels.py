@@ -107,6 +107,7 @@ def dijkstra(
     goal_ix=-1,
     blocked=253,
     escape_cells=0,
+    deep_cells=-1,
 ):
     """Dijkstra navigation function from the start cell (8-connected), with early exit.
 
@@ -118,7 +119,10 @@ def dijkstra(
     Returns `(K,) int64` flat indices of the target cells settled, nearest first.
 
     Only from cells within `escape_cells` of the start may blocked cells be entered (at 253 a
-    step): the robot stands there, so it can drive out.
+    step): the robot stands there, so it can drive out. Cells at or above INSCRIBED (where
+    the footprint would touch an obstacle) only within `deep_cells` (-1: escape_cells): a
+    wide escape from a pocket may cross gaps under the margin, never chain through the
+    inscribed zones of furniture, where the robot does not fit.
 
     With a goal cell (goal_iy >= 0) the queue is ordered by potential plus the octile
     distance to it times the cheapest step cost (A*): an admissible bound, so the goal's
@@ -136,6 +140,7 @@ def dijkstra(
     stamp[start_iy, start_ix] = run_id
     use_h = goal_iy >= 0
     escape2 = escape_cells * escape_cells
+    deep2 = escape2 if deep_cells < 0 else deep_cells * deep_cells
     keys, vals, n = _push(keys, vals, 0, 0.0, s)
     while n > 0:
         key, idx, n = _pop(keys, vals, n)
@@ -160,9 +165,10 @@ def dijkstra(
                 first = d
                 if stop_extra <= 0.0:
                     break
-        if (iy - start_iy) ** 2 + (ix - start_ix) ** 2 > escape2:
+        r2 = (iy - start_iy) ** 2 + (ix - start_ix) ** 2
+        if r2 > escape2:
             escaping = 0
-        elif inflated[iy, ix] >= blocked:
+        elif inflated[iy, ix] >= blocked and r2 <= deep2:
             escaping = 2
         else:
             escaping = 1

@@ -30,12 +30,32 @@ class Trail:
             if len(self.points) > p.trail_cap:
                 del self.points[: p.trail_trim]
 
-    def back_target(self) -> np.ndarray | None:
-        """The point retrace_points back along the trail; None when it is too short."""
+    def back_target(self, xy: np.ndarray | None = None) -> np.ndarray | None:
+        """The point to back out to: walking back along the trail from its newest point, the
+        first one at least retrace_points x trail_spacing (0.8 m) in a straight line from `xy`
+        (the robot; default the newest point), else the trail's start; None when the trail
+        is too short. Measured from the robot, not counted in points: after dithering on
+        the spot the newest points all lie where it stands, and the way it came is behind
+        them."""
         p = self.params
         if len(self.points) < p.retrace_min_points:
             return None
-        return self.points[max(0, len(self.points) - 1 - p.retrace_points)].copy()
+        here = self.points[-1] if xy is None else np.asarray(xy, dtype=float)[:2]
+        reach = p.retrace_points * p.trail_spacing
+        pts = np.asarray(self.points)
+        far = np.flatnonzero(np.hypot(pts[:, 0] - here[0], pts[:, 1] - here[1]) >= reach - 1e-9)
+        return self.points[int(far[-1]) if far.size else 0].copy()
+
+    def cut_to(self, target: np.ndarray) -> None:
+        """A back-out to `target` ended: forget the trail after the newest point at it (the
+        stretch backed out of, and the back-out's own points), so the next back-out goes on
+        further the way the robot came; the whole trail when the point was trimmed off."""
+        pts = np.asarray(self.points)
+        at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1])) if len(pts) else []
+        if len(at) == 0:
+            self.points.clear()
+        else:
+            del self.points[int(at[-1]) + 1 :]
 
     def clear(self) -> None:
         self.points.clear()

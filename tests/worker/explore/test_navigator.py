@@ -93,11 +93,13 @@ def test_transitions_table_names_each_state_once_and_no_self_loops():
 
 
 def _unreachable_world() -> World:
-    # as test_loop's: a room behind a slit narrower than the robot, which it glimpses (its
-    # goals there fail, the robot backs out), furniture-free otherwise
+    # a room behind a 0.45 m slit, which the robot glimpses: the narrow fallback plans
+    # through it, the robot cannot pass it with its padding (its goals there fail, it backs
+    # out), furniture-free otherwise. (A slit under the robot's width is no goal at all: no
+    # plan crosses inscribed cells beyond the escape radius.)
     occ = _box(5.0, 9.0)
     occ[:, _cells(5.0) : _cells(5.1)] = True
-    occ[_cells(2.4) : _cells(2.65), _cells(5.0) : _cells(5.1)] = False
+    occ[_cells(2.4) : _cells(2.85), _cells(5.0) : _cells(5.1)] = False
     occ[_cells(3.5) : _cells(3.6), _cells(5.1) :] = True
     return World.from_array(occ, RES, start_pose=(1.5, 1.5, 0.0), name="unreachable")
 

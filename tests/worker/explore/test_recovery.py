@@ -27,20 +27,45 @@ def test_trail_keeps_points_spaced_and_drops_the_oldest_past_its_cap():
     assert trail.points[0][0] == pytest.approx(0.4)
 
 
-def test_back_target_lies_retrace_points_back_on_the_trail():
-    p = ExploreParams(retrace_min_points=4, retrace_points=16)
+def test_back_target_lies_the_retrace_distance_back_in_a_straight_line():
+    p = ExploreParams(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
     trail = Trail(p)
     for i in range(3):
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
     assert trail.back_target() is None  # 3 points: too short
     for i in range(3, 20):
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
-    # 20 points, the newest at index 19: 16 back is index 3
-    assert trail.back_target()[0] == pytest.approx(0.3)
+    # newest point at 1.9 m: the newest one at least 16 x 0.05 = 0.8 m from it is at 1.1 m
+    assert trail.back_target()[0] == pytest.approx(1.1)
     trail = Trail(p)
     for i in range(5):
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
-    assert trail.back_target()[0] == 0.0  # fewer than 16 back: the trail's start
+    assert trail.back_target()[0] == 0.0  # nothing 0.8 m away: the trail's start
+
+
+def test_back_out_after_dithering_goes_the_way_the_robot_came_and_further_each_time():
+    # in along x to 2 m, then 40 periods of dithering on the spot (trail points 0.06 m apart)
+    p = ExploreParams(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
+    trail = Trail(p)
+    for i in range(41):
+        trail.grow(np.array([0.05 * i, 0.0, 0.0]))
+    for k in range(40):
+        trail.grow(np.array([2.0, 0.06 * (k % 2), 0.0]))
+    here = np.array([2.0, 0.0])
+    # counted in points, 16 back would be a dithering point where the robot stands
+    assert np.hypot(*(trail.points[-17] - here)) < 0.1
+    first = trail.back_target(here)
+    assert first[1] == 0.0 and first[0] == pytest.approx(1.2)  # 0.8 m back along the way in
+    # backing out appends the robot's positions; the back-out ends at its target
+    for x in (1.9, 1.6, 1.3, 1.2):
+        trail.grow(np.array([x, 0.0, 0.0]))
+    trail.cut_to(first)
+    assert trail.points[-1][0] == pytest.approx(1.2)
+    second = trail.back_target(first)
+    assert second[0] == pytest.approx(0.4)  # the next back-out goes on, 0.8 m further
+    trail.points = trail.points[10:]  # trimmed past the cap: the target is gone
+    trail.cut_to(np.array([0.1, 0.0]))
+    assert trail.points == []
 
 
 def _free_local(pose):
