@@ -15,6 +15,7 @@ from worker.predict.train import TrainParams, fit_linear, fit_quantiles
 from worker.predict.trees import predict_gbr
 
 METHODS = ("trees", "linear", "mean", "free_area")
+INTERVAL = 0.8  # the predicted interval's nominal coverage
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,20 @@ class CvResult:
     low: np.ndarray  # trees' 10 % quantile
     high: np.ndarray  # trees' 90 % quantile
 
+    def conformity(self) -> np.ndarray:
+        """`(N,)` [log units] how far each measured value lies outside its held-out 10-90 %
+        interval (negative: inside), the score of conformalised quantile regression (Romano,
+        Patterson and Candes 2019), on the log scale the models are fitted on."""
+        y = np.log(np.maximum(self.measured, 1e-6))
+        return np.maximum(np.log(self.low) - y, y - np.log(self.high))
+
+    def calibrated_bounds(self, level: float = INTERVAL) -> tuple[np.ndarray, np.ndarray]:
+        """`(N,)` each world's interval widened by the margin that the *other* buildings'
+        held-out scores give (so no world calibrates its own interval)."""
+        e, b = self.conformity(), np.array(self.buildings)
+        margin = np.array([conformal_margin(e[b != g], level) for g in self.buildings])
+        return self.low * np.exp(-margin), self.high * np.exp(margin)
+
     def scores(self) -> dict[str, dict[str, float]]:
         """Per method: Spearman over worlds and over buildings (variants averaged), MAE."""
         out = {}
@@ -40,6 +55,9 @@ class CvResult:
             }
         inside = (self.measured >= self.low) & (self.measured <= self.high)
         out["trees"]["interval_coverage"] = float(inside.mean())
+        lo, hi = self.calibrated_bounds()
+        inside = (self.measured >= lo) & (self.measured <= hi)
+        out["trees"]["calibrated_interval_coverage"] = float(inside.mean())
         return out
 
     def _by_building(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -49,6 +67,17 @@ class CvResult:
             np.array([pred[b == n].mean() for n in names]),
             np.array([self.measured[b == n].mean() for n in names]),
         )
+
+
+def conformal_margin(scores: np.ndarray, level: float = INTERVAL) -> float:
+    """The split-conformal margin: the ceil((n + 1) level)-th smallest of n scores (the
+    largest when that rank passes n), so that a new world's interval widened by it holds its
+    value with probability at least `level` when worlds are exchangeable; 0 without scores."""
+    s = np.sort(np.asarray(scores, dtype=float))
+    if s.size == 0:
+        return 0.0
+    k = min(math.ceil((s.size + 1) * level), s.size)
+    return float(s[k - 1])
 
 
 def spearman(a: np.ndarray, b: np.ndarray) -> float:
@@ -97,8 +126,15 @@ def leave_one_building_out(
     return CvResult(target, ds.worlds, ds.buildings, y, pred, low, high)
 
 
-def cv_summary(ds: Dataset, p: TrainParams = TrainParams()) -> dict[str, Any]:
-    """Cross-validated scores of both targets (what the model file stores)."""
+def cross_validate(ds: Dataset, p: TrainParams = TrainParams()) -> dict[str, CvResult]:
+    """Leave-one-building-out results of both targets; empty below 3 buildings."""
     if len(set(ds.buildings)) < 3:
+        return {}
+    return {t: leave_one_building_out(ds, t, p) for t in ("b_mean_t", "b_mean_r")}
+
+
+def cv_summary(cvs: dict[str, CvResult]) -> dict[str, Any]:
+    """Cross-validated scores of both targets (what the model file stores)."""
+    if not cvs:
         return {"note": "fewer than 3 buildings: no cross-validation"}
-    return {t: leave_one_building_out(ds, t, p).scores() for t in ("b_mean_t", "b_mean_r")}
+    return {t: cv.scores() for t, cv in cvs.items()}

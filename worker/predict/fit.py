@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from worker.errors import InputError
-from worker.predict.crossval import cv_summary
+from worker.predict.crossval import INTERVAL, conformal_margin, cross_validate, cv_summary
 from worker.predict.dataset import Dataset, build_datasets, read_runs, world_index
 from worker.predict.model import FORMAT, VERSION
 from worker.predict.train import TrainParams, fit_slam
@@ -76,6 +76,11 @@ def train_model(
         if len(ds.worlds) < 2:
             raise InputError(f"{slam}: only {len(ds.worlds)} evaluated world, need at least 2")
         part = fit_slam(ds, params)
-        part["cv"] = cv_summary(ds, params)
+        cvs = cross_validate(ds, params)
+        part["cv"] = cv_summary(cvs)
+        # the quantile trees' 10-90 % interval held too few held-out worlds (they fit the
+        # training worlds' spread): widen it by the conformal margin of the held-out scores
+        for target, cv in cvs.items():
+            part["targets"][target]["interval_margin"] = conformal_margin(cv.conformity(), INTERVAL)
         model["slam"][slam] = part
     return model

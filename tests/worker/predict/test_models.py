@@ -11,9 +11,9 @@ import pytest
 from sklearn.ensemble import GradientBoostingRegressor
 
 from worker.errors import InputError
-from worker.predict.crossval import leave_one_building_out, spearman
+from worker.predict.crossval import conformal_margin, leave_one_building_out, spearman
 from worker.predict.dataset import Dataset, building_of
-from worker.predict.model import FORMAT, VERSION, linear_predict, load_model
+from worker.predict.model import FORMAT, VERSION, _target, linear_predict, load_model
 from worker.predict.train import TrainParams, fit_linear, fit_success
 from worker.predict.trees import export_gbr, predict_gbr
 
@@ -96,3 +96,46 @@ def test_model_file_of_another_version_is_refused(tmp_path):
 def test_furnished_variant_belongs_to_its_building():
     assert building_of("office_a_furnitures") == "office_a"
     assert building_of("lab_ipa") == "lab_ipa"
+
+
+def test_conformal_margin_is_the_rank_ceil_n_plus_1_times_level():
+    # 9 scores at level 0.8: rank ceil(10 * 0.8) = 8, the 8th smallest
+    scores = np.array([0.5, -0.3, 0.1, 0.9, -0.1, 0.2, 0.4, 0.0, 0.7])
+    assert conformal_margin(scores, 0.8) == 0.7
+    assert conformal_margin(np.array([0.3, -0.2]), 0.8) == 0.3  # rank 3 > 2: the largest
+    assert conformal_margin(np.array([]), 0.8) == 0.0
+
+
+def test_calibrated_intervals_hold_about_80_percent_of_held_out_worlds():
+    # log error = a linear law plus noise wider than the trees can see in 40 buildings: their
+    # own 10-90 % intervals hold too few held-out worlds; the conformal ones hold ~80 %
+    rng = np.random.default_rng(7)
+    area = rng.uniform(100, 3000, 80)
+    y = 0.05 * np.exp(area / 2000 + rng.normal(0, 0.4, 80))
+    s = leave_one_building_out(_dataset(area, rng.normal(size=80), y)).scores()["trees"]
+    assert s["interval_coverage"] < 0.75
+    assert 0.72 <= s["calibrated_interval_coverage"] <= 0.9
+
+
+def test_prediction_interval_is_widened_by_the_stored_margin_on_the_log_scale():
+    def stump(v):  # one constant tree: what export_gbr writes for a model predicting v
+        return {"init": v, "learning_rate": 1.0, "trees": [
+            {"feature": [-2], "threshold": [0.0], "left": [-1], "right": [-1], "value": [0.0]}
+        ]}  # fmt: skip
+
+    spec = {
+        "transform": "log",
+        "linear": {"mean": [0.0], "scale": [1.0], "coef": [0.0], "intercept": np.log(0.1)},
+        "quantiles": {
+            "0.1": stump(np.log(0.08)),
+            "0.5": stump(np.log(0.1)),
+            "0.9": stump(np.log(0.12)),
+        },  # fmt: skip
+    }
+    x, names = np.array([1.0]), ["free_area_m2"]
+    raw = _target(spec, x, names, "m")
+    assert (raw.low, raw.median, raw.high) == pytest.approx((0.08, 0.1, 0.12))
+    wide = _target({**spec, "interval_margin": 0.5}, x, names, "m")
+    assert (wide.low, wide.high) == pytest.approx((0.08 * np.exp(-0.5), 0.12 * np.exp(0.5)))
+    narrow = _target({**spec, "interval_margin": -1.0}, x, names, "m")
+    assert narrow.low == narrow.median == narrow.high == pytest.approx(0.1)  # never past it
