@@ -138,7 +138,8 @@ def main() -> None:
     ap.add_argument("--speed-only", action="store_true")
     args = ap.parse_args()
     if not args.speed_only:
-        batches = args.batches or sorted((ROOT / "data" / "training").glob("*/runs.csv"))
+        # by default the whole explorations the bundled model is trained on
+        batches = args.batches or sorted((ROOT / "data" / "training").glob("*-full-*/runs.csv"))
         ds = build_datasets(read_runs(batches), feature_source(args.worlds))[args.slam]
         print(f"training data: {', '.join(str(b) for b in batches)}")
         cvs = [(leave_one_building_out(ds, "b_mean_t"), "m"),
