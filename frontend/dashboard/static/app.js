@@ -3,12 +3,27 @@
   "use strict";
   const refresh = document.querySelector('meta[name="mapqual-refresh"]');
   if (refresh) {
+    // The countdown starts once the page has loaded (on a slow server a page reloading
+    // before its own load would never finish loading), and stops when the user leaves: a
+    // reload must not cancel the link or form the user chose while waiting for it.
     const seconds = parseFloat(refresh.content) || 3;
-    setTimeout(function () {
-      // keep the scroll position across the reload
-      sessionStorage.setItem("mapqual-scroll", String(window.scrollY));
-      window.location.reload();
-    }, seconds * 1000);
+    let timer = null;
+    const arm = function () {
+      timer = setTimeout(function () {
+        // keep the scroll position across the reload
+        sessionStorage.setItem("mapqual-scroll", String(window.scrollY));
+        window.location.reload();
+      }, seconds * 1000);
+    };
+    if (document.readyState === "complete") { arm(); } else { window.addEventListener("load", arm); }
+    const disarm = function () { window.removeEventListener("load", arm); clearTimeout(timer); };
+    window.addEventListener("beforeunload", disarm);
+    document.addEventListener("submit", disarm);
+    // a link into this tab (one opening another tab, like the viewer's, leaves it refreshing)
+    document.addEventListener("click", function (e) {
+      const a = e.target.closest("a[href]");
+      if (a && (!a.target || a.target === "_self") && !e.ctrlKey && !e.metaKey && !e.shiftKey) { disarm(); }
+    });
   }
   const y = sessionStorage.getItem("mapqual-scroll");
   if (y !== null) { sessionStorage.removeItem("mapqual-scroll"); window.scrollTo(0, parseFloat(y)); }
