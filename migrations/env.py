@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from alembic import context
-from sqlalchemy import pool
+from sqlalchemy import pool, text
 
 from backend.core.config import get_settings
 from backend.db.models import Base
@@ -12,6 +12,7 @@ from backend.db.session import get_engine
 config = context.config
 url = config.get_main_option("sqlalchemy.url") or get_settings().database_url
 target_metadata = Base.metadata
+MIGRATE_LOCK = 0x6D6170717561  # PostgreSQL advisory lock key of mapqual's migrations ("mapqua")
 
 
 def run_migrations_offline() -> None:
@@ -35,6 +36,10 @@ def run_migrations_online() -> None:
             render_as_batch=url.startswith("sqlite"),
         )
         with context.begin_transaction():
+            if connection.dialect.name == "postgresql":
+                # processes migrating at once (a worker and the API starting together) take
+                # turns: the next one reads the version table after the first has committed
+                connection.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": MIGRATE_LOCK})
             context.run_migrations()
 
 
