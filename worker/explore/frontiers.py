@@ -191,14 +191,15 @@ class FrontierSearch:
         """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
         robot's cell `start (ix, iy)`: flat indices, nearest first. Tried with the planner's
         margin, then with a wider escape (a pocket the map sealed around the robot), then
-        with narrow_margin (frontiers behind doors too narrow for the margin)."""
+        with narrow_margin (frontiers behind doors too narrow for the margin); gaps closed
+        after a failure (`ClosedGaps`) stay closed to all three."""
         p = self.params
         args = (costmap, start, cells, labels, cell_valid, avoid)
-        found = self._search_with(*args, p, None)
-        if found.size == 0:
-            found = self._search_with(*args, p, p.pocket_escape_radius)
-        if found.size == 0 and p.planner_margin > p.narrow_margin:
-            with self.closed.applied(costmap):
+        with self.closed.applied(costmap):  # closed gaps: closed to every attempt
+            found = self._search_with(*args, p, None)
+            if found.size == 0:
+                found = self._search_with(*args, p, p.pocket_escape_radius)
+            if found.size == 0 and p.planner_margin > p.narrow_margin:
                 found = self._search_with(*args, narrow_params(p), None)
         return found
 

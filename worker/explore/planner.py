@@ -135,14 +135,16 @@ class GlobalPlanner:
             )
 
         try:
-            found = attempt()
-            if found.size == 0:  # a pocket the map sealed around the robot: a wider escape
-                found = attempt(p.pocket_escape_radius)
-            if found.size == 0 and p.planner_margin > p.narrow_margin:
-                # a door narrower than the margin allows: navfn's own rule (any cell below
-                # the inscribed cost), as move_base would plan through it
-                p = narrow_params(p)
-                with self.closed.applied(costmap):
+            # a gap closed after a failure stays closed to every attempt: the escapes near the
+            # robot would otherwise send it back through the gap it just backed out of
+            with self.closed.applied(costmap):
+                found = attempt()
+                if found.size == 0:  # a pocket the map sealed around the robot: wider escape
+                    found = attempt(p.pocket_escape_radius)
+                if found.size == 0 and p.planner_margin > p.narrow_margin:
+                    # a door narrower than the margin allows: navfn's own rule (any cell below
+                    # the inscribed cost), as move_base would plan through it
+                    p = narrow_params(p)
                     found = attempt()
         finally:
             self._target[gy, gx] = False
@@ -155,9 +157,12 @@ class GlobalPlanner:
 
 class ClosedGaps:
     """Gaps under the planner's margin the robot failed to get through (a goal given up
-    with its plan through one near the robot): closed to the narrow fallback, which plans
-    through any cell below the inscribed cost, so that it does not send the robot back to
-    them goal after goal. Kept as points (map frame); `clear` opens them all again."""
+    with its plan through one near the robot): closed to every plan and goal search (the
+    narrow fallback, which plans through any cell below the inscribed cost, and the escapes
+    near the robot, which cross cells under the margin), so that they do not send the robot
+    back to them goal after goal. Kept as points (map frame); `clear` opens them all again.
+    A robot standing in a closed cell can still leave: escaping from a cell at or above the
+    planner's blocked cost enters inscribed cells near it (planner_kernels.dijkstra)."""
 
     def __init__(self):
         self.points = np.zeros((0, 2))
@@ -166,9 +171,12 @@ class ClosedGaps:
         self.points = np.zeros((0, 2))
 
     def close(self, costmap, params: ExploreParams, path_xy, robot_xy, radius: float) -> int:
-        """Close the cells of `path_xy (K, 2)` within `radius` [m] of the robot that only the
-        narrow fallback lets a plan through (cost at or above the margin's blocked cost,
-        below INSCRIBED); returns how many."""
+        """Close the gap of `path_xy (K, 2)` within `radius` [m] of the robot: its cells that
+        only the narrow fallback or an escape lets a plan through (cost at or above the
+        margin's blocked cost, below INSCRIBED), and the gap's other such cells within the
+        margin's clearance (footprint half side + planner margin) of them, so that the next
+        plan does not slip through the same door a line beside this one. Returns how many
+        of the path's cells were closed."""
         from worker.explore.costmap_kernels import INSCRIBED
 
         if path_xy is None or len(path_xy) == 0:
@@ -178,9 +186,21 @@ class ClosedGaps:
         ix, iy = self._cells(costmap, pts[near])
         if ix.size == 0:
             return 0
+        blocked = planner_blocked_cost(params)
         c = costmap.inflated[iy, ix]
-        narrow = (c >= planner_blocked_cost(params)) & (c < INSCRIBED)
-        xs, ys = costmap.cell_to_world(ix[narrow], iy[narrow])
+        narrow = (c >= blocked) & (c < INSCRIBED)
+        if not narrow.any():
+            return 0
+        disc = cells_in_radius(params.footprint_half_m + params.planner_margin, costmap.resolution)
+        h, w = costmap.shape
+        gy = (iy[narrow][:, None] + disc[:, 0]).ravel()
+        gx = (ix[narrow][:, None] + disc[:, 1]).ravel()
+        ok = (gy >= 0) & (gy < h) & (gx >= 0) & (gx < w)
+        gy, gx = gy[ok], gx[ok]
+        cg = costmap.inflated[gy, gx]
+        gap = (cg >= blocked) & (cg < INSCRIBED)
+        cells = np.unique(gy[gap] * w + gx[gap])
+        xs, ys = costmap.cell_to_world(cells % w, cells // w)
         self.points = np.concatenate([self.points, np.column_stack((xs, ys))])
         return int(np.count_nonzero(narrow))
 

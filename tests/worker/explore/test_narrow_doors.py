@@ -98,3 +98,34 @@ def test_a_narrow_gap_the_robot_failed_to_pass_is_closed_to_the_fallback_until_c
     planner.closed.clear()  # the blacklist's retry opens it again
     assert planner.plan(cm, (0.5, 0.5), (4.5, 0.5)) is not None
     assert fs.choose(cm2, (0.5, 1.5), []) is not None
+
+
+def test_a_closed_gap_stays_closed_to_the_escapes_after_the_back_out():
+    """Histor4 (issue 18): the robot backed out of a 0.5 m door and drove back to it goal
+    after goal until the stuck rule fired: the plans that may escape near the robot (0.5 m;
+    1.5 m from a pocket) crossed the closed cells, and the closure was the failed plan's
+    line only, a cell beside which the next plan slipped through. Now the whole gap is
+    closed, to every attempt; a robot standing in it can still leave."""
+    p = ExploreParams()
+    cm = _costmap(_door(10), p)
+    planner = GlobalPlanner(p)
+    path = planner.plan(cm, (0.5, 0.5), (4.5, 0.5))
+    planner.closed.close(cm, p, path, (2.2, 1.5), p.closed_gap_radius)
+    # closed: every cell of the door's throat under the inscribed cost (rows 28-31 of the
+    # wall's column; the failed plan crossed row 29)
+    with planner.closed.applied(cm):
+        assert (cm.inflated[27:33, 50] >= 253).all()
+    # backed out to 0.8 m before the door: the door is within the pocket escape's 1.5 m,
+    # and within the 0.5 m escape of a plan from 0.3 m further on
+    for start in ((1.7, 1.5), (2.0, 1.4)):
+        assert planner.plan(cm, start, (4.5, 1.5)) is None, start
+    # the frontier search sees the same
+    prob = _door(10)
+    prob[:, 80:] = np.nan
+    cm2 = _costmap(prob, p)
+    fs = FrontierSearch(p, planner.closed)
+    fs.update(cm2, None)
+    assert fs.choose(cm2, (1.7, 1.5), []) is None
+    # standing in the closed door, the robot is planned out of it, back to its own side
+    back = planner.plan(cm, (2.525, 1.5), (0.5, 1.5))
+    assert back is not None and back[-1][0] < 0.6
