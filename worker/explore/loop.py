@@ -284,8 +284,8 @@ def judge_outcome(
     detail = (
         f"{stop.detail}, but {area:.1f} m^2 of reachable space never seen in {len(left)} "
         f"region(s), the largest {big.area_m2:.1f} m^2 at ({big.centre[0]:.1f}, "
-        f"{big.centre[1]:.1f}); coverage {100 * cov:.1f} %"
-    )
+        f"{big.centre[1]:.1f})"
+    )  # the coverage is the run's own field (the CLI prints it after this line)
     return RunOutcome.INCOMPLETE, detail
 
 
