@@ -27,6 +27,16 @@ def _costmap(prob: np.ndarray, p: ExploreParams) -> GlobalCostmap:
     return cm
 
 
+def _far_room_search(p: ExploreParams, closed) -> tuple[FrontierSearch, GlobalCostmap]:
+    """A frontier search over a 10-cell door whose far room is known up to x = 4 m."""
+    prob = _door(10)
+    prob[:, 80:] = np.nan
+    cm = _costmap(prob, p)
+    fs = FrontierSearch(p, closed)
+    fs.update(cm, None)
+    return fs, cm
+
+
 def test_a_0_7_m_door_mapped_a_cell_narrower_each_side_is_planned_through():
     # 0.7 m in the floorplan, 0.5 m (10 cells) in the map: the door's middle cells are 5 and
     # 6 cells (0.25, 0.30 m) from the jambs' centres; one of them at 0.25 m, under the 0.2 m
@@ -89,11 +99,7 @@ def test_a_narrow_gap_the_robot_failed_to_pass_is_closed_to_the_fallback_until_c
     assert planner.plan(cm, (0.5, 0.5), (4.5, 0.5)) is None  # the only way is closed
     np.testing.assert_array_equal(cm.inflated, before)  # and the costmap is left as it was
     # the frontier search's fallback sees the same closed door
-    prob = _door(10)
-    prob[:, 80:] = np.nan
-    cm2 = _costmap(prob, p)
-    fs = FrontierSearch(p, planner.closed)
-    fs.update(cm2, None)
+    fs, cm2 = _far_room_search(p, planner.closed)
     assert fs.choose(cm2, (0.5, 1.5), []) is None
     planner.closed.clear()  # the blacklist's retry opens it again
     assert planner.plan(cm, (0.5, 0.5), (4.5, 0.5)) is not None
@@ -120,11 +126,7 @@ def test_a_closed_gap_stays_closed_to_the_escapes_after_the_back_out():
     for start in ((1.7, 1.5), (2.0, 1.4)):
         assert planner.plan(cm, start, (4.5, 1.5)) is None, start
     # the frontier search sees the same
-    prob = _door(10)
-    prob[:, 80:] = np.nan
-    cm2 = _costmap(prob, p)
-    fs = FrontierSearch(p, planner.closed)
-    fs.update(cm2, None)
+    fs, cm2 = _far_room_search(p, planner.closed)
     assert fs.choose(cm2, (1.7, 1.5), []) is None
     # standing in the closed door, the robot is planned out of it, back to its own side
     back = planner.plan(cm, (2.525, 1.5), (0.5, 1.5))
