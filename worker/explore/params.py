@@ -86,8 +86,9 @@ class ExploreParams:
     # map closed around the robot as it mapped obstacles better must not trap it
     escape_radius: float = 0.5
     # [m] a goal given up for no progress or no legal command with its plan through cells
-    # only the narrow fallback allows within this of the robot: those cells are closed to
-    # the fallback (planner.ClosedGaps) until the blacklist is next cleared
+    # only the narrow fallback (or an escape) allows within this of the robot: that gap is
+    # closed to every plan and goal search (planner.ClosedGaps) until the blacklist is next
+    # cleared
     closed_gap_radius: float = 1.0
     # [m] the same, when nothing is reachable otherwise (the robot in a pocket between table
     # legs that the map sealed as it mapped them): before a goal or the run is given up
