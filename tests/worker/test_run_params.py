@@ -31,6 +31,7 @@ SETTINGS_SINCE_EXAMPLE = {
         "incomplete_area",
         "incomplete_cell_loss",
         "incomplete_width",
+        "local_raytrace",
         "look_fov_margin",
         "narrow_margin",
         "no_frontier_time",

@@ -206,6 +206,7 @@ class LocalCostmap:
         reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m
         self._reach = int(math.ceil(reach_m / self.resolution)) + 2
         self._marks: list[tuple[float, np.ndarray]] = []  # (t, (K, 2) obstacle points [m])
+        self._lattice = np.zeros(2)  # a corner of the global grid's cells (set by build)
         self.origin = np.zeros(2)
         shape = (self.n, self.n)
         self.lethal = np.zeros(shape, dtype=np.bool_)
@@ -218,11 +219,34 @@ class LocalCostmap:
     ) -> None:
         """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
+        if self.params.local_raytrace and self._marks:
+            self._clear_crossed(pose, ranges_m, angles, range_max)
         # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
         # put the mark in the free cell in front
         r = ranges_m[hit] + 0.2 * self.resolution
         a = angles[hit] + pose[2]
         self.add_points(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
+
+    def _clear_crossed(self, pose, ranges_m, angles, range_max) -> None:
+        """Drop the earlier marks whose cell a beam of this scan crosses (costmap_2d's
+        raytrace clearing), in a window of the local costmap's size around the robot, on the
+        lattice `build` rasterises on (so a mark is cleared exactly when its cell is)."""
+        res, n = self.resolution, self.n
+        ox = self._lattice[0] + (math.floor((pose[0] - self._lattice[0]) / res) - n // 2) * res
+        oy = self._lattice[1] + (math.floor((pose[1] - self._lattice[1]) / res) - n // 2) * res
+        crossed = lk.crossed_cells(
+            ox, oy, res, n, float(pose[0]), float(pose[1]), float(pose[2]),
+            np.asarray(ranges_m, dtype=float), np.asarray(angles, dtype=float), float(range_max),
+        )  # fmt: skip
+        kept = []
+        for t_m, pts in self._marks:
+            ix = np.floor((pts[:, 0] - ox) / res).astype(np.int64)
+            iy = np.floor((pts[:, 1] - oy) / res).astype(np.int64)
+            inside = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
+            gone = np.zeros(len(pts), dtype=np.bool_)
+            gone[inside] = crossed[iy[inside], ix[inside]]
+            kept.append((t_m, pts[~gone]))
+        self._marks = kept
 
     def add_points(self, t: float, pts: np.ndarray) -> None:
         """Mark obstacle points `(K, 2) [x, y]` (map frame) observed at time t."""
@@ -253,6 +277,7 @@ class LocalCostmap:
         ix = math.floor((x - g_origin[0]) / res)
         iy = math.floor((y - g_origin[1]) / res)
         self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
+        self._lattice = np.asarray(g_origin, dtype=float).copy()
         pts = np.concatenate([m[1] for m in self._marks]) if self._marks else np.zeros((0, 2))
         if costmap is None or costmap.shape[0] == 0 or not use_map:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)

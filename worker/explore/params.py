@@ -42,6 +42,9 @@ class ExploreParams:
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
     local_window_m: float = 6.0  # [m] local_costmap width = height (rolling window)
     local_persistence: float = 1.0  # [s] how long scan obstacles stay in the local costmap
+    # each scan clears the earlier scans' marks in the cells its beams cross (costmap_2d's
+    # raytrace clearing): a noisy short reading lasts until the next beam through it
+    local_raytrace: bool = False
     # --- frontiers (explore_lite) ---
     min_frontier_size: float = 0.5  # [m] clusters smaller than this are ignored
     # [m^2] unknown regions up to this size enclosed by known cells (the inside of table legs,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -187,6 +188,41 @@ def test_local_costmap_marks_hits_only_and_clears():
     local.clear()  # recovery: only the newest scan stays
     local.build(5.0, 5.0)
     assert local.lethal.sum() == 1
+
+
+def test_local_costmap_raytrace_clears_earlier_marks_its_beams_cross():
+    # a noisy short reading marks a ghost at x = 6.0 m; the next scan's beam along the same
+    # bearing reaches the wall at 7.0 m through the ghost's cell: with raytrace clearing the
+    # ghost goes, without it the ghost stays for local_persistence (1 s)
+    angles = np.array([0.0, math.pi / 2])
+    pose = np.array([5.02, 5.02, 0.0])
+    for raytrace, ghosts in ((True, 0), (False, 1)):
+        local = LocalCostmap(dataclasses.replace(ExploreParams(), local_raytrace=raytrace), RES)
+        local.add_scan(0.0, pose, np.array([1.0, 30.0]), angles, 30.0)
+        local.add_scan(0.1, pose, np.array([2.0, 30.0]), angles, 30.0)
+        local.build(5.0, 5.0)
+        wall = [(7.025, 5.025)]
+        assert _marked(local) == (wall if ghosts == 0 else [(6.025, 5.025), *wall])
+    local = LocalCostmap(dataclasses.replace(ExploreParams(), local_raytrace=True), RES)
+    # a beam ending in the ghost's own cell, one without a return, and one on another
+    # bearing leave it; only a beam through the cell clears
+    local.add_points(0.0, np.array([[6.02, 5.02]]))
+    local.add_scan(0.1, pose, np.array([1.0, 30.0]), angles, 30.0)  # ends in the same cell
+    local.add_scan(0.2, pose, np.array([30.0, 30.0]), angles, 30.0)  # no return on the bearing
+    local.add_scan(0.3, pose, np.array([30.0, 0.5]), angles, 30.0)  # the other bearing only
+    local.build(5.0, 5.0)
+    assert _marked(local) == [(5.025, 5.525), (6.025, 5.025)]
+    local.add_scan(0.4, pose, np.array([1.5, 30.0]), angles, 30.0)  # through the ghost's cell
+    local.build(5.0, 5.0)
+    assert _marked(local) == [(5.025, 5.525), (6.525, 5.025)]
+
+
+def _marked(local):
+    """Centres [m] of the local costmap's lethal cells, sorted."""
+    cy, cx = np.nonzero(local.lethal)
+    xs = local.origin[0] + (cx + 0.5) * local.resolution
+    ys = local.origin[1] + (cy + 0.5) * local.resolution
+    return sorted((round(float(x), 3), round(float(y), 3)) for x, y in zip(xs, ys, strict=True))
 
 
 def test_local_costmap_includes_map_obstacles_and_inflation():
