@@ -34,6 +34,9 @@ class GlobalCostmap:
         self.inflated = np.zeros((0, 0), dtype=np.uint8)
         # obstacle layer: the laser's hits, kept until a beam passes through (raytrace_scan)
         self.obstacle = np.zeros((0, 0), dtype=np.bool_)
+        # the SLAM map's obstacles alone (above occupied_thresh), without the obstacle
+        # layer's: kept only for the door passage (explore.door_align), else empty
+        self.map_lethal = np.zeros((0, 0), dtype=np.bool_)
         self._kernel = np.zeros((1, 1), dtype=np.uint8)
         self._fresh = np.zeros((0, 0), dtype=np.bool_)  # new obstacle cells to stamp
 
@@ -99,6 +102,8 @@ class GlobalCostmap:
             y0, y1, x0, x1 = _union((y0, y1, x0, x1), marked)
         if y1 <= y0 or x1 <= x0:
             return (0, 0, 0, 0)
+        if self.params.door_align:
+            self._classify_map(prob, off_y, off_x, y0, y1, x0, x1)
         t = _TILE
         tiles = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.bool_)
         fresh_tiles = np.zeros_like(tiles)
@@ -107,12 +112,29 @@ class GlobalCostmap:
         ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
             y0, y1, x0, x1, tiles, self._fresh, fresh_tiles, t, self.obstacle,
+            self.params.obstacle_min_prob,
         )  # fmt: skip
         if ly1 > ly0:
             # obstacles that went away: their blocks are recomputed; new ones: stamped in
             ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
             ck.stamp_fresh(self.lethal, self._kernel, self.inflated, self._fresh, fresh_tiles, t)
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
+
+    def _classify_map(self, prob, off_y: int, off_x: int, y0: int, y1: int, x0: int, x1: int):
+        """map_lethal in the window `[y0, y1) x [x0, x1)`: the map's cells above
+        occupied_thresh (cells outside the map: not obstacles)."""
+        if self.map_lethal.shape != self.lethal.shape:
+            self.map_lethal = np.zeros(self.lethal.shape, dtype=np.bool_)
+            y0, y1, x0, x1 = 0, self.lethal.shape[0], 0, self.lethal.shape[1]
+        ph, pw = prob.shape
+        win = self.map_lethal[y0:y1, x0:x1]
+        win[:] = False
+        sy0, sy1 = max(y0 - off_y, 0), min(y1 - off_y, ph)
+        sx0, sx1 = max(x0 - off_x, 0), min(x1 - off_x, pw)
+        if sy1 > sy0 and sx1 > sx0:
+            with np.errstate(invalid="ignore"):
+                part = prob[sy0:sy1, sx0:sx1] > self.params.occupied_thresh
+            win[sy0 + off_y - y0 : sy1 + off_y - y0, sx0 + off_x - x0 : sx1 + off_x - x0] = part
 
     def _mark(self, scan) -> tuple[int, int, int, int]:
         """Clear and mark the obstacle layer with one scan; the box of the cells changed."""
@@ -266,11 +288,13 @@ class LocalCostmap:
         theta: float | None = None,
         use_map: bool = True,
         clear_touching: bool = False,
+        map_only: bool = False,
     ) -> None:
         """Rasterise the window centred on (x, y): scan obstacles, then the map's (if given);
         with the robot's heading theta, the cells under its footprint are cleared (see
         local_kernels.local_layers; clear_touching: the scan cells it touches too). use_map
-        False: the map's obstacles are left out (the thesis's scan-only local costmap)."""
+        False: the map's obstacles are left out (the thesis's scan-only local costmap);
+        map_only: the SLAM map's obstacles alone (`GlobalCostmap.map_lethal`), no scans."""
         res = self.resolution
         half = self.n // 2
         g_origin = costmap.origin if costmap is not None else np.zeros(2)
@@ -279,11 +303,14 @@ class LocalCostmap:
         self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
         self._lattice = np.asarray(g_origin, dtype=float).copy()
         pts = np.concatenate([m[1] for m in self._marks]) if self._marks else np.zeros((0, 2))
+        if map_only:
+            pts = np.zeros((0, 2))
         if costmap is None or costmap.shape[0] == 0 or not use_map:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
             g_oy = g_ox = -(10**6)
         else:
-            g_lethal, g_cost = costmap.lethal, costmap.inflated
+            g_lethal = costmap.map_lethal if map_only else costmap.lethal
+            g_cost = costmap.inflated
             g_oy, g_ox = iy - half, ix - half
         self.lethal, self.near, self.inner, self.cost = lk.local_layers(
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),

@@ -230,7 +230,7 @@ def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
 @njit(cache=True)
 def classify_region(
     prob, off_y, off_x, occupied_thresh, lethal, unknown, y0, y1, x0, x1, tiles, fresh,
-    fresh_tiles, tile, obstacle,
+    fresh_tiles, tile, obstacle, obstacle_min_prob=0.0,
 ):  # fmt: skip
     """Refresh the lethal/unknown layers from SLAM probabilities inside a window (in place).
 
@@ -240,7 +240,8 @@ def classify_region(
     holding obstacle cells that went away are flagged in `tiles (ceil(H / tile),
     ceil(W / tile)) bool`; new obstacle cells in `fresh (H, W) bool`, their blocks in
     `fresh_tiles`. A cell the obstacle layer `obstacle (H, W) bool` marks is lethal too (the
-    master grid takes the maximum of the layers). Returns the bounding boxes
+    master grid takes the maximum of the layers), unless the map knows it with a
+    probability under `obstacle_min_prob` (0: always). Returns the bounding boxes
     `(y0, y1, x0, x1)` of the lethal and of the unknown changes, each empty (y1 == y0) when
     nothing changed.
     """
@@ -253,7 +254,9 @@ def classify_region(
             sx = ix - off_x
             p = prob[sy, sx] if (0 <= sy < ph and 0 <= sx < pw) else np.nan
             unk = math.isnan(p)
-            let = ((not unk) and p > occupied_thresh) or obstacle[iy, ix]
+            let = ((not unk) and p > occupied_thresh) or (
+                obstacle[iy, ix] and (unk or p >= obstacle_min_prob)
+            )
             if let != lethal[iy, ix]:
                 lethal[iy, ix] = let
                 if let:

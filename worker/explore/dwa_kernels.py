@@ -260,3 +260,42 @@ def motion_legal(x, y, th, v, w, duration, lethal, near, inner, ox, oy, res, hal
         if footprint_collides(lethal, near, inner, ox, oy, res, x, y, th, half):
             return False
     return True
+
+
+@njit(cache=True)
+def narrow_along(px, py, lethal, ox, oy, res, width):
+    """`(K,) bool`: path points (px, py) [m] with obstacle cells of `lethal` on both sides,
+    across the path's direction there, less than `width` [m] apart in all (a door, a gap
+    between furniture); each side sampled every half cell out to `width`."""
+    k = px.shape[0]
+    out = np.zeros(k, dtype=np.bool_)
+    h, w = lethal.shape
+    m = int(width / (0.5 * res)) + 1
+    for i in range(k):
+        j0 = max(0, i - 1)
+        j1 = min(k - 1, i + 1)
+        dx = px[j1] - px[j0]
+        dy = py[j1] - py[j0]
+        norm = math.hypot(dx, dy)
+        if norm == 0.0:
+            continue
+        nx = -dy / norm
+        ny = dx / norm
+        total = 0.0
+        for sgn in (1.0, -1.0):
+            found = -1.0
+            for step in range(m):
+                r = step * 0.5 * res
+                ix = int(math.floor((px[i] + sgn * r * nx - ox) / res))
+                iy = int(math.floor((py[i] + sgn * r * ny - oy) / res))
+                if not (0 <= ix < w and 0 <= iy < h):
+                    break
+                if lethal[iy, ix]:
+                    found = r
+                    break
+            if found < 0.0:
+                total = np.inf
+                break
+            total += found
+        out[i] = total < width
+    return out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
+from worker.explore.door import DoorPass
 from worker.explore.dwa import Command, DwaPlanner
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.nav_state import (
@@ -44,6 +45,7 @@ class Navigator:
         self.planner = GlobalPlanner(params, self.closed)
         self.dwa = DwaPlanner(params)
         self.shim = HeadingShim(params)
+        self.door = DoorPass(params)
         self.safety = SafetyController(params, self.angles, self.range_max)
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
@@ -138,16 +140,21 @@ class Navigator:
         return self._drive(t, pose, v0, w0, ranges)
 
     def _drive(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
-        """Follow the plan: the heading shim when it lies behind, else the DWA; the safety
-        controller has the last word."""
+        """Follow the plan: the door passage through a tight passage ahead (door_align), the
+        heading shim when the plan lies behind, else the DWA; the safety controller has the
+        last word on the DWA's commands."""
         g = self.pursuit
-        shim = self.shim.command(pose, w0, g.path, self.local)
+        shim = self.door.command(pose, g.path, self.costmap) if self.params.door_align else None
+        if shim is None:
+            shim = self.shim.command(pose, w0, g.path, self.local)
         if shim is not None:
             self._command_found()
             if self._no_progress(t, pose):
                 self._give_up(t, "no progress", pose)
                 return NavCommand(0.0, 0.0, "recovering")
-            status = "aligning" if shim[2] == "rotate" else "recovering"
+            status = {"rotate": "aligning", "door_turn": "aligning", "door": "driving"}.get(
+                shim[2], "recovering"
+            )
             return NavCommand(shim[0], shim[1], status)
         cmd = self._dwa_command(pose, v0, w0)
         if cmd.kind == "aligned":
@@ -364,6 +371,7 @@ class Navigator:
         self.pursuit = None
         self.dwa.set_plan(None)
         self.shim.reset()
+        self.door.reset()
         self._next_choice_t = t
         if self.retrace is None:
             self._enter(NavState.IDLE)

@@ -37,6 +37,9 @@ class ExploreParams:
     obstacle_layer: bool = True
     obstacle_range: float = 30.0  # [m]
     raytrace_range: float = 30.0  # [m]
+    # [-] the obstacle layer's marks count only in cells the SLAM map does not know as
+    # firmly free (probability at least this, or unknown); 0: everywhere
+    obstacle_min_prob: float = 0.0
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
@@ -126,6 +129,15 @@ class ExploreParams:
     shim_angle: float = 1.2  # [rad]
     shim_release: float = 0.5  # [rad] the DWA takes over again below this
     shim_lookahead: float = 0.5  # [m]
+    # door passage (door.DoorPass), off by default: when the path enters a passage narrower
+    # than door_width (the SLAM map's obstacles on both sides) within door_lookahead, the
+    # robot steers onto its axis, faces along it (turning on the spot past door_angle) and
+    # drives through at door_speed
+    door_align: bool = False
+    door_width: float = 0.9  # [m]
+    door_lookahead: float = 1.0  # [m]
+    door_angle: float = 0.1  # [rad]
+    door_speed: float = 0.15  # [m/s]
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
@@ -196,6 +208,7 @@ class ExploreParams:
         may_be_zero = (
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
+            "obstacle_min_prob",
         )  # fmt: skip
         bad = []
         for f in fields(self):

@@ -1,0 +1,155 @@
+"""Door passage: line up with a tight passage on the path, then drive straight through it.
+
+A square robot in a door it entered at an angle can neither turn (its diagonal is 1.41 times
+its side) nor go on; with a noisy laser the marks at the jambs leave a 0.85 m door 0.5 m
+wide, so the robot (0.44 m with its padding) has to arrive on the door's axis, facing along
+it. The DWA's constant-curvature arcs cannot make that S-bend. This controller does, as a
+robot's door-passing behaviour does: it steers onto the passage's axis (turning on the spot
+where the heading is far off), faces along it, and drives through at door_speed, every motion
+checked against the local costmap with the exact footprint; when no motion is legal it hands
+back to the DWA and the recoveries.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
+from worker.explore import dwa_kernels as dk
+from worker.explore.costmap import GlobalCostmap, LocalCostmap
+from worker.explore.params import ExploreParams
+
+_LINE_GAIN = 3.0  # [rad/m] heading towards the axis per metre off it (clamped)
+_LINE_MAX = 0.6  # [rad] before the passage
+_LINE_MAX_INSIDE = 0.1  # [rad] in it
+_STEER_GAIN = 2.0  # [1/s] turn rate per radian of heading error while driving
+_CHECK_TIME = 0.5  # [s] each motion is checked this far ahead
+
+
+class DoorPass:
+    """Drives the robot through the first tight passage on its path (see the module)."""
+
+    def __init__(self, params: ExploreParams):
+        self.params = params
+        self.door: tuple[np.ndarray, np.ndarray] | None = None  # (entry, exit) [m]
+        self._rotating = False
+        self._local: LocalCostmap | None = None  # the map's obstacles around the robot
+        self.n_passages = 0  # passages driven through to their far end
+
+    def reset(self) -> None:
+        self.door = None
+        self._rotating = False
+
+    def command(
+        self, pose: np.ndarray, path_xy: np.ndarray | None, costmap: GlobalCostmap
+    ) -> tuple[float, float, str] | None:
+        """(v, w, kind) with kind "door_turn", "door" or "door_back", or None (no passage
+        ahead, or nothing legal: the DWA decides). Passages and motions are judged on the
+        SLAM map's obstacles alone (`GlobalCostmap.map_lethal`): one scan of a noisy laser
+        marks a door's jambs up to two sigmas into the opening along its oblique beams, the
+        map holds where many scans agree."""
+        p = self.params
+        if path_xy is None or len(path_xy) < 3 or costmap.map_lethal.shape != costmap.shape:
+            self.reset()
+            return None
+        if self._local is None or self._local.resolution != costmap.resolution:
+            self._local = LocalCostmap(p, costmap.resolution)
+        local = self._local
+        local.build(float(pose[0]), float(pose[1]), costmap, float(pose[2]), map_only=True)
+        found = find_passage(path_xy, pose[0], pose[1], local, p)
+        if found is not None and (
+            self.door is None or np.hypot(*(found[0] - self.door[0])) > p.door_width
+        ):
+            self.door = found
+            self._rotating = False
+        if self.door is None:
+            return None
+        entry, exit_ = self.door
+        axis = exit_ - entry
+        length = float(np.hypot(*axis))
+        u = axis / length if length > 1e-6 else _direction_at(path_xy, entry)
+        rel = np.asarray(pose[:2], dtype=float) - entry
+        along = float(u @ rel)
+        off = float(u[0] * rel[1] - u[1] * rel[0])  # > 0: left of the axis
+        if along > length + 0.1:
+            self.n_passages += 1
+            self.reset()
+            return None
+        if along < -(p.door_lookahead + 0.5) or abs(off) > p.door_width:
+            self.reset()  # the robot left the passage's approach (a replan, a recovery)
+            return None
+        inside = along > -0.05
+        limit = _LINE_MAX_INSIDE if inside else _LINE_MAX
+        desired = math.atan2(u[1], u[0]) - max(-limit, min(limit, _LINE_GAIN * off))
+        err = wrap_angle(desired - float(pose[2]))
+        threshold = 0.5 * p.door_angle if self._rotating else p.door_angle
+        if abs(err) > threshold:
+            w_mag = max(p.min_in_place_vel_theta, min(p.max_vel_theta, 2.0 * abs(err)))
+            w = math.copysign(w_mag, err)
+            if _legal(pose, 0.0, w, local, p, min(_CHECK_TIME, abs(err) / w_mag + 0.1)):
+                self._rotating = True
+                return 0.0, w, "door_turn"
+        else:
+            self._rotating = False
+            v = p.door_speed
+            w = max(-p.max_vel_theta, min(p.max_vel_theta, _STEER_GAIN * err))
+            if _legal(pose, v, w, local, p, _CHECK_TIME):
+                return v, w, "door"
+        # neither the turn nor the drive is legal here: back up along the axis for room
+        v = p.back_out_speed_ratio * p.escape_vel
+        if along < length and _legal(pose, v, 0.0, local, p, _CHECK_TIME):
+            self._rotating = False
+            return v, 0.0, "door_back"
+        self.reset()
+        return None
+
+
+def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p: ExploreParams):
+    """`(entry, exit)` [m] of the first passage narrower than door_width that the path
+    enters within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
+    already), or None. A path point is in such a passage when the local costmap has obstacle
+    cells on both sides of it, across the path, less than door_width apart; the exit is a
+    little past its last such point."""
+    d = np.hypot(path_xy[:, 0] - x, path_xy[:, 1] - y)
+    i0 = int(np.argmin(d))
+    seg = np.hypot(*np.diff(path_xy[i0:], axis=0).T)
+    along = np.concatenate(([0.0], np.cumsum(seg)))
+    end = int(np.searchsorted(along, p.door_lookahead + 2.0 * p.door_width, side="right"))
+    pts = path_xy[i0 : i0 + end]
+    if len(pts) < 3:
+        return None
+    tight = dk.narrow_along(
+        np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), local.lethal,
+        float(local.origin[0]), float(local.origin[1]), local.resolution, p.door_width,
+    )  # fmt: skip
+    first = np.flatnonzero(tight)
+    if first.size == 0 or along[first[0]] > p.door_lookahead:
+        return None
+    i1 = int(first[0])
+    i2 = i1
+    while i2 + 1 < len(pts) and tight[i2 + 1]:
+        i2 += 1
+    k = min(len(pts) - 1, int(np.searchsorted(along, along[i2] + 0.1)))
+    return pts[i1].astype(float).copy(), pts[k].astype(float).copy()
+
+
+def _direction_at(path_xy: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Unit direction of the path at its point nearest xy."""
+    i = int(np.argmin(np.hypot(path_xy[:, 0] - xy[0], path_xy[:, 1] - xy[1])))
+    a, b = path_xy[max(0, i - 1)], path_xy[min(len(path_xy) - 1, i + 1)]
+    d = b - a
+    n = float(np.hypot(*d))
+    return d / n if n > 1e-9 else np.array([1.0, 0.0])
+
+
+def _legal(pose, v: float, w: float, local: LocalCostmap, p: ExploreParams, duration: float):
+    """Driving (v, w) for `duration` [s] keeps the exact footprint (no padding: these are
+    slow, finely checked motions) clear of the local costmap's obstacles."""
+    return dk.motion_legal(
+        float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration,
+        local.lethal, local.near, local.inner, float(local.origin[0]),
+        float(local.origin[1]), local.resolution, p.footprint_half_m,
+        p.angular_sim_granularity,
+    )  # fmt: skip
