@@ -5,9 +5,12 @@ drift allows."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from worker.slam.graph.optimize import Edges
 from worker.slam.graph.params import GraphSlamParams
@@ -93,6 +96,25 @@ class EdgeList:
 
     def __len__(self) -> int:
         return len(self.i)
+
+    def graph_distance(self, n: int, src: int, dst: int, limit: float) -> float:
+        """Shortest distance [m] from node src to node dst through the graph's edges, each
+        as long as the translation it measures; corridor closures (sigma along the corridor
+        differs from across) are left out, since they do not fix that direction. inf when
+        farther than `limit` [m]. Once loop closures tie the path back, the odometry drift
+        that separates two nodes is that of this path, not of the whole way driven."""
+        if not self.i:
+            return math.inf
+        i = np.array(self.i, dtype=np.int64)
+        j = np.array(self.j, dtype=np.int64)
+        z = np.array(self.z).reshape(-1, 3)
+        sig = np.array(self.sigma, dtype=np.float64).reshape(-1, 3)
+        keep = sig[:, 0] == sig[:, 1]
+        # explicit zeros would be read as no edge: a node that did not move is 1 um away
+        w = np.hypot(z[keep, 0], z[keep, 1]) + 1e-6
+        graph = csr_matrix((w, (i[keep], j[keep])), shape=(n, n))
+        d = dijkstra(graph, directed=False, indices=src, limit=limit)
+        return float(d[dst])
 
     def arrays(self) -> Edges:
         """The edges as arrays."""

@@ -147,7 +147,10 @@ class GraphSlam:
         cand = find_candidate(nodes.poses[: nodes.n], nodes.path_m[: nodes.n], k, g)
         if cand is None:
             return
-        lin, ang = search_window(cand.path_m, g)
+        # the drift since the two nodes were last tied together: along the graph's shortest
+        # path (earlier closures shorten it), at most along the way driven
+        path = min(cand.path_m, self.edges.graph_distance(nodes.n, cand.node, k, cand.path_m))
+        lin, ang = search_window(path, g)
         cur = nodes.poses[k].copy()
         pts, nrm = nodes.map_points(cand.chain)
         chain_map = point_map_around(
