@@ -47,7 +47,7 @@ class ExploreParams:
     local_persistence: float = 1.0  # [s] how long scan obstacles stay in the local costmap
     # each scan clears the earlier scans' marks in the cells its beams cross (costmap_2d's
     # raytrace clearing): a noisy short reading lasts until the next beam through it
-    local_raytrace: bool = False
+    local_raytrace: bool = True
     # --- frontiers (explore_lite) ---
     min_frontier_size: float = 0.5  # [m] clusters smaller than this are ignored
     # [m^2] unknown regions up to this size enclosed by known cells (the inside of table legs,
