@@ -6,8 +6,13 @@ wide, so the robot (0.44 m with its padding) has to arrive on the door's axis, f
 it. The DWA's constant-curvature arcs cannot make that S-bend. This controller does, as a
 robot's door-passing behaviour does: it steers onto the passage's axis (turning on the spot
 where the heading is far off), faces along it, and drives through at door_speed, every motion
-checked against the local costmap with the exact footprint; when no motion is legal it hands
-back to the DWA and the recoveries.
+checked with the exact footprint against the SLAM map's obstacles around the robot (not the
+latest scan's marks); when no motion is legal it hands back to the DWA and the recoveries.
+
+Off by default (`explore.door_align`): its commands bypass the safety controller and see only
+what the map holds as occupied, and every gap under door_width counts as a door, furniture
+gaps included; on the oracle proof that cost collisions among furniture (README, "Laser
+noise").
 """
 
 from __future__ import annotations
@@ -109,8 +114,8 @@ class DoorPass:
 def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p: ExploreParams):
     """`(entry, exit)` [m] of the first passage narrower than door_width that the path
     enters within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
-    already), or None. A path point is in such a passage when the local costmap has obstacle
-    cells on both sides of it, across the path, less than door_width apart; the exit is a
+    already), or None. A path point is in such a passage when `local` (the map's obstacles
+    around the robot) has obstacle cells on both sides of it, across the path, less than door_width apart; the exit is a
     little past its last such point."""
     d = np.hypot(path_xy[:, 0] - x, path_xy[:, 1] - y)
     i0 = int(np.argmin(d))
