@@ -115,8 +115,8 @@ def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p
     """`(entry, exit)` [m] of the first passage narrower than door_width that the path
     enters within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
     already), or None. A path point is in such a passage when `local` (the map's obstacles
-    around the robot) has obstacle cells on both sides of it, across the path, less than door_width apart; the exit is a
-    little past its last such point."""
+    around the robot) has obstacle cells on both sides of it, across the path, less than
+    door_width apart; the exit is a little past its last such point."""
     d = np.hypot(path_xy[:, 0] - x, path_xy[:, 1] - y)
     i0 = int(np.argmin(d))
     seg = np.hypot(*np.diff(path_xy[i0:], axis=0).T)
