@@ -302,9 +302,8 @@ class LocalCostmap:
         iy = math.floor((y - g_origin[1]) / res)
         self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
         self._lattice = np.asarray(g_origin, dtype=float).copy()
-        pts = np.concatenate([m[1] for m in self._marks]) if self._marks else np.zeros((0, 2))
-        if map_only:
-            pts = np.zeros((0, 2))
+        marks = [] if map_only else [m[1] for m in self._marks]
+        pts = np.concatenate(marks) if marks else np.zeros((0, 2))
         if costmap is None or costmap.shape[0] == 0 or not use_map:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
             g_oy = g_ox = -(10**6)

@@ -105,14 +105,11 @@ class EdgeList:
         that separates two nodes is that of this path, not of the whole way driven."""
         if not self.i:
             return math.inf
-        i = np.array(self.i, dtype=np.int64)
-        j = np.array(self.j, dtype=np.int64)
-        z = np.array(self.z).reshape(-1, 3)
-        sig = np.array(self.sigma, dtype=np.float64).reshape(-1, 3)
-        keep = sig[:, 0] == sig[:, 1]
+        e = self.arrays()
+        keep = e.sigma[:, 0] == e.sigma[:, 1]
         # explicit zeros would be read as no edge: a node that did not move is 1 um away
-        w = np.hypot(z[keep, 0], z[keep, 1]) + 1e-6
-        graph = csr_matrix((w, (i[keep], j[keep])), shape=(n, n))
+        w = np.hypot(e.z[keep, 0], e.z[keep, 1]) + 1e-6
+        graph = csr_matrix((w, (e.i[keep], e.j[keep])), shape=(n, n))
         d = dijkstra(graph, directed=False, indices=src, limit=limit)
         return float(d[dst])
 
