@@ -308,17 +308,11 @@ def raytrace_scan(
         ex = int(math.floor((px + re * c - origin_x) / resolution))
         ey = int(math.floor((py + re * s - origin_y) / resolution))
         n = int(min(r, raytrace_range) / step)
-        entered = False
         for i in range(n + 1):
             d = i * step
             ix = int(math.floor((px + d * c - origin_x) / resolution))
             iy = int(math.floor((py + d * s - origin_y) / resolution))
-            if not (0 <= ix < w and 0 <= iy < h):
-                if entered:
-                    break  # the grid is convex: a beam that left it does not come back
-                continue
-            entered = True
-            if ix == ex and iy == ey:
+            if (ix == ex and iy == ey) or not (0 <= ix < w and 0 <= iy < h):
                 continue
             if obstacle[iy, ix]:
                 obstacle[iy, ix] = False

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-from worker.explore.costmap_kernels import INSCRIBED, LETHAL, raytrace_scan
+from worker.explore.costmap_kernels import INSCRIBED, LETHAL
 
 
 def disc_half_widths(radius_cells: float) -> np.ndarray:
@@ -142,13 +142,35 @@ def local_layers(
     return lethal, near, inner, cost
 
 
+@njit(cache=True)
 def crossed_cells(ox, oy, resolution, n, px, py, theta, ranges, angles, range_max):
     """`(n, n) bool`: the cells of the window (lower-left corner (ox, oy)) that the beams of
-    one scan from (px, py, theta) cross before their end cell: the cells the obstacle
-    layer's raytrace (`costmap_kernels.raytrace_scan`, marking nothing) clears in a window
-    full of marks. Beams without a return clear nothing, nor does a beam its own end cell."""
-    grid = np.ones((n, n), dtype=np.bool_)
-    raytrace_scan(
-        grid, ox, oy, resolution, px, py, theta, ranges, angles, range_max, -1.0, math.inf
-    )
-    return ~grid
+    one scan from (px, py, theta) cross before their end cell, as costmap_2d's raytrace
+    clears them. Beams without a return (>= range_max) clear nothing (costmap_2d drops
+    them unless inf_is_valid); a beam's own end cell (its range nudged a fifth of a cell
+    inside, as the marks are) is never cleared by it. The beam walk is
+    `costmap_kernels.raytrace_scan`'s; it is not reused here because this runs every
+    control step, and raytrace_scan over a window full of marks (keeping its box of
+    changes, then its marking pass) takes twice as long (about 250 against 130 us a scan)."""
+    out = np.zeros((n, n), dtype=np.bool_)
+    for k in range(ranges.shape[0]):
+        r = ranges[k]
+        if not (r < range_max * 0.999) or r <= 0.0:
+            continue
+        c = math.cos(theta + angles[k])
+        s = math.sin(theta + angles[k])
+        step = resolution / max(abs(c), abs(s))
+        re = r + 0.2 * resolution
+        ex = int(math.floor((px + re * c - ox) / resolution))
+        ey = int(math.floor((py + re * s - oy) / resolution))
+        m = int(r / step)
+        for i in range(m + 1):
+            d = i * step
+            ix = int(math.floor((px + d * c - ox) / resolution))
+            iy = int(math.floor((py + d * s - oy) / resolution))
+            if not (0 <= ix < n and 0 <= iy < n):
+                break  # the window is convex: a beam that left it does not come back
+            if ix == ex and iy == ey:
+                break
+            out[iy, ix] = True
+    return out
