@@ -83,7 +83,11 @@ def _end(session: Session, commit: bool) -> None:
         session.close()
 
 
-SessionDep = Annotated[Session, Depends(db_session)]
+# scope="function": the transaction ends before the response is sent. FastAPI's default for
+# a dependency with `yield` ("request") ends it after, so a client following a 303 (sign-in,
+# an upload, a job's submission) could ask for what the redirect points at before it was
+# committed, and be told it does not exist; and a failed commit would follow a success sent.
+SessionDep = Annotated[Session, Depends(db_session, scope="function")]
 
 
 def in_session(settings: Settings, work: Callable[..., T], *args) -> T:

@@ -123,6 +123,50 @@ def test_sign_in_starts_a_session_in_a_cookie(site):
     assert bare.get("/", headers={"Authorization": f"Bearer {site['b']}"}).status_code == 200
 
 
+def test_a_sign_in_is_committed_before_its_redirect_is_sent(site):
+    """The browser follows the 303 at once; the page it asks for must find the new session.
+    At the moment the response starts, another connection must see the session's row (a
+    transaction ended after the response, FastAPI's default for a dependency with `yield`,
+    lost this race on a loaded machine: the redirected page sent the browser back to the
+    sign-in form)."""
+    import asyncio
+    import sqlite3
+    from concurrent.futures import ThreadPoolExecutor
+    from urllib.parse import urlencode
+
+    db = site["url"].removeprefix("sqlite:///")
+
+    def sessions() -> int:
+        with sqlite3.connect(db) as c:
+            return c.execute("SELECT count(*) FROM web_sessions").fetchone()[0]
+
+    body = urlencode({"key": site["b"], "next": "/"}).encode()
+    scope = {
+        "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
+        "scheme": "https", "path": "/login", "raw_path": b"/login", "root_path": "",
+        "query_string": b"", "server": ("testserver", 443), "client": ("127.0.0.1", 5000),
+        "headers": [(b"host", b"testserver"), (b"content-length", str(len(body)).encode()),
+                    (b"content-type", b"application/x-www-form-urlencoded")],
+    }  # fmt: skip
+    seen: dict = {}
+    before = sessions()
+
+    async def receive():
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    async def send(message):
+        if message["type"] == "http.response.start":
+            seen["status"] = message["status"]
+            seen["sessions"] = sessions()
+
+    # in a thread of its own: the browser tests' Playwright keeps an event loop running in
+    # this one
+    with ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, site["app"](scope, receive, send)).result()
+    assert seen["status"] == 303
+    assert seen["sessions"] == before + 1
+
+
 def _wait_ready(client, world_id: int, seconds: float = 30.0) -> None:
     deadline = time.monotonic() + seconds
     while client.get(f"/api/v1/worlds/{world_id}").json()["status"] == "pending":
