@@ -115,8 +115,12 @@ def run_pool(
             for s in slots:
                 if s.index is None and pending:
                     index, arg = pending.popleft()
-                    s.give(index, arg)
+                    # reported before the worker has it: an interrupt (SIGTERM raises in the
+                    # parent right after the blocking send) must find every task a worker may
+                    # have begun among those reported started, and the parent prepares for a
+                    # task (its folder emptied) before the worker writes there
                     on_message(PoolMessage("started", index))
+                    s.give(index, arg)
             busy = {s.conn: s for s in slots if s.index is not None}
             for conn in wait(list(busy), timeout=POLL_S):
                 _receive(busy[conn], on_message)

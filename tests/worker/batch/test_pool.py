@@ -6,6 +6,9 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
+
+import pytest
 
 from worker.batch.pool import TaskFailed, run_pool
 
@@ -67,3 +70,24 @@ def test_a_task_failed_in_its_own_words_is_reported_verbatim():
     run_pool(fails_in_its_own_words, [7], 1, messages.append)
     errors = [m.payload for m in messages if m.kind == "error"]
     assert errors == ["ValueError: run 7 broke"]  # no type prefix, no location appended
+
+
+def touch(path, progress):
+    """A task that leaves a mark the moment a worker begins it."""
+    Path(path).touch()
+    time.sleep(5)
+
+
+def test_an_interrupt_at_a_tasks_start_leaves_no_task_begun_unreported(tmp_path):
+    # the batch requeues the runs reported started when it is interrupted: a worker must never
+    # begin a task the parent had not reported (that run stayed `running` for ever)
+    marks = [tmp_path / f"{i}" for i in range(2)]
+
+    def on_message(m):
+        if m.kind == "started" and m.index == 1:
+            time.sleep(1.0)  # time enough for a worker holding the task to begin it
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_pool(touch, [str(p) for p in marks], 2, on_message)
+    assert not marks[1].exists()
