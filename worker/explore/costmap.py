@@ -227,7 +227,12 @@ class LocalCostmap:
         # matter for the collision test only that near
         reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m
         self._reach = int(math.ceil(reach_m / self.resolution)) + 2
-        self._marks: list[tuple[float, np.ndarray]] = []  # (t, (K, 2) obstacle points [m])
+        # the obstacle marks, in the order added: (K, 2) points [m], the time each was seen
+        # and the number of the scan (add_points call) that made it
+        self._pts = np.zeros((0, 2))
+        self._t = np.zeros(0)
+        self._scan = np.zeros(0, dtype=np.int64)
+        self._n_scans = 0
         self._lattice = np.zeros(2)  # a corner of the global grid's cells (set by build)
         self.origin = np.zeros(2)
         shape = (self.n, self.n)
@@ -241,18 +246,21 @@ class LocalCostmap:
     ) -> None:
         """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
-        if self.params.local_raytrace and self._marks:
-            self._clear_crossed(pose, ranges_m, angles, range_max)
+        keep = self._t > t - self.params.local_persistence
+        if self.params.local_raytrace and len(self._pts):
+            keep &= self._uncrossed(pose, ranges_m, angles, range_max)
+        self._keep(keep)
         # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
         # put the mark in the free cell in front
         r = ranges_m[hit] + 0.2 * self.resolution
         a = angles[hit] + pose[2]
-        self.add_points(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
+        self._append(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
 
-    def _clear_crossed(self, pose, ranges_m, angles, range_max) -> None:
-        """Drop the earlier marks whose cell a beam of this scan crosses (costmap_2d's
-        raytrace clearing), in a window of the local costmap's size around the robot, on the
-        lattice `build` rasterises on (so a mark is cleared exactly when its cell is)."""
+    def _uncrossed(self, pose, ranges_m, angles, range_max) -> np.ndarray:
+        """`(K,) bool`: the marks whose cell no beam of this scan crosses. The others go
+        (costmap_2d's raytrace clearing), in a window of the local costmap's size around the
+        robot, on the lattice `build` rasterises on (so a mark is cleared exactly when its
+        cell is)."""
         res, n = self.resolution, self.n
         ox = self._lattice[0] + (math.floor((pose[0] - self._lattice[0]) / res) - n // 2) * res
         oy = self._lattice[1] + (math.floor((pose[1] - self._lattice[1]) / res) - n // 2) * res
@@ -260,25 +268,29 @@ class LocalCostmap:
             ox, oy, res, n, float(pose[0]), float(pose[1]), float(pose[2]),
             np.asarray(ranges_m, dtype=float), np.asarray(angles, dtype=float), float(range_max),
         )  # fmt: skip
-        kept = []
-        for t_m, pts in self._marks:
-            ix = np.floor((pts[:, 0] - ox) / res).astype(np.int64)
-            iy = np.floor((pts[:, 1] - oy) / res).astype(np.int64)
-            inside = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
-            gone = np.zeros(len(pts), dtype=np.bool_)
-            gone[inside] = crossed[iy[inside], ix[inside]]
-            kept.append((t_m, pts[~gone]))
-        self._marks = kept
+        return lk.uncrossed(self._pts, crossed, ox, oy, res)
 
     def add_points(self, t: float, pts: np.ndarray) -> None:
         """Mark obstacle points `(K, 2) [x, y]` (map frame) observed at time t."""
-        self._marks.append((t, np.asarray(pts, dtype=float).reshape(-1, 2)))
-        keep_after = t - self.params.local_persistence
-        self._marks = [m for m in self._marks if m[0] > keep_after]
+        self._keep(self._t > t - self.params.local_persistence)
+        self._append(t, np.asarray(pts, dtype=float).reshape(-1, 2))
+
+    def _append(self, t: float, pts: np.ndarray) -> None:
+        """Add the marks `(K, 2)` of one scan at time t (the expired ones already gone)."""
+        self._n_scans += 1
+        if t > t - self.params.local_persistence:  # (a persistence of 0 keeps nothing)
+            self._pts = np.concatenate((self._pts, pts))
+            self._t = np.concatenate((self._t, np.full(len(pts), float(t))))
+            self._scan = np.concatenate((self._scan, np.full(len(pts), self._n_scans)))
+
+    def _keep(self, keep: np.ndarray) -> None:
+        """Keep the marks where `keep (K,) bool` holds."""
+        if not keep.all():
+            self._pts, self._t, self._scan = self._pts[keep], self._t[keep], self._scan[keep]
 
     def clear(self) -> None:
         """Recovery behaviour: forget all but the newest scan's obstacles."""
-        self._marks = self._marks[-1:]
+        self._keep(self._scan == self._n_scans)
 
     def build(
         self,
@@ -302,8 +314,7 @@ class LocalCostmap:
         iy = math.floor((y - g_origin[1]) / res)
         self.origin = np.array([g_origin[0] + (ix - half) * res, g_origin[1] + (iy - half) * res])
         self._lattice = np.asarray(g_origin, dtype=float).copy()
-        marks = [] if map_only else [m[1] for m in self._marks]
-        pts = np.concatenate(marks) if marks else np.zeros((0, 2))
+        pts = np.zeros((0, 2)) if map_only else self._pts
         if costmap is None or costmap.shape[0] == 0 or not use_map:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
             g_oy = g_ox = -(10**6)

@@ -174,3 +174,18 @@ def crossed_cells(ox, oy, resolution, n, px, py, theta, ranges, angles, range_ma
                 break
             out[iy, ix] = True
     return out
+
+
+@njit(cache=True)
+def uncrossed(pts, crossed, ox, oy, resolution):
+    """`(K,) bool`: which points `(K, 2) [x, y]` do not lie in a cell marked in `crossed`
+    (the `(n, n)` window of `crossed_cells`, lower-left corner (ox, oy)); points outside
+    the window are kept."""
+    n = crossed.shape[0]
+    keep = np.ones(pts.shape[0], dtype=np.bool_)
+    for k in range(pts.shape[0]):
+        ix = int(math.floor((pts[k, 0] - ox) / resolution))
+        iy = int(math.floor((pts[k, 1] - oy) / resolution))
+        if 0 <= ix < n and 0 <= iy < n and crossed[iy, ix]:
+            keep[k] = False
+    return keep
