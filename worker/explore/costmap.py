@@ -203,6 +203,9 @@ def _union(a, b):
     return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
 
 
+_NO_WINDOW = np.zeros((0, 0), dtype=np.bool_)  # a scan that clears no mark
+
+
 class LocalCostmap:
     """Rolling window around the robot: the recent scans' obstacles over the SLAM map's.
 
@@ -246,21 +249,24 @@ class LocalCostmap:
     ) -> None:
         """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
-        keep = self._t > t - self.params.local_persistence
+        crossed, ox, oy = _NO_WINDOW, 0.0, 0.0
         if self.params.local_raytrace and len(self._pts):
-            keep &= self._uncrossed(pose, ranges_m, angles, range_max)
-        self._keep(keep)
+            crossed, ox, oy = self._crossed(pose, ranges_m, angles, range_max)
+        self._pts, self._t, self._scan = lk.kept_marks(
+            self._pts, self._t, self._scan, t - self.params.local_persistence, crossed, ox, oy,
+            self.resolution,
+        )  # fmt: skip
         # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
         # put the mark in the free cell in front
         r = ranges_m[hit] + 0.2 * self.resolution
         a = angles[hit] + pose[2]
         self._append(t, np.column_stack((pose[0] + r * np.cos(a), pose[1] + r * np.sin(a))))
 
-    def _uncrossed(self, pose, ranges_m, angles, range_max) -> np.ndarray:
-        """`(K,) bool`: the marks whose cell no beam of this scan crosses. The others go
-        (costmap_2d's raytrace clearing), in a window of the local costmap's size around the
-        robot, on the lattice `build` rasterises on (so a mark is cleared exactly when its
-        cell is)."""
+    def _crossed(self, pose, ranges_m, angles, range_max) -> tuple[np.ndarray, float, float]:
+        """The cells the beams of this scan cross (their marks go: costmap_2d's raytrace
+        clearing) in a window of the local costmap's size around the robot, on the lattice
+        `build` rasterises on (so a mark is cleared exactly when its cell is): `(n, n) bool`
+        and the window's lower-left corner [m]."""
         res, n = self.resolution, self.n
         ox = self._lattice[0] + (math.floor((pose[0] - self._lattice[0]) / res) - n // 2) * res
         oy = self._lattice[1] + (math.floor((pose[1] - self._lattice[1]) / res) - n // 2) * res
@@ -268,7 +274,7 @@ class LocalCostmap:
             ox, oy, res, n, float(pose[0]), float(pose[1]), float(pose[2]),
             np.asarray(ranges_m, dtype=float), np.asarray(angles, dtype=float), float(range_max),
         )  # fmt: skip
-        return lk.uncrossed(self._pts, crossed, ox, oy, res)
+        return crossed, ox, oy
 
     def add_points(self, t: float, pts: np.ndarray) -> None:
         """Mark obstacle points `(K, 2) [x, y]` (map frame) observed at time t."""

@@ -177,15 +177,26 @@ def crossed_cells(ox, oy, resolution, n, px, py, theta, ranges, angles, range_ma
 
 
 @njit(cache=True)
-def uncrossed(pts, crossed, ox, oy, resolution):
-    """`(K,) bool`: which points `(K, 2) [x, y]` do not lie in a cell marked in `crossed`
-    (the `(n, n)` window of `crossed_cells`, lower-left corner (ox, oy)); points outside
-    the window are kept."""
+def kept_marks(pts, ts, scans, t_min, crossed, ox, oy, resolution):
+    """The marks `(K, 2) [x, y]` (with their times `ts (K,)` and scan numbers `scans (K,)`)
+    seen after t_min whose cell is not marked in `crossed`, the `(n, n)` window of
+    `crossed_cells` with lower-left corner (ox, oy) (points outside it are kept; a (0, 0)
+    window clears nothing): the three arrays compacted, in their order."""
     n = crossed.shape[0]
-    keep = np.ones(pts.shape[0], dtype=np.bool_)
-    for k in range(pts.shape[0]):
-        ix = int(math.floor((pts[k, 0] - ox) / resolution))
-        iy = int(math.floor((pts[k, 1] - oy) / resolution))
+    k = 0
+    out_p = np.empty_like(pts)
+    out_t = np.empty_like(ts)
+    out_s = np.empty_like(scans)
+    for i in range(pts.shape[0]):
+        if not ts[i] > t_min:
+            continue
+        ix = int(math.floor((pts[i, 0] - ox) / resolution))
+        iy = int(math.floor((pts[i, 1] - oy) / resolution))
         if 0 <= ix < n and 0 <= iy < n and crossed[iy, ix]:
-            keep[k] = False
-    return keep
+            continue
+        out_p[k, 0] = pts[i, 0]
+        out_p[k, 1] = pts[i, 1]
+        out_t[k] = ts[i]
+        out_s[k] = scans[i]
+        k += 1
+    return out_p[:k], out_t[:k], out_s[:k]
