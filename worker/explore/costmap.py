@@ -249,13 +249,10 @@ class LocalCostmap:
     ) -> None:
         """Mark the hits (readings < range_max) seen from `pose (3,) [x, y, theta]`."""
         hit = ranges_m < range_max * 0.999
-        crossed, ox, oy = _NO_WINDOW, 0.0, 0.0
         if self.params.local_raytrace and len(self._pts):
-            crossed, ox, oy = self._crossed(pose, ranges_m, angles, range_max)
-        self._pts, self._t, self._scan = lk.kept_marks(
-            self._pts, self._t, self._scan, t - self.params.local_persistence, crossed, ox, oy,
-            self.resolution,
-        )  # fmt: skip
+            self._drop(t, *self._crossed(pose, ranges_m, angles, range_max))
+        else:
+            self._drop(t)
         # a reading ends on the obstacle's face: nudge it inside, so that rounding cannot
         # put the mark in the free cell in front
         r = ranges_m[hit] + 0.2 * self.resolution
@@ -278,25 +275,31 @@ class LocalCostmap:
 
     def add_points(self, t: float, pts: np.ndarray) -> None:
         """Mark obstacle points `(K, 2) [x, y]` (map frame) observed at time t."""
-        self._keep(self._t > t - self.params.local_persistence)
+        self._drop(t)
         self._append(t, np.asarray(pts, dtype=float).reshape(-1, 2))
 
-    def _append(self, t: float, pts: np.ndarray) -> None:
-        """Add the marks `(K, 2)` of one scan at time t (the expired ones already gone)."""
-        self._n_scans += 1
-        if t > t - self.params.local_persistence:  # (a persistence of 0 keeps nothing)
-            self._pts = np.concatenate((self._pts, pts))
-            self._t = np.concatenate((self._t, np.full(len(pts), float(t))))
-            self._scan = np.concatenate((self._scan, np.full(len(pts), self._n_scans)))
+    def _drop(
+        self, t: float, crossed: np.ndarray = _NO_WINDOW, ox: float = 0.0, oy: float = 0.0
+    ) -> None:
+        """Drop the marks expired at time t and those in the cells of `crossed` (the window
+        of `_crossed` with lower-left corner (ox, oy); by default none)."""
+        self._pts, self._t, self._scan = lk.kept_marks(
+            self._pts, self._t, self._scan, t - self.params.local_persistence, crossed, ox, oy,
+            self.resolution,
+        )  # fmt: skip
 
-    def _keep(self, keep: np.ndarray) -> None:
-        """Keep the marks where `keep (K,) bool` holds."""
-        if not keep.all():
-            self._pts, self._t, self._scan = self._pts[keep], self._t[keep], self._scan[keep]
+    def _append(self, t: float, pts: np.ndarray) -> None:
+        """Add the marks `(K, 2)` of one scan at time t (the expired ones already gone;
+        local_persistence is positive, so these are not)."""
+        self._n_scans += 1
+        self._pts = np.concatenate((self._pts, pts))
+        self._t = np.concatenate((self._t, np.full(len(pts), float(t))))
+        self._scan = np.concatenate((self._scan, np.full(len(pts), self._n_scans)))
 
     def clear(self) -> None:
         """Recovery behaviour: forget all but the newest scan's obstacles."""
-        self._keep(self._scan == self._n_scans)
+        keep = self._scan == self._n_scans
+        self._pts, self._t, self._scan = self._pts[keep], self._t[keep], self._scan[keep]
 
     def build(
         self,
