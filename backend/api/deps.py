@@ -114,21 +114,27 @@ class Principal:
 class KeyCache:
     """API key hash -> Principal, each entry trusted for `ttl` seconds (one per app)."""
 
-    def __init__(self, ttl: float = KEY_CACHE_TTL, max_entries: int = KEY_CACHE_MAX):
+    def __init__(
+        self,
+        ttl: float = KEY_CACHE_TTL,
+        max_entries: int = KEY_CACHE_MAX,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.ttl = ttl
         self.max_entries = max_entries
+        self.clock = clock
         self._entries: dict[str, tuple[Principal, float]] = {}
 
     def get(self, key_hash: str) -> Principal | None:
         entry = self._entries.get(key_hash)
-        if entry is None or entry[1] < time.monotonic():
+        if entry is None or entry[1] < self.clock():
             return None
         return entry[0]
 
     def put(self, key_hash: str, principal: Principal) -> None:
         if len(self._entries) >= self.max_entries:
             self._entries.clear()
-        self._entries[key_hash] = (principal, time.monotonic() + self.ttl)
+        self._entries[key_hash] = (principal, self.clock() + self.ttl)
 
 
 def key_cache(app: FastAPI) -> KeyCache:
