@@ -227,7 +227,8 @@ class Exploration:
     def result(self, stop: StopReason) -> ExplorationResult:
         """The run, ended by `stop`: its recording, final map, coverage and counters."""
         world, sim, nav, rec = self.world, self.sim, self.nav, self.rec
-        grid = self.slam.occupancy()
+        # with the end-point counts where the SLAM keeps them (the map score's walls)
+        grid = getattr(self.slam, "occupancy_with_hits", self.slam.occupancy)()
         pose_gt = rec.buf[: rec.n, 1:4].copy()
         pose_est = rec.buf[: rec.n, 4:7].copy()
         T = align_map_to_world(pose_est, pose_gt)

@@ -25,12 +25,17 @@ class OccupancyGrid:
     origin: (2,) [m] world position of the lower-left corner of cell (0, 0).
     occ_thresh: a cell is occupied above this probability when published (GMapping's
         occ_thresh, 0.25), free at or below it.
+    hits: None, or (H, W) float32 the number of beam end points in each cell (GMapping's
+        hits, the ratio's numerator): where a noisy laser's end points are densest, which the
+        ratio alone does not tell (the map score's "density" walls). Only the final map of a
+        run carries it (`with_hits`); a map read from files has none.
     """
 
     prob: np.ndarray
     resolution: float
     origin: np.ndarray
     occ_thresh: float = 0.25
+    hits: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         prob = np.array(self.prob, dtype=np.float32, copy=True)
@@ -42,6 +47,11 @@ class OccupancyGrid:
         object.__setattr__(self, "prob", prob)
         object.__setattr__(self, "origin", origin)
         object.__setattr__(self, "resolution", float(self.resolution))
+        object.__setattr__(self, "hits", _hits_for(self.hits, prob.shape))
+
+    def with_hits(self, hits: np.ndarray) -> OccupancyGrid:
+        """This map with its end-point counts `hits` (H, W) attached (copied)."""
+        return OccupancyGrid(self.prob, self.resolution, self.origin, self.occ_thresh, hits)
 
     @classmethod
     def adopt(
@@ -57,7 +67,7 @@ class OccupancyGrid:
         grid = object.__new__(cls)
         for name, value in (
             ("prob", prob), ("resolution", float(resolution)), ("origin", origin),
-            ("occ_thresh", float(occ_thresh)),
+            ("occ_thresh", float(occ_thresh)), ("hits", None),
         ):  # fmt: skip
             object.__setattr__(grid, name, value)
         return grid
@@ -115,6 +125,17 @@ class OccupancyGrid:
         path = Path(path)
         Image.fromarray(self.to_image()).save(path)
         return path
+
+
+def _hits_for(hits: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    """`hits` as a read-only float32 copy of the grid's shape (None stays None)."""
+    if hits is None:
+        return None
+    out = np.array(hits, dtype=np.float32, copy=True)
+    if out.shape != shape:
+        raise ValueError(f"hits must have the map's shape {shape}, got {out.shape}")
+    out.setflags(write=False)
+    return out
 
 
 def map_server_files(

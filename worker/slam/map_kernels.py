@@ -227,6 +227,20 @@ def register_scans(
 
 
 @njit(cache=True)
+def dense_hits(hits, table):
+    """(TH*32, TW*32) float32 end-point counts of one particle's map, 0 where none."""
+    th, tw = table.shape
+    out = np.zeros((th * PATCH, tw * PATCH), dtype=np.float32)
+    for ty in range(th):
+        for tx in range(tw):
+            e = table[ty, tx]
+            if e < 0:
+                continue
+            out[ty * PATCH : (ty + 1) * PATCH, tx * PATCH : (tx + 1) * PATCH] = hits[e]
+    return out
+
+
+@njit(cache=True)
 def dense_prob(visits, hits, table):
     """(TH*32, TW*32) float32 hits / visits of one particle's map, NaN where never visited."""
     th, tw = table.shape

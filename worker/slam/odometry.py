@@ -55,3 +55,7 @@ class OdometrySlam:
         if self._grid is None:
             self._grid = self.maps.occupancy(0)
         return self._grid
+
+    def occupancy_with_hits(self) -> OccupancyGrid:
+        """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
+        return self.maps.occupancy(0, with_hits=True)

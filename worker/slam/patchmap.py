@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.grid import OccupancyGrid
-from worker.slam.map_kernels import PATCH, PATCH_BITS, dense_prob, register_scans
+from worker.slam.map_kernels import PATCH, PATCH_BITS, dense_hits, dense_prob, register_scans
 
 
 class PatchMaps:
@@ -190,21 +190,24 @@ class PatchMaps:
         self._recount()
         return need
 
-    def occupancy(self, particle: int) -> OccupancyGrid:
-        """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none)."""
-        prob = dense_prob(self.visits, self.hits, self.tables[particle])
+    def occupancy(self, particle: int, with_hits: bool = False) -> OccupancyGrid:
+        """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none);
+        with_hits: with its cells' end-point counts (`OccupancyGrid.hits`)."""
+        table = self.tables[particle]
+        prob = dense_prob(self.visits, self.hits, table)
         known = ~np.isnan(prob)
         side = self.resolution * PATCH
         origin = np.array([self.tpx0 * side, self.tpy0 * side])
         if not known.any():
-            return OccupancyGrid(
-                np.full((1, 1), np.nan, np.float32), self.resolution, origin, self.occ_thresh
-            )
+            empty = np.full((1, 1), np.nan, np.float32)
+            hits = np.zeros((1, 1), np.float32) if with_hits else None
+            return OccupancyGrid(empty, self.resolution, origin, self.occ_thresh, hits)
         rows = np.flatnonzero(known.any(axis=1))
         cols = np.flatnonzero(known.any(axis=0))
         r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
         origin = origin + np.array([c0, r0]) * self.resolution
-        return OccupancyGrid(prob[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh)
+        hits = dense_hits(self.hits, table)[r0:r1, c0:c1] if with_hits else None
+        return OccupancyGrid(prob[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh, hits)
 
 
 __all__ = ["PatchMaps", "PATCH", "PATCH_BITS"]

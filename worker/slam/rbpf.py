@@ -308,6 +308,10 @@ class RbpfSlam:
             self._grid = self.maps.occupancy(self._best)
         return self._grid
 
+    def occupancy_with_hits(self) -> OccupancyGrid:
+        """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
+        return self.maps.occupancy(self._best, with_hits=True)
+
 
 # [m^2 or rad^2] the smallest motion-model variance of the proposal's prior: a noise-free model
 # (srr = ... = 0, as some tests set) pins the draw to the odometry instead of dividing by zero

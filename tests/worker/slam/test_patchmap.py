@@ -50,6 +50,21 @@ def test_hits_over_visits():
     assert maps.hits[e, 0, 10] == 2 and np.allclose(maps.mean[e, 0, 10], [0.05, 0.05], atol=1e-6)
 
 
+def test_the_map_with_hits_carries_each_cells_end_point_count():
+    maps = PatchMaps(1, 0.1, 2.0, 0.25)
+    _beam(maps, [0.05, 0.05, 0.0], 0.5)  # ends in cell 5
+    _beam(maps, [0.05, 0.05, 0.0], 1.0)  # through cell 5, ends in cell 10
+    _beam(maps, [0.05, 0.05, 0.0], 1.0)
+    g = maps.occupancy(0, with_hits=True)
+    assert maps.occupancy(0).hits is None  # only when asked: the explore loop's maps skip it
+    expected = np.zeros((1, 11), np.float32)
+    expected[0, 5], expected[0, 10] = 1, 2
+    assert g.hits.dtype == np.float32 and np.array_equal(g.hits, expected)
+    assert np.array_equal(g.prob, maps.occupancy(0).prob)
+    with pytest.raises(ValueError):
+        g.hits[0, 0] = 1.0  # read-only, as prob
+
+
 def test_map_grows_with_explored_area_negative_side():
     maps = PatchMaps(1, 0.05, 1.0, 0.25)
     _beam(maps, [0.01, 0.01, 0.0], 1.0)

@@ -98,14 +98,17 @@ class NodeMap:
         """(N, 3) the poses the counts were made with."""
         return self._poses.copy()
 
-    def occupancy(self) -> OccupancyGrid:
-        """The map as hit / visit ratios (NaN = never seen)."""
+    def occupancy(self, with_hits: bool = False) -> OccupancyGrid:
+        """The map as hit / visit ratios (NaN = never seen); with_hits: with its cells'
+        end-point counts (`OccupancyGrid.hits`)."""
         if self._hits.size == 0:
             prob = np.full((1, 1), np.nan, dtype=np.float32)
+            hits = np.zeros((1, 1), dtype=np.float32)
         else:
             prob = hit_ratio(self._hits, self._visits)
+            hits = self._hits
         origin = np.array([self._ix0, self._iy0], dtype=np.float64) * self.res
-        return OccupancyGrid(prob, self.res, origin, self.occ_thresh)
+        return OccupancyGrid(prob, self.res, origin, self.occ_thresh, hits if with_hits else None)
 
     @property
     def nbytes(self) -> int:

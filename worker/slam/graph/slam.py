@@ -285,6 +285,11 @@ class GraphSlam:
             self._grid = self.map.occupancy()
         return self._grid
 
+    def occupancy_with_hits(self) -> OccupancyGrid:
+        """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
+        self.occupancy()  # brings the map up to the nodes' poses
+        return self.map.occupancy(with_hits=True)
+
 
 def _inverse3(a: np.ndarray) -> np.ndarray:
     c, s = math.cos(a[2]), math.sin(a[2])
