@@ -4,7 +4,7 @@ their relation errors and their map-versus-floorplan scores (issue 17 section 4)
     .venv/bin/python benchmarks/bench_validity.py [--out out/validity] [--time-limit 90]
         [--seeds 1 2] [--worlds worlds/bormann/office_a.yaml worlds/bormann/lab_ipa.yaml]
         [--noises 0 0.1 0.3] [--limit N] [--report-only] [--plot docs/validity.png]
-        [--walls ridge|front|occupied]
+        [--walls density|ridge|front|occupied]
 
 Every run (rbpf with 40, 10, 3 and 1 particles and the odometry baseline; laser noise 0, 0.1
 and 0.3 m; each world and seed) is written to OUT/<key>.json as soon as it ends, and a run
@@ -12,10 +12,11 @@ already there is not run again: stop it any time and start it again to resume. T
 ordered seed first, so any prefix spans the algorithms, noises and worlds. The odometry error
 is 5x Stage's default (E = 0.05, 0.05, 0.10) so that dead reckoning and starved filters make
 bad maps within a short time limit. B relations: at least 500 a run (issue 17 section 2).
-Each run's final map is kept beside it (OUT/<key>.npz: the hit ratios, the grid's geometry and
-the first estimated and true poses), and the report scores the stored maps again with the map
-score of the current code (`--walls` picks the wall extraction), so a change to the score needs
-no new runs; a run without its map is run again (a summary alone cannot be scored again).
+Each run's final map is kept beside it (OUT/<key>.npz: the hit ratios and end-point counts,
+the grid's geometry and the first estimated and true poses), and the report scores the stored
+maps again with the map score of the current code (`--walls` picks the wall extraction), so a
+change to the score needs no new runs; a run without its map is run again (a summary alone
+cannot be scored again).
 """
 
 from __future__ import annotations
@@ -121,9 +122,10 @@ def save_map(path: Path, ex: Any) -> None:
         return
     g = ex.final_map
     tmp = path.with_suffix(".tmp.npz")
+    hits = {} if g.hits is None else {"hits": g.hits}
     np.savez_compressed(tmp, prob=g.prob, resolution=g.resolution, origin=g.origin,
                         occ_thresh=g.occ_thresh, pose_est0=ex.pose_est[0],
-                        pose_gt0=ex.pose_gt[0])  # fmt: skip
+                        pose_gt0=ex.pose_gt[0], **hits)  # fmt: skip
     tmp.replace(path)
 
 
@@ -144,7 +146,10 @@ def rescore(npz: Path, world_path: Path, p: Any, cache: dict[str, Any]) -> dict[
     if key not in cache:
         cache[key] = reachable_free(world.occ, world.resolution, start,
                                     ExploreParams().footprint_half_m)  # fmt: skip
-    grid = OccupancyGrid(d["prob"], float(d["resolution"]), d["origin"], float(d["occ_thresh"]))
+    hits = d["hits"] if "hits" in d.files else None  # maps stored before the counts: none
+    grid = OccupancyGrid(
+        d["prob"], float(d["resolution"]), d["origin"], float(d["occ_thresh"]), hits
+    )
     T0 = start_alignment(d["pose_est0"], g0)
     return score_map(world.occ, world.resolution, world.origin, cache[key], grid, T0, p).summary()
 
@@ -163,7 +168,8 @@ def load(out: Path, p: Any = None, world_paths: tuple[str, ...] = WORLDS) -> lis
             continue
         npz = path.with_suffix(".npz")
         if p is not None and npz.exists() and rec["world"] in worlds:
-            s["map_score"] = rescore(npz, worlds[rec["world"]], p, cache)
+            pr = p.for_laser_noise(rec["noise"])  # as the run's own score was made
+            s["map_score"] = rescore(npz, worlds[rec["world"]], pr, cache)
         row = {k: rec[k] for k in ("key", "world", "slam", "noise", "seed")}
         row["outcome"] = s["outcome"]
         for kind, axis in ERRORS:
@@ -299,7 +305,8 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=90.0, help="[s] simulated")
     ap.add_argument("--limit", type=int, default=None, help="run only the first N runs")
     ap.add_argument("--report-only", action="store_true", help="no new runs")
-    ap.add_argument("--walls", default="ridge", choices=("ridge", "front", "occupied"),
+    ap.add_argument("--walls", default="density",
+                    choices=("density", "ridge", "front", "occupied"),
                     help="the map's walls, when stored maps are scored again")  # fmt: skip
     ap.add_argument("--plot", default=None, help="scatter plot PNG (default OUT/validity.png)")
     args = ap.parse_args()

@@ -203,9 +203,8 @@ def _map_score(world: World, params: RunParams, ex: ExplorationResult) -> MapSco
     )
     reach = reachable_free(world.occ, world.resolution, start_cell, params.explore.footprint_half_m)
     T0 = start_alignment(ex.pose_est[0], ex.pose_gt[0])
-    return score_map(
-        world.occ, world.resolution, world.origin, reach, ex.final_map, T0, MapScoreParams()
-    )
+    p = MapScoreParams().for_laser_noise(params.sim.laser_noise_sigma)
+    return score_map(world.occ, world.resolution, world.origin, reach, ex.final_map, T0, p)
 
 
 def _progress_relay(

@@ -16,7 +16,7 @@ nearest point of S:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from worker.evaluate import map_score_kernels as k
 from worker.explore.coverage import coverage
 
-WALLS = ("ridge", "front", "occupied")
+WALLS = ("density", "ridge", "front", "occupied")
 
 
 @dataclass(frozen=True)
@@ -39,15 +39,30 @@ class MapScoreParams:
     icp_tol: float = 1e-4  # [m] stop a gate once the update moves no wall cell more than this
     icp_min_pairs: int = 10  # fewer correspondences keep the pose reached so far
     seen_margin: float = 0.1  # [m] a floorplan wall this close to a known map cell was seen
-    # which of the map's cells are its walls: "ridge" (occupied cells on the ridge of the hit
-    # ratio across the wall, robust to laser range noise), "front" (occupied cells facing a
-    # free cell) or "occupied" (every cell above the grid's occ_thresh)
-    walls: str = "ridge"
-    ridge_sigma_m: float = 0.05  # [m] Gaussian smoothing of the hit ratio before the ridge
+    # which of the map's cells are its walls: "density" (cells on the ridge of the beams' end
+    # point counts across the wall, where a noisy laser's walls really are; a map without
+    # counts, OccupancyGrid.hits None, falls back to "ridge"), "ridge" (occupied cells on the
+    # ridge of the hit ratio: thin, but behind the surface under range noise), "front"
+    # (occupied cells facing a free cell) or "occupied" (every cell above occ_thresh)
+    walls: str = "density"
+    ridge_sigma_m: float = 0.05  # [m] Gaussian smoothing of the hit ratio ("ridge")
+    # [m] Gaussian smoothing of the end-point counts ("density"); `for_laser_noise` matches it
+    # to the laser's range noise, as a run does: a wall's end points scatter across it by
+    # that sigma, and a narrower filter leaves many small peaks across the band
+    density_sigma_m: float = 0.05
+    # a "density" ridge cell is a wall only where more than this share of the beams through
+    # it ended in it (a stray end point in open floor is not)
+    density_min_ratio: float = 0.05
 
     def __post_init__(self) -> None:
         if self.walls not in WALLS:
             raise ValueError(f"walls must be one of {', '.join(WALLS)}, got {self.walls!r}")
+
+    def for_laser_noise(self, sigma_m: float) -> MapScoreParams:
+        """These settings with the end points smoothed by the laser's range noise `sigma_m`
+        [m] (a filter matched to the scatter of a wall's end points), never below
+        density_sigma_m."""
+        return replace(self, density_sigma_m=max(self.density_sigma_m, float(sigma_m)))
 
 
 @dataclass(frozen=True)
@@ -70,6 +85,8 @@ class MapScore:
     icp_converged: bool
     floorplan_walls: np.ndarray  # (H, W) bool world cells: the walls compared against
     map_walls_xy: np.ndarray  # (K, 2) [m] the map's wall cell centres, registered (world frame)
+    walls: str = "ridge"  # the wall extraction used (MapScoreParams.walls, or its fallback)
+    walls_sigma_m: float = 0.05  # [m] its smoothing (ridge_sigma_m or density_sigma_m)
 
     def summary(self) -> dict:
         """summary.json's `map_score` section."""
@@ -79,6 +96,7 @@ class MapScore:
                 "precision", "recall", "wall_coverage", "distance_m", "distance_map_m",
                 "distance_floorplan_m", "free_share", "tolerance_m", "n_map_walls",
                 "n_floorplan_walls", "n_floorplan_walls_seen", "icp_iterations", "icp_converged",
+                "walls", "walls_sigma_m",
             )
         }  # fmt: skip
         x, y, th = (float(v) for v in self.T_world_map)
@@ -100,12 +118,23 @@ def floorplan_walls(occ: np.ndarray, reachable: np.ndarray) -> np.ndarray:
     return k.wall_surface(occ, reachable)
 
 
+def walls_used(grid, p: MapScoreParams = MapScoreParams()) -> str:
+    """The wall extraction `map_walls` applies to `grid`: p.walls, but "ridge" for "density"
+    on a map without end-point counts."""
+    if p.walls == "density" and getattr(grid, "hits", None) is None:
+        return "ridge"
+    return p.walls
+
+
 def map_walls(grid, p: MapScoreParams = MapScoreParams()) -> np.ndarray:
     """`(H, W) bool` the cells of `grid` (an OccupancyGrid) taken as its walls, by `p.walls`."""
     if p.walls == "occupied":
         return grid.occupied
     if p.walls == "front":
         return k.front_walls(grid.prob, grid.occ_thresh)
+    if walls_used(grid, p) == "density":
+        sigma = p.density_sigma_m / grid.resolution
+        return k.density_walls(grid.hits, grid.prob, sigma, p.density_min_ratio)
     return k.ridge_walls(grid.prob, grid.occ_thresh, p.ridge_sigma_m / grid.resolution)
 
 
@@ -161,6 +190,8 @@ def score_map(
         icp_converged=reg.converged,
         floorplan_walls=fp_walls,
         map_walls_xy=map_w,
+        walls=walls_used(grid, p),
+        walls_sigma_m=p.density_sigma_m if walls_used(grid, p) == "density" else p.ridge_sigma_m,
     )
 
 

@@ -183,29 +183,83 @@ def ridge_walls(prob: np.ndarray, occ_thresh: float, sigma_cells: float) -> NDAr
     is no normal, and the cell is kept.
     """
     p = np.nan_to_num(np.asarray(prob, dtype=np.float64), nan=0.0)
-    occ = p > occ_thresh
-    if not occ.any():
-        return occ
+    return _ridge(p, p > occ_thresh, sigma_cells)
+
+
+def density_walls(
+    hits: np.ndarray, prob: np.ndarray, sigma_cells: float, min_ratio: float
+) -> NDArray[np.bool_]:
+    """`(H, W) bool` cells on the ridge of the beams' end-point density across their wall.
+
+    With Gaussian range noise a wall's end points scatter symmetrically about its surface,
+    so their density peaks on it; the hit ratio (hits over beams through a cell) is the
+    noise's hazard rate instead, which rises *behind* the surface, so that `ridge_walls`
+    puts a noisy laser's walls up to a noise sigma behind the true ones. The same ridge
+    (Hessian normal, non-maximum suppression across the wall, `_ridge`) is taken of the end
+    points `hits` (smoothed by `sigma_cells`) among the cells holding any, where the density
+    curves down across the wall (the tails of a wall's end points, behind and in front of it,
+    fall off convexly and hold no ridge) and, where it falls off alike in every direction
+    (a post, a wall's end), at its peak. A ridge cell is kept where its hit ratio exceeds
+    `min_ratio` (a stray end point in open floor, through which many beams passed, is not a
+    wall).
+    """
+    h = np.asarray(hits, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        solid = np.nan_to_num(np.asarray(prob, dtype=np.float64), nan=0.0) > min_ratio
+    return _ridge(h, h > 0.0, sigma_cells, concave=True) & solid
+
+
+def _ridge(
+    p: np.ndarray, cand: np.ndarray, sigma_cells: float, concave: bool = False
+) -> NDArray[np.bool_]:
+    """The cells of `cand` on the ridge of `p` (H, W) smoothed by `sigma_cells` (see
+    `ridge_walls`): not below a candidate neighbour along the normal, or with no normal.
+    concave: only where the smoothed `p` curves down across the normal more than it curves
+    up along it, and with no normal only at a peak (down in every direction, not below any
+    neighbour): a ridge, not a shoulder or the rounded end of a wall."""
+    if not cand.any():
+        return cand
 
     def g(order: tuple[int, int]) -> np.ndarray:
         return ndimage.gaussian_filter(p, sigma_cells, order=order, mode="constant")
 
-    s, hyy, hxx, hxy = g((0, 0)), g((2, 0)), g((0, 2)), g((1, 1))
+    if concave:
+        # the Hessian by central differences of the smoothed values: the truncated Gaussian's
+        # own second derivatives do not sum to zero, and along a straight wall that hair of
+        # curvature can outweigh the real one across it near the peak's shoulders
+        s = g((0, 0))
+        q = np.pad(s, 1)
+        hyy = q[2:, 1:-1] - 2.0 * s + q[:-2, 1:-1]
+        hxx = q[1:-1, 2:] - 2.0 * s + q[1:-1, :-2]
+        hxy = 0.25 * (q[2:, 2:] - q[2:, :-2] - q[:-2, 2:] + q[:-2, :-2])
+    else:
+        s, hyy, hxx, hxy = g((0, 0)), g((2, 0)), g((0, 2)), g((1, 1))
     half_gap = np.hypot(0.5 * (hxx - hyy), hxy)  # half the eigenvalues' difference
     lam_min = 0.5 * (hxx + hyy) - half_gap
     line = 2.0 * half_gap > 0.5 * np.abs(lam_min)  # lam_max - lam_min > |lam_min| / 2
     # angle of the larger eigenvalue's eigenvector; the normal is at right angles to it
     normal = 0.5 * np.arctan2(2.0 * hxy, hxx - hyy) + 0.5 * np.pi
     bins = np.round(normal / (0.25 * np.pi)).astype(np.int64) % 4
-    padded = np.pad(np.where(occ, s, -np.inf), 1, constant_values=-np.inf)
+    padded = np.pad(np.where(cand, s, -np.inf), 1, constant_values=-np.inf)
     h, w = p.shape
-    keep = np.zeros_like(occ)
+    keep = np.zeros_like(cand)
     eps = 1e-9 * max(float(s.max()), 1.0)  # floating-point ties (symmetric corners)
     for b, (dy, dx) in enumerate(_ACROSS):
         fwd = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
         bwd = padded[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w]
         keep |= (bins == b) & (s >= fwd - eps) & (s >= bwd - eps)
-    return occ & (keep | ~line)
+    if concave:
+        # a peak across the wall: the curvature of largest magnitude (the normal's) is
+        # negative; with no normal (a post, a wall's end) a peak in every direction
+        lam_max = lam_min + 2.0 * half_gap
+        keep &= (lam_min < -eps) & (lam_min + lam_max < 0.0)
+        peak = lam_max < -eps
+        for dy, dx in _ACROSS:
+            fwd = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+            bwd = padded[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w]
+            peak &= (s >= fwd - eps) & (s >= bwd - eps)
+        return cand & np.where(line, keep, peak)
+    return cand & (keep | ~line)
 
 
 def front_walls(prob: np.ndarray, occ_thresh: float) -> NDArray[np.bool_]:

@@ -114,6 +114,11 @@ class MapScoreSummary(_Part):
     icp_iterations: int
     icp_converged: bool
     alignment: Alignment  # T_world_map after ICP
+    # the map's walls: "density" (ridge of the beams' end points), "ridge" (of the hit ratio),
+    # "front" or "occupied" (worker.evaluate.map_score.MapScoreParams.walls); absent from runs
+    # scored before it was recorded (ridge)
+    walls: str | None = Field(default=None, exclude_if=lambda v: v is None)
+    walls_sigma_m: float | None = Field(default=None, exclude_if=lambda v: v is None)  # [m]
 
 
 class Collision(_Part):

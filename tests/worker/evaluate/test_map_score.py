@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from worker.evaluate import map_score_kernels as k
 from worker.evaluate.map_score import MapScoreParams, score_map, start_alignment
 from worker.slam.grid import OccupancyGrid
 
@@ -195,3 +196,68 @@ def test_the_front_of_a_blurred_wall_is_its_face_towards_free_space():
 def test_an_unknown_wall_extraction_is_refused():
     with pytest.raises(ValueError, match="walls must be one of"):
         MapScoreParams(walls="skeleton")
+
+
+def noisy_wall(sigma_cells: float, surface: int, rows: int = 40, cols: int = 60):
+    """A wall across the grid whose surface is the centre of column `surface`, seen by 1000
+    beams a row from the left with Gaussian range noise of `sigma_cells`: (hits, prob), as
+    GMapping counts them. A column's hits are the beams ending in it, N (Phi(b) - Phi(a))
+    over its edges a, b in sigmas from the surface; its visits the beams reaching its near
+    edge, N (1 - Phi(a)); the ratio is the noise's hazard rate, which only rises with depth."""
+    from scipy.stats import norm
+
+    i = np.arange(cols)
+    a = (i - 0.5 - surface) / sigma_cells
+    b = (i + 0.5 - surface) / sigma_cells
+    hits = 1000.0 * (norm.cdf(b) - norm.cdf(a))
+    visits = 1000.0 * norm.sf(a)
+    prob = np.where(visits > 1e-9, hits / np.maximum(visits, 1e-300), np.nan)
+    return (np.tile(hits, (rows, 1)).astype(np.float32),
+            np.tile(prob, (rows, 1)).astype(np.float32))  # fmt: skip
+
+
+def test_the_end_point_density_puts_a_noisy_wall_on_its_surface_where_the_ratio_does_not():
+    """Range noise of 6 cells (0.3 m at 0.05 m): the end points' density peaks on the surface
+    (a Gaussian's mode is its mean), so the density ridge is column 20 exactly; the hit ratio
+    passes 0.25 about one sigma behind it and keeps rising, so its ridge lies further back."""
+    hits, prob = noisy_wall(6.0, 20)
+    inner = slice(5, 35)  # rows away from the grid's ends, where the wall ends
+    dens = k.density_walls(hits, prob, 1.0, 0.05)[inner]
+    assert np.array_equal(np.flatnonzero(dens.any(axis=0)), [20]) and dens[:, 20].all()
+    ridge = k.ridge_walls(prob, 0.25, 1.0)[inner]
+    assert ridge.any() and np.flatnonzero(ridge.any(axis=0)).min() >= 20 + 4
+
+
+def test_the_map_score_takes_a_noisy_walls_surface_from_the_hit_counts():
+    """The same wall scored against its floorplan (solid from column 20 on): on the surface
+    with the counts (walls 'density'), 0.2 m and more behind it by the ratio alone (a map
+    with no counts falls back to the ridge, and says so): outside the 0.1 m tolerance, every
+    cell."""
+    hits, prob = noisy_wall(6.0, 20)
+    occ = np.zeros(prob.shape, bool)
+    occ[:, 20:] = True
+    p = MapScoreParams(icp_iterations=0)
+    with_counts = OccupancyGrid(prob, RES, np.zeros(2), hits=hits)
+    s = score_map(occ, RES, np.zeros(2), ~occ, with_counts, np.zeros(3), p)
+    assert s.walls == "density" and s.summary()["walls"] == "density"
+    # every map wall on the surface; the wall's last rows, where the counts stop at the
+    # grid's edge, curve down along it and hold no ridge (2 of its 40 cells left unmatched)
+    assert s.precision == 1.0 and s.distance_map_m == pytest.approx(0.0, abs=1e-12)
+    assert s.recall >= 0.95
+    r = score_map(occ, RES, np.zeros(2), ~occ, OccupancyGrid(prob, RES, np.zeros(2)),
+                  np.zeros(3), p)  # fmt: skip
+    assert r.walls == "ridge" and r.distance_map_m >= 0.2
+    assert r.recall == 0.0 and r.precision == 0.0
+
+
+def test_hits_of_another_shape_than_the_map_are_refused():
+    with pytest.raises(ValueError, match="hits must have the map's shape"):
+        OccupancyGrid(np.zeros((3, 4)), RES, np.zeros(2), hits=np.zeros((4, 3)))
+
+
+def test_a_runs_map_score_smooths_the_end_points_by_the_lasers_range_noise():
+    """A filter matched to the end points' scatter; never narrower than the default."""
+    p = MapScoreParams()
+    assert p.for_laser_noise(0.3).density_sigma_m == 0.3
+    assert p.for_laser_noise(0.0).density_sigma_m == p.density_sigma_m == 0.05
+    assert p.for_laser_noise(0.3).ridge_sigma_m == p.ridge_sigma_m

@@ -22,6 +22,7 @@ def test_the_oracles_map_matches_the_floorplan_and_lands_in_summary_and_overlay(
     # cell, so within a cell (0.05 m) at worst, and the registration stays at the start pose
     assert m.precision >= 0.99 and m.recall >= 0.95
     assert m.distance_m < 0.05
+    assert m.walls == "density" and m.walls_sigma_m == 0.05  # noise-free: one cell
     a = m.alignment
     assert abs(a.x) < 0.02 and abs(a.y) < 0.02 and abs(a.theta) < 0.005
     assert m.free_share == r.summary.coverage or abs(m.free_share - r.summary.coverage) < 0.02
@@ -38,3 +39,10 @@ def test_a_drifting_odometry_scores_worse_than_the_oracle():
     odo = run_one(two_rooms(), RunParams.from_json({"algorithm": "odometry", **common}), 5)
     a, b = oracle.summary.map_score, odo.summary.map_score
     assert b.distance_m > a.distance_m and b.precision < a.precision
+
+
+def test_a_noisy_lasers_map_is_scored_with_the_end_points_smoothed_by_its_noise():
+    p = {"algorithm": "rbpf", "slam": {"particles": 5}, "explore": {"time_limit": 60.0},
+         "sim": {"laser_noise_sigma": 0.1}}  # fmt: skip
+    m = run_one(two_rooms(), RunParams.from_json(p), 2).summary.map_score
+    assert (m.walls, m.walls_sigma_m) == ("density", 0.1)

@@ -83,6 +83,8 @@ def test_closed_loop_run_with_graph_completes(tmp_path):
     assert summary["params"]["slam"]["graph"]["minimum_travel_distance"] == 0.5
     assert summary["relations"]["B"]["translation"]["n"] > 0
     assert summary["relations"]["B"]["translation"]["mean"] < 0.2
+    # the final map carries graph's end-point counts: the map score takes its walls from them
+    assert summary["map_score"]["walls"] == "density"
     assert (tmp_path / "report" / "summary.json").exists()
 
 
