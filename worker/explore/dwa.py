@@ -68,6 +68,10 @@ class DwaPlanner:
         self._prev_xy = (0.0, 0.0)
         self._escape_from: tuple[float, float, float] | None = None
         self._dist = np.zeros((2, 0, 0), dtype=np.float32)  # path / goal distance buffers
+        # [m] the farthest from the robot a scored trajectory's point or the heading
+        # look-ahead can be: the distance maps are needed that far only
+        fastest = max(abs(p.max_vel_x), abs(p.min_vel_x), abs(p.escape_vel))
+        self._reach = max(fastest * p.sim_time, p.heading_lookahead)
         self._queue = np.zeros(0, dtype=np.int64)
 
     def set_plan(self, path_xy: np.ndarray | None) -> None:
@@ -110,8 +114,14 @@ class DwaPlanner:
             self._dist = np.empty((2, n, n), dtype=np.float32)
             self._queue = np.empty(n * n, dtype=np.int64)
         path_dist, goal_dist = self._dist[0], self._dist[1]
-        dk.wavefront_into(seeds, local.cost, local.resolution, path_dist, self._queue)
-        dk.wavefront_into(goal_cell, local.cost, local.resolution, goal_dist, self._queue)
+        # the distances are read only where a trajectory or the heading look-ahead can reach
+        cy = int(math.floor((pose[1] - local.origin[1]) / local.resolution))
+        cx = int(math.floor((pose[0] - local.origin[0]) / local.resolution))
+        r = int(math.ceil(self._reach / local.resolution)) + 2
+        dk.wavefront_into(seeds, local.cost, local.resolution, path_dist, self._queue, cy, cx, r)
+        dk.wavefront_into(
+            goal_cell, local.cost, local.resolution, goal_dist, self._queue, cy, cx, r
+        )
         goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         passes = [(self.prm, False), (self._prm_unpadded, True)]
         if self._stuck_left or self._stuck_right:

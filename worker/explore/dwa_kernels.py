@@ -46,11 +46,27 @@ def wavefront(seeds, cost, resolution):
 
 
 @njit(cache=True)
-def wavefront_into(seeds, cost, resolution, dist, queue):
+def wavefront_into(seeds, cost, resolution, dist, queue, cy=0, cx=0, r=-1):
     """`wavefront` written into `dist (n, n) float32`, with `queue (n * n,) int64` as its
-    work space (both reused from call to call: no allocation at 10 Hz)."""
+    work space (both reused from call to call: no allocation at 10 Hz).
+
+    With r >= 0 only the square of cells within r (rows and columns) of cell (cy, cx) is
+    asked for: the search stops once every cell there below INSCRIBED has its distance
+    (a cell's first visit is final), so those cells hold what the whole search gives them;
+    cells outside it may be left at inf. A square cell that cannot be reached keeps the
+    search going to its end, as without r."""
     h, w = cost.shape
     dist[:, :] = np.inf
+    y0 = 0 if r < 0 else max(0, cy - r)
+    y1 = h - 1 if r < 0 else min(h - 1, cy + r)
+    x0 = 0 if r < 0 else max(0, cx - r)
+    x1 = w - 1 if r < 0 else min(w - 1, cx + r)
+    need = 0  # the square's traversable cells not reached yet (0 and r < 0: never stops)
+    if r >= 0:
+        for iy in range(y0, y1 + 1):
+            for ix in range(x0, x1 + 1):
+                if cost[iy, ix] < 253:
+                    need += 1
     head = 0
     tail = 0
     for i in range(seeds.shape[0]):
@@ -60,6 +76,10 @@ def wavefront_into(seeds, cost, resolution, dist, queue):
             dist[iy, ix] = 0.0
             queue[tail] = iy * w + ix
             tail += 1
+            if y0 <= iy <= y1 and x0 <= ix <= x1 and cost[iy, ix] < 253:
+                need -= 1
+    if r >= 0 and need == 0:
+        return
     while head < tail:
         idx = queue[head]
         head += 1
@@ -76,6 +96,10 @@ def wavefront_into(seeds, cost, resolution, dist, queue):
             dist[jy, jx] = nd
             queue[tail] = jy * w + jx
             tail += 1
+            if r >= 0 and y0 <= jy <= y1 and x0 <= jx <= x1:
+                need -= 1
+                if need == 0:
+                    return
 
 
 @njit(cache=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
@@ -42,6 +43,27 @@ def test_wavefront_is_manhattan_distance_around_obstacles():
     assert d[0, 3] == np.inf
     # to (0, 4): up 4, across 4, down 4 -> 12 steps
     assert math.isclose(d[0, 4], 1.2, rel_tol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_wavefront_asked_for_a_square_gives_its_cells_what_the_whole_search_does(seed):
+    """The search stops once the square's reachable cells are all reached; the square must
+    then hold the whole search's distances, cell for cell, on random obstacle fields (some
+    with cells of the square walled off, which keep the search going to its end)."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    cost = np.where(rng.random((n, n)) < 0.3, 254, 0).astype(np.uint8)
+    seeds = rng.integers(0, n, size=(int(rng.integers(1, 6)), 2))
+    full = dk.wavefront(seeds, cost, 0.05)
+    for cy, cx, r in ((30, 30, 5), (2, 57, 8), (int(seeds[0, 0]), int(seeds[0, 1]), 0)):
+        part = np.empty((n, n), dtype=np.float32)
+        dk.wavefront_into(seeds, cost, 0.05, part, np.empty(n * n, np.int64), cy, cx, r)
+        sq = (slice(max(0, cy - r), cy + r + 1), slice(max(0, cx - r), cx + r + 1))
+        assert np.array_equal(part[sq], full[sq])
+        # what lies outside was not all searched (the point of the square): never wrong
+        # where it was, inf where it was not
+        out = part != full
+        assert np.all(part[out] == np.inf)
 
 
 def test_free_straight_path_accelerates_forwards_within_the_window():
