@@ -255,6 +255,7 @@ def test_job_page_shows_the_finished_run(site):
     # the map-versus-floorplan figures, as the summary has them
     m = site["summary"]["map_score"]
     assert f"{m['distance_m']:.3f} m" in page and f"{m['precision']:.3f}" in page
+    assert m["walls"] == "density" and "map walls: end-point density ridge" in page
     for src in srcs:
         r = client.get(src)
         assert r.status_code == 200 and r.content[:4] == b"\x89PNG", src
