@@ -86,7 +86,8 @@ class MapScore:
     floorplan_walls: np.ndarray  # (H, W) bool world cells: the walls compared against
     map_walls_xy: np.ndarray  # (K, 2) [m] the map's wall cell centres, registered (world frame)
     walls: str = "ridge"  # the wall extraction used (MapScoreParams.walls, or its fallback)
-    walls_sigma_m: float = 0.05  # [m] its smoothing (ridge_sigma_m or density_sigma_m)
+    # [m] its smoothing (ridge_sigma_m or density_sigma_m; None for "front" and "occupied")
+    walls_sigma_m: float | None = 0.05
 
     def summary(self) -> dict:
         """summary.json's `map_score` section."""
@@ -191,7 +192,9 @@ def score_map(
         floorplan_walls=fp_walls,
         map_walls_xy=map_w,
         walls=walls_used(grid, p),
-        walls_sigma_m=p.density_sigma_m if walls_used(grid, p) == "density" else p.ridge_sigma_m,
+        walls_sigma_m={"density": p.density_sigma_m, "ridge": p.ridge_sigma_m}.get(
+            walls_used(grid, p)
+        ),
     )
 
 

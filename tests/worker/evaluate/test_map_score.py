@@ -191,6 +191,8 @@ def test_the_front_of_a_blurred_wall_is_its_face_towards_free_space():
                   MapScoreParams(icp_iterations=0, walls="front"))  # fmt: skip
     assert s.n_map_walls == 128
     assert s.distance_map_m == pytest.approx(RES)
+    assert (s.walls, s.walls_sigma_m) == ("front", None)  # no smoothing to report
+    assert "walls_sigma_m" in s.summary() and s.summary()["walls_sigma_m"] is None
 
 
 def test_an_unknown_wall_extraction_is_refused():
