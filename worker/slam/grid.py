@@ -28,7 +28,7 @@ class OccupancyGrid:
     hits: None, or (H, W) float32 the number of beam end points in each cell (GMapping's
         hits, the ratio's numerator): where a noisy laser's end points are densest, which the
         ratio alone does not tell (the map score's "density" walls). Only the final map of a
-        run carries it (`with_hits`); a map read from files has none.
+        run carries it (the SLAMs' `occupancy_with_hits`); a map read from files has none.
     """
 
     prob: np.ndarray
@@ -48,10 +48,6 @@ class OccupancyGrid:
         object.__setattr__(self, "origin", origin)
         object.__setattr__(self, "resolution", float(self.resolution))
         object.__setattr__(self, "hits", _hits_for(self.hits, prob.shape))
-
-    def with_hits(self, hits: np.ndarray) -> OccupancyGrid:
-        """This map with its end-point counts `hits` (H, W) attached (copied)."""
-        return OccupancyGrid(self.prob, self.resolution, self.origin, self.occ_thresh, hits)
 
     @classmethod
     def adopt(
