@@ -156,6 +156,7 @@ def score_map(
     world_origin = np.asarray(world_origin, dtype=np.float64)
     fp_walls = floorplan_walls(occ, reachable)
     fp_xy = k.cell_centres(fp_walls, world_resolution, world_origin)
+    used = walls_used(grid, p)
     map_xy = k.cell_centres(map_walls(grid, p), grid.resolution, grid.origin)
     fp_tree = cKDTree(fp_xy)
     reg = _register(map_xy, fp_tree, fp_xy, np.asarray(T0, dtype=np.float64), p)
@@ -191,10 +192,8 @@ def score_map(
         icp_converged=reg.converged,
         floorplan_walls=fp_walls,
         map_walls_xy=map_w,
-        walls=walls_used(grid, p),
-        walls_sigma_m={"density": p.density_sigma_m, "ridge": p.ridge_sigma_m}.get(
-            walls_used(grid, p)
-        ),
+        walls=used,
+        walls_sigma_m={"density": p.density_sigma_m, "ridge": p.ridge_sigma_m}.get(used),
     )
 
 
