@@ -23,6 +23,7 @@ SETTINGS_SINCE_EXAMPLE = {
     "explore": [
         "back_out_check_time",
         "back_out_gain",
+        "back_out_lookahead",
         "back_out_speed_ratio",
         "blacklist_arrivals",
         "closed_gap_radius",

@@ -158,6 +158,11 @@ class ExploreParams:
     back_out_speed_ratio: float = 1.5
     back_out_gain: float = 1.5
     back_out_check_time: float = 0.5
+    # [s] getting room to turn ranks its motions by the lowest costmap value along each one's
+    # legal roll-out this far ahead, not where the checked back_out_check_time ends: a motion
+    # that gains a little room at once but runs into a slot loses to backing out the way the
+    # robot came
+    back_out_lookahead: float = 2.0
     unwedge_time: float = 1.0  # [s] an unwedging motion (footprint in contact), checked whole
     # --- safety controller (range_proximity_safety_controller) ---
     safety_distance: float = 0.2  # [m] obstacle this near the footprint's front: back off

@@ -78,8 +78,8 @@ class HeadingShim:
 
     def _to_clearance(self, pose: np.ndarray, err: float, local: LocalCostmap):
         """Boxed in (no turn is legal): the short legal motion, backwards or forwards, that
-        ends where the costmap is lowest (farthest from obstacles), backwards on ties (the
-        robot came from there); None when nothing is legal."""
+        leads where the costmap is lowest (farthest from obstacles) within back_out_lookahead,
+        backwards on ties (the robot came from there); None when nothing is legal."""
         p = self.params
         # backing up, the rear's heading th + pi turns with w: w > 0 swings it left (ccw)
         rear_err = wrap_angle(err + math.pi)
@@ -98,7 +98,7 @@ class HeadingShim:
                     continue
                 # once going one way, keep going that way while it is legal (no shuffling)
                 turn_back = _SWITCH_PENALTY if v * self._dir < 0 else 0
-                c = _cost_after(pose, v, w, horizon, local) + turn_back
+                c = self._lowest_cost_ahead(pose, v, w, local, shrink) + turn_back
                 if best is None or c < best[0]:
                     best = (c, v, w)
             if best is not None:
@@ -110,6 +110,25 @@ class HeadingShim:
         self._dir = math.copysign(1.0, best[1])
         self.n_reversals += best[1] < 0
         return best[1], best[2], "reverse" if best[1] < 0 else "creep"
+
+    def _lowest_cost_ahead(
+        self, pose: np.ndarray, v: float, w: float, local: LocalCostmap, shrink: float
+    ) -> int:
+        """The lowest costmap value at the ends of back_out_check_time steps of (v, w), as far
+        as the motion stays legal, up to back_out_lookahead; the first step is legal already.
+        Where the first step ends alone is myopic: between table legs a forward turn gains a
+        few cells of room in half a second and ends in a slot the robot can neither turn in
+        nor leave, while backing out the way it came gains more a second later."""
+        p = self.params
+        step = p.back_out_check_time
+        best = _cost_after(pose, v, w, step, local)
+        k = 2
+        while k * step <= p.back_out_lookahead + 1e-9 and best > 0:
+            if not self._legal(pose, v, w, local, k * step, padded=False, shrink=shrink):
+                break
+            best = min(best, _cost_after(pose, v, w, k * step, local))
+            k += 1
+        return best
 
     def _legal(
         self,

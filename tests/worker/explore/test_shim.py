@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
-from worker.explore.costmap import LocalCostmap
+from worker.explore.costmap import GlobalCostmap, LocalCostmap
 from worker.explore.params import ExploreParams
 from worker.explore.shim import HeadingShim
 
@@ -92,3 +93,47 @@ def test_a_turn_under_way_keeps_its_direction_when_the_path_is_about_behind():
     assert shim.command(pose, 0.3, _path_west(), _local([], pose, p))[1] > 0
     fresh = HeadingShim(p)  # a robot that was not turning takes the short way: right
     assert fresh.command(pose, 0.0, _path_west(), _local([], pose, p))[1] < 0
+
+
+def test_boxed_in_among_table_legs_it_backs_out_the_way_it_came_not_into_a_slot():
+    # Captured from office_b_furnitures (graph SLAM, seed 3) at 12.9 s: the SLAM map around
+    # the robot, the local costmap's laser marks, the robot's pose and its plan. The robot
+    # drove north into a 0.6 m gap between table legs (west) and a cabinet (north-east); the
+    # plan now leads back south-east, and no turn fits. Backing half a second ends nearer the
+    # legs than a forward right turn does, so the shim used to creep forwards, turning, into
+    # the slot between leg and cabinet, where the robot could neither turn nor leave: it
+    # shuffled 3 cm back and forth until `stuck` (here: no turn within 10 s). Backing out
+    # the way it came reaches room to turn.
+    p = ExploreParams()
+    data = np.load(Path(__file__).parents[2] / "data" / "office_b_furnitures_shim_trap.npz")
+    q = data["prob"]
+    prob = np.where(q == 255, np.nan, q / 250.0).astype(np.float32)
+    res = float(data["resolution"])
+    costmap = GlobalCostmap(p)
+    costmap.update(prob, res, tuple(data["origin"]))
+    occ = np.argwhere(prob > p.occupied_thresh)  # (row, col) of the map's obstacle cells
+    occ_xy = data["origin"] + (occ[:, ::-1] + 0.5) * res
+    x = data["pose"].astype(float).copy()
+    path = data["path"].astype(float)
+    shim = HeadingShim(p)
+    local = LocalCostmap(p, res)
+    local.add_points(0.0, data["marks"].astype(float))
+    kinds = []
+    for _ in range(100):  # 10 s
+        local.build(x[0], x[1], costmap, x[2])
+        out = shim.command(x, 0.0, path, local)
+        assert out is not None
+        v, w, kind = out
+        kinds.append(kind)
+        if kind == "rotate":
+            break
+        x[0] += v * math.cos(x[2]) * 0.1
+        x[1] += v * math.sin(x[2]) * 0.1
+        x[2] += w * 0.1
+        c, s = math.cos(x[2]), math.sin(x[2])  # independent check: the 0.4 m square is clear
+        u = (occ_xy[:, 0] - x[0]) * c + (occ_xy[:, 1] - x[1]) * s
+        q_ = -(occ_xy[:, 0] - x[0]) * s + (occ_xy[:, 1] - x[1]) * c
+        assert not np.any((np.abs(u) < 0.2) & (np.abs(q_) < 0.2))
+    assert kinds[0] == "reverse"  # out the way it came
+    assert kinds[-1] == "rotate" and len(kinds) < 50  # room to turn within 5 s
+    assert x[1] < data["pose"][1]  # south of where it was boxed in, not up in the slot
