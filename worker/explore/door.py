@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
@@ -42,10 +43,15 @@ class DoorPass:
         self._rotating = False
         self._local: LocalCostmap | None = None  # the map's obstacles around the robot
         self.n_passages = 0  # passages driven through to their far end
+        self._best_along = -math.inf  # [m] the farthest the robot got into the passage
+        self._stalled = 0  # control periods since it last got 0.05 m farther
+        self.refused: list[np.ndarray] = []  # entries of passages given up (door_patience)
 
     def reset(self) -> None:
         self.door = None
         self._rotating = False
+        self._best_along = -math.inf
+        self._stalled = 0
 
     def command(
         self, pose: np.ndarray, path_xy: np.ndarray | None, costmap: GlobalCostmap
@@ -64,11 +70,17 @@ class DoorPass:
         local = self._local
         local.build(float(pose[0]), float(pose[1]), costmap, float(pose[2]), map_only=True)
         found = find_passage(path_xy, pose[0], pose[1], local, p)
+        if found is not None and any(
+            np.hypot(*(found[0] - e)) <= p.door_width for e in self.refused
+        ):
+            found = None  # given up before: the DWA and the recoveries have it
+            if self.door is not None:
+                self.reset()
         if found is not None and (
             self.door is None or np.hypot(*(found[0] - self.door[0])) > p.door_width
         ):
+            self.reset()
             self.door = found
-            self._rotating = False
         if self.door is None:
             return None
         entry, exit_ = self.door
@@ -77,6 +89,16 @@ class DoorPass:
         u = axis / length if length > 1e-6 else _direction_at(path_xy, entry)
         rel = np.asarray(pose[:2], dtype=float) - entry
         along = float(u @ rel)
+        if along > self._best_along + 0.05:
+            self._best_along, self._stalled = along, 0
+        else:
+            self._stalled += 1
+        if self._stalled > p.door_patience * p.controller_frequency:
+            # lining up and backing for room got the robot no farther in: something the
+            # map does not hold is in the way, or the passage is too tight to line up in
+            self.refused.append(entry.copy())
+            self.reset()
+            return None
         off = float(u[0] * rel[1] - u[1] * rel[0])  # > 0: left of the axis
         if along > length + 0.1:
             self.n_passages += 1
@@ -112,11 +134,12 @@ class DoorPass:
 
 
 def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p: ExploreParams):
-    """`(entry, exit)` [m] of the first passage narrower than door_width that the path
-    enters within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
+    """`(entry, exit)` [m] of the first door narrower than door_width that the path enters
+    within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
     already), or None. A path point is in such a passage when `local` (the map's obstacles
     around the robot) has obstacle cells on both sides of it, across the path, less than
-    door_width apart; the exit is a little past its last such point."""
+    door_width apart; the passage is a door when both sides' obstacles belong to walls
+    (`_in_a_wall`); the exit is a little past its last such point."""
     d = np.hypot(path_xy[:, 0] - x, path_xy[:, 1] - y)
     i0 = int(np.argmin(d))
     seg = np.hypot(*np.diff(path_xy[i0:], axis=0).T)
@@ -129,15 +152,63 @@ def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p
         np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), local.lethal,
         float(local.origin[0]), float(local.origin[1]), local.resolution, p.door_width,
     )  # fmt: skip
-    first = np.flatnonzero(tight)
-    if first.size == 0 or along[first[0]] > p.door_lookahead:
-        return None
-    i1 = int(first[0])
-    i2 = i1
-    while i2 + 1 < len(pts) and tight[i2 + 1]:
-        i2 += 1
-    k = min(len(pts) - 1, int(np.searchsorted(along, along[i2] + 0.1)))
-    return pts[i1].astype(float).copy(), pts[k].astype(float).copy()
+    labels = None
+    i = 0
+    while i < len(pts):
+        if not tight[i]:
+            i += 1
+            continue
+        i1 = i2 = i
+        if along[i1] > p.door_lookahead:
+            return None
+        while i2 + 1 < len(pts) and tight[i2 + 1]:
+            i2 += 1
+        if labels is None:
+            labels = _components(local.lethal)
+        if _in_a_wall(pts, i1, local, labels, p):
+            k = min(len(pts) - 1, int(np.searchsorted(along, along[i2] + 0.1)))
+            return pts[i1].astype(float).copy(), pts[k].astype(float).copy()
+        i = i2 + 1
+    return None
+
+
+def _components(lethal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(labels, extent [cells] of each label): the 8-connected obstacle regions of `lethal`
+    and the longer side of each one's bounding box."""
+    labels, n = ndimage.label(lethal, structure=np.ones((3, 3), dtype=bool))
+    extent = np.zeros(n + 1)
+    for k, sl in enumerate(ndimage.find_objects(labels), start=1):
+        extent[k] = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start)
+    return labels, extent
+
+
+def _in_a_wall(pts: np.ndarray, i: int, local: LocalCostmap, comps, p: ExploreParams) -> bool:
+    """Whether the obstacles found on both sides of the path at pts[i], across it, are each
+    part of a region at least door_wall_min long: a door in a wall, not a gap between
+    pieces of furniture."""
+    labels, extent = comps
+    j0, j1 = max(0, i - 1), min(len(pts) - 1, i + 1)
+    d = pts[j1] - pts[j0]
+    norm = float(np.hypot(*d))
+    if norm == 0.0:
+        return False
+    nx, ny = -d[1] / norm, d[0] / norm
+    res = local.resolution
+    h, w = labels.shape
+    for sgn in (1.0, -1.0):
+        label = 0
+        for step in range(int(p.door_width / (0.5 * res)) + 1):
+            r = sgn * step * 0.5 * res
+            ix = int(math.floor((pts[i, 0] + r * nx - local.origin[0]) / res))
+            iy = int(math.floor((pts[i, 1] + r * ny - local.origin[1]) / res))
+            if not (0 <= ix < w and 0 <= iy < h):
+                break
+            if labels[iy, ix]:
+                label = labels[iy, ix]
+                break
+        if label == 0 or extent[label] * res < p.door_wall_min:
+            return False
+    return True
 
 
 def _direction_at(path_xy: np.ndarray, xy: np.ndarray) -> np.ndarray:

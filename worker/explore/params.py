@@ -39,7 +39,7 @@ class ExploreParams:
     raytrace_range: float = 30.0  # [m]
     # [-] the obstacle layer's marks count only in cells the SLAM map does not know as
     # firmly free (probability at least this, or unknown); 0: everywhere
-    obstacle_min_prob: float = 0.0
+    obstacle_min_prob: float = 0.1
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
@@ -129,15 +129,22 @@ class ExploreParams:
     shim_angle: float = 1.2  # [rad]
     shim_release: float = 0.5  # [rad] the DWA takes over again below this
     shim_lookahead: float = 0.5  # [m]
-    # door passage (door.DoorPass), off by default: when the path enters a passage narrower
-    # than door_width (the SLAM map's obstacles on both sides) within door_lookahead, the
-    # robot steers onto its axis, faces along it (turning on the spot past door_angle) and
-    # drives through at door_speed
-    door_align: bool = False
+    # door passage (door.DoorPass): when the path enters a door narrower than door_width
+    # (the SLAM map's walls on both sides) within door_lookahead, the robot steers onto its
+    # axis, faces along it (turning on the spot past door_angle) and drives through at
+    # door_speed
+    door_align: bool = True
     door_width: float = 0.9  # [m]
     door_lookahead: float = 1.0  # [m]
     door_angle: float = 0.1  # [rad]
     door_speed: float = 0.15  # [m/s]
+    # [m] a passage is a door only where the obstacles on both sides of it each extend at
+    # least this far (walls, in the window the robot sees): a gap between table legs or
+    # chairs is left to the DWA
+    door_wall_min: float = 1.0
+    # [s] a passage the robot gets no 0.05 m farther into for this long is given up to the
+    # DWA and the recoveries for the rest of the run
+    door_patience: float = 10.0
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up

@@ -62,12 +62,12 @@ def _footprint_hits_wall(cm: GlobalCostmap, x: float, y: float, th: float, half:
 
 def test_map_lethal_is_the_map_alone_and_only_kept_for_the_door_passage():
     prob = _door_map(10)
-    cm = GlobalCostmap(_params())
+    cm = GlobalCostmap(_params(obstacle_min_prob=0.0))  # every mark counts
     cm.update(prob, RES, (0.0, 0.0), scan=(np.array([2.0, 2.0, 0.0]), np.array([0.6]),
                                            np.array([0.0]), 30.0))  # fmt: skip
     assert np.array_equal(cm.map_lethal, prob > 0.25)
     assert cm.lethal[40, 52] and not cm.map_lethal[40, 52]  # the obstacle layer's mark
-    off = GlobalCostmap(ExploreParams())
+    off = GlobalCostmap(dataclasses.replace(ExploreParams(), door_align=False))
     off.update(prob, RES, (0.0, 0.0))
     assert off.map_lethal.size == 0
 
@@ -75,13 +75,14 @@ def test_map_lethal_is_the_map_alone_and_only_kept_for_the_door_passage():
 def test_obstacle_marks_in_cells_the_map_knows_free_can_be_left_out():
     # a noisy short reading marks a cell the map has seen free many times (0.02), another
     # marks a wall face the map shows under occupied_thresh (0.2): with obstacle_min_prob
-    # 0.1 only the second is an obstacle, with 0 (the default) both are
+    # 0.1 (the default) only the second is an obstacle, with 0 both are
     prob = _door_map(10)
     prob[10, 50] = 0.2
     scans = [
         (np.array([2.0, 2.02, 0.0]), np.array([0.62])),  # ends in cell (40, 52): p 0.02
         (np.array([2.0, 0.52, 0.0]), np.array([0.52])),  # ends in cell (10, 50): p 0.2
     ]
+    assert ExploreParams().obstacle_min_prob == 0.1
     for min_prob, expected in ((0.0, [True, True]), (0.1, [False, True])):
         cm = GlobalCostmap(dataclasses.replace(ExploreParams(), obstacle_min_prob=min_prob))
         for pose, r in scans:
@@ -134,3 +135,48 @@ def test_a_door_narrower_than_the_robot_is_not_forced():
     assert poses[-1, 0] < 3.0 - p.footprint_half_m + 0.02
     assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
     assert ck.LETHAL == 254  # the costmap values the checks rely on
+
+
+def test_a_gap_between_pieces_of_furniture_is_not_a_door():
+    # the same 0.5 m gap on the same path, once in a wall and once between two cabinets
+    # 0.4 m long: only the first is a door (door_wall_min 1 m); the gap between the
+    # cabinets is the DWA's, as every other gap between furniture
+    from worker.explore.costmap import LocalCostmap
+
+    p = _params()
+    assert p.door_wall_min == 1.0
+    path = np.column_stack((np.arange(1.5, 4.5, RES), np.full(60, 2.025)))
+    furniture = np.full((80, 120), 0.02, dtype=np.float32)
+    furniture[27:35, WALL_X : WALL_X + 2] = 0.9  # y in [1.35, 1.75): 0.4 m
+    furniture[45:53, WALL_X : WALL_X + 2] = 0.9  # y in [2.25, 2.65)
+    local = LocalCostmap(p, RES)
+    for prob, is_door in ((_door_map(10), True), (furniture, False)):
+        cm = GlobalCostmap(p)
+        cm.update(prob, RES, (0.0, 0.0))
+        local.build(2.4, 2.0, cm, 0.0, map_only=True)
+        assert (find_passage(path, 2.4, 2.0, local, p) is not None) is is_door
+    long_cabinets = furniture.copy()
+    long_cabinets[15:35, WALL_X : WALL_X + 2] = 0.9  # 1.0 m long each: wall enough
+    long_cabinets[45:65, WALL_X : WALL_X + 2] = 0.9
+    cm = GlobalCostmap(p)
+    cm.update(long_cabinets, RES, (0.0, 0.0))
+    local.build(2.4, 2.0, cm, 0.0, map_only=True)
+    assert find_passage(path, 2.4, 2.0, local, p) is not None
+
+
+def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
+    # a 0.6 m door with a post the map holds 0.15 m past it, on the axis: the robot lines
+    # up and drives in, but no motion takes it farther; after door_patience (10 s) the
+    # passage is refused, and the same door is not taken up again
+    p = _params()
+    prob = _door_map(12)
+    prob[38:42, WALL_X + 5 : WALL_X + 7] = 0.9  # x in [3.25, 3.35), y in [1.9, 2.1)
+    cm = GlobalCostmap(p)
+    cm.update(prob, RES, (0.0, 0.0))
+    path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.0)))
+    poses, kinds, door = _drive_through(p, cm, (2.3, 2.0, 0.0), path, steps=400)
+    assert len(door.refused) == 1 and abs(door.refused[0][0] - 3.0) < 0.35
+    n = len(kinds)
+    assert p.door_patience * p.controller_frequency < n < 400  # it gave up, after patience
+    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    assert door.command(poses[-1], path, cm) is None  # refused: left to the DWA
