@@ -9,10 +9,12 @@ where the heading is far off), faces along it, and drives through at door_speed,
 checked with the exact footprint against the SLAM map's obstacles around the robot (not the
 latest scan's marks); when no motion is legal it hands back to the DWA and the recoveries.
 
-Off by default (`explore.door_align`): its commands bypass the safety controller and see only
-what the map holds as occupied, and every gap under door_width counts as a door, furniture
-gaps included; on the oracle proof that cost collisions among furniture (README, "Laser
-noise").
+On by default (`explore.door_align`). Only a door in a wall counts: a gap whose two sides
+both belong to obstacle regions at least door_wall_min long (`_in_a_wall`); every gap
+between furniture stays the DWA's, since the map alone (the passage's judge) may not hold a
+thin chair leg the laser sees. A passage the robot gets no farther into for door_patience is
+given up for the run (`refused`). Before those two rules the passage collided and stuck
+among furniture on the oracle proof (README, "Laser noise").
 """
 
 from __future__ import annotations
