@@ -30,6 +30,7 @@ SETTINGS_SINCE_EXAMPLE = {
         "coverage_period",
         "door_align",
         "door_angle",
+        "door_engage_width",
         "door_lookahead",
         "door_patience",
         "door_speed",

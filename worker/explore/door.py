@@ -56,13 +56,19 @@ class DoorPass:
         self._stalled = 0
 
     def command(
-        self, pose: np.ndarray, path_xy: np.ndarray | None, costmap: GlobalCostmap
+        self,
+        pose: np.ndarray,
+        path_xy: np.ndarray | None,
+        costmap: GlobalCostmap,
+        seen: LocalCostmap | None = None,
     ) -> tuple[float, float, str] | None:
         """(v, w, kind) with kind "door_turn", "door" or "door_back", or None (no passage
         ahead, or nothing legal: the DWA decides). Passages and motions are judged on the
         SLAM map's obstacles alone (`GlobalCostmap.map_lethal`): one scan of a noisy laser
         marks a door's jambs up to two sigmas into the opening along its oblique beams, the
-        map holds where many scans agree."""
+        map holds where many scans agree. `seen`, the DWA's local costmap (the map and the
+        laser's marks): a door takes over only where it is narrower there than
+        door_engage_width (None: every door)."""
         p = self.params
         if path_xy is None or len(path_xy) < 3 or costmap.map_lethal.shape != costmap.shape:
             self.reset()
@@ -82,7 +88,8 @@ class DoorPass:
             self.door is None or np.hypot(*(found[0] - self.door[0])) > p.door_width
         ):
             self.reset()
-            self.door = found
+            if seen is None or _tight_in(path_xy, found, seen, p.door_engage_width):
+                self.door = found
         if self.door is None:
             return None
         entry, exit_ = self.door
@@ -211,6 +218,21 @@ def _in_a_wall(pts: np.ndarray, i: int, local: LocalCostmap, comps, p: ExplorePa
         if label == 0 or extent[label] * res < p.door_wall_min:
             return False
     return True
+
+
+def _tight_in(path_xy: np.ndarray, door, local: LocalCostmap, width: float) -> bool:
+    """Whether the path between the door's entry and exit passes between obstacle cells of
+    `local` less than `width` [m] apart somewhere (a door as the DWA sees it)."""
+    i0 = int(np.argmin(np.hypot(path_xy[:, 0] - door[0][0], path_xy[:, 1] - door[0][1])))
+    i1 = int(np.argmin(np.hypot(path_xy[:, 0] - door[1][0], path_xy[:, 1] - door[1][1])))
+    pts = path_xy[max(0, i0 - 1) : max(i0, i1) + 2]
+    if len(pts) < 2:
+        return True
+    tight = dk.narrow_along(
+        np.ascontiguousarray(pts[:, 0], dtype=float), np.ascontiguousarray(pts[:, 1], dtype=float),
+        local.lethal, float(local.origin[0]), float(local.origin[1]), local.resolution, width,
+    )  # fmt: skip
+    return bool(tight.any())
 
 
 def _direction_at(path_xy: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -144,7 +144,11 @@ class Navigator:
         heading shim when the plan lies behind, else the DWA; the safety controller has the
         last word on the DWA's commands."""
         g = self.pursuit
-        shim = self.door.command(pose, g.path, self.costmap) if self.params.door_align else None
+        shim = (
+            self.door.command(pose, g.path, self.costmap, self.local)
+            if self.params.door_align
+            else None
+        )
         if shim is None:
             shim = self.shim.command(pose, w0, g.path, self.local)
         if shim is not None:

@@ -142,6 +142,10 @@ class ExploreParams:
     # least this far (walls, in the window the robot sees): a gap between table legs or
     # chairs is left to the DWA
     door_wall_min: float = 1.0
+    # [m] the passage takes over only where the door as the DWA sees it (the local costmap:
+    # the map and the laser's marks) is narrower than this; a wider one the DWA drives
+    # through at speed, as it does without a noisy laser
+    door_engage_width: float = 0.8
     # [s] a passage the robot gets no 0.05 m farther into for this long is given up to the
     # DWA and the recoveries for the rest of the run
     door_patience: float = 10.0

@@ -180,3 +180,26 @@ def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
     assert p.door_patience * p.controller_frequency < n < 400  # it gave up, after patience
     assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
     assert door.command(poses[-1], path, cm) is None  # refused: left to the DWA
+
+
+def test_the_passage_takes_over_only_where_the_dwa_sees_the_door_tight():
+    # a 0.85 m door: as the map draws it the DWA drives through at speed, so the passage
+    # leaves it alone; with a noisy scan's marks 0.2 m into the opening at both jambs (0.45
+    # m left, under door_engage_width 0.8 m) the passage lines the robot up
+    from worker.explore.costmap import LocalCostmap
+
+    p = _params()
+    cm = GlobalCostmap(p)
+    cm.update(_door_map(17), RES, (0.0, 0.0))  # y in [1.6, 2.45)
+    path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.025)))
+    pose = np.array([2.4, 1.9, 0.8])
+    clean = LocalCostmap(p, RES)
+    clean.build(pose[0], pose[1], cm, pose[2])
+    assert DoorPass(p).command(pose, path, cm, clean) is None
+    noisy = LocalCostmap(p, RES)
+    marks = np.array([[3.0 + dx, y] for dx in (0.0, 0.05) for y in (1.62, 1.72, 2.32, 2.42)])
+    noisy.add_points(0.0, marks)
+    noisy.build(pose[0], pose[1], cm, pose[2])
+    cmd = DoorPass(p).command(pose, path, cm, noisy)
+    assert cmd is not None and cmd[2] == "door_turn"  # facing 0.8 rad off the door's axis
+    assert DoorPass(p).command(pose, path, cm) is not None  # no local costmap: every door
