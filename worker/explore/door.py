@@ -73,11 +73,20 @@ class DoorPass:
         if path_xy is None or len(path_xy) < 3 or costmap.map_lethal.shape != costmap.shape:
             self.reset()
             return None
+        pts, along = _ahead(path_xy, float(pose[0]), float(pose[1]), p)
+        seen_tight = None
+        if seen is not None:
+            # what the DWA sees holds the map's obstacles and more: where nothing ahead is
+            # tight there, no door of the map can be taken up (the map-only window is not
+            # built, which is most control periods)
+            seen_tight = _narrow(pts, seen, p.door_engage_width)
+            if self.door is None and not seen_tight.any():
+                return None
         if self._local is None or self._local.resolution != costmap.resolution:
             self._local = LocalCostmap(p, costmap.resolution)
         local = self._local
         local.build(float(pose[0]), float(pose[1]), costmap, float(pose[2]), map_only=True)
-        found = find_passage(path_xy, pose[0], pose[1], local, p)
+        found = find_passage(pts, along, local, p)
         if found is not None and any(
             np.hypot(*(found[0] - e)) <= p.door_width for e in self.refused
         ):
@@ -88,8 +97,9 @@ class DoorPass:
             self.door is None or np.hypot(*(found[0] - self.door[0])) > p.door_width
         ):
             self.reset()
-            if seen is None or _tight_in(path_xy, found, seen, p.door_engage_width):
-                self.door = found
+            i1, k = found[2], found[3]
+            if seen_tight is None or seen_tight[i1 : k + 1].any():
+                self.door = found[0], found[1]
         if self.door is None:
             return None
         entry, exit_ = self.door
@@ -142,25 +152,38 @@ class DoorPass:
         return None
 
 
-def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p: ExploreParams):
-    """`(entry, exit)` [m] of the first door narrower than door_width that the path enters
-    within door_lookahead ahead of its point nearest (x, y) (the robot possibly in it
-    already), or None. A path point is in such a passage when `local` (the map's obstacles
-    around the robot) has obstacle cells on both sides of it, across the path, less than
-    door_width apart; the passage is a door when both sides' obstacles belong to walls
-    (`_in_a_wall`); the exit is a little past its last such point."""
+def _ahead(path_xy: np.ndarray, x: float, y: float, p: ExploreParams):
+    """The path from its point nearest (x, y) on, door_lookahead + 2 door_width [m] of it,
+    and the distance [m] along it of each point."""
     d = np.hypot(path_xy[:, 0] - x, path_xy[:, 1] - y)
     i0 = int(np.argmin(d))
     seg = np.hypot(*np.diff(path_xy[i0:], axis=0).T)
     along = np.concatenate(([0.0], np.cumsum(seg)))
     end = int(np.searchsorted(along, p.door_lookahead + 2.0 * p.door_width, side="right"))
-    pts = path_xy[i0 : i0 + end]
+    return np.ascontiguousarray(path_xy[i0 : i0 + end], dtype=float), along[:end]
+
+
+def _narrow(pts: np.ndarray, local: LocalCostmap, width: float) -> np.ndarray:
+    """`(K,) bool`: path points between obstacle cells of `local` less than `width` apart."""
+    if len(pts) < 3:
+        return np.zeros(len(pts), dtype=np.bool_)
+    return dk.narrow_along(
+        np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), local.lethal,
+        float(local.origin[0]), float(local.origin[1]), local.resolution, width,
+    )  # fmt: skip
+
+
+def find_passage(pts: np.ndarray, along: np.ndarray, local: LocalCostmap, p: ExploreParams):
+    """`(entry, exit, i1, k)` of the first door narrower than door_width on the path ahead
+    (`_ahead`: `pts`, `along`) that it enters within door_lookahead (the robot possibly in
+    it already), or None; i1 and k index the entry and the exit in `pts`. A path point is in
+    such a passage when `local` (the map's obstacles around the robot) has obstacle cells
+    on both sides of it, across the path, less than door_width apart; the passage is a door
+    when both sides' obstacles belong to walls (`_in_a_wall`); the exit is a little past its
+    last such point."""
     if len(pts) < 3:
         return None
-    tight = dk.narrow_along(
-        np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), local.lethal,
-        float(local.origin[0]), float(local.origin[1]), local.resolution, p.door_width,
-    )  # fmt: skip
+    tight = _narrow(pts, local, p.door_width)
     labels = None
     i = 0
     while i < len(pts):
@@ -176,7 +199,7 @@ def find_passage(path_xy: np.ndarray, x: float, y: float, local: LocalCostmap, p
             labels = _components(local.lethal)
         if _in_a_wall(pts, i1, local, labels, p):
             k = min(len(pts) - 1, int(np.searchsorted(along, along[i2] + 0.1)))
-            return pts[i1].astype(float).copy(), pts[k].astype(float).copy()
+            return pts[i1].copy(), pts[k].copy(), i1, k
         i = i2 + 1
     return None
 
@@ -218,21 +241,6 @@ def _in_a_wall(pts: np.ndarray, i: int, local: LocalCostmap, comps, p: ExplorePa
         if label == 0 or extent[label] * res < p.door_wall_min:
             return False
     return True
-
-
-def _tight_in(path_xy: np.ndarray, door, local: LocalCostmap, width: float) -> bool:
-    """Whether the path between the door's entry and exit passes between obstacle cells of
-    `local` less than `width` [m] apart somewhere (a door as the DWA sees it)."""
-    i0 = int(np.argmin(np.hypot(path_xy[:, 0] - door[0][0], path_xy[:, 1] - door[0][1])))
-    i1 = int(np.argmin(np.hypot(path_xy[:, 0] - door[1][0], path_xy[:, 1] - door[1][1])))
-    pts = path_xy[max(0, i0 - 1) : max(i0, i1) + 2]
-    if len(pts) < 2:
-        return True
-    tight = dk.narrow_along(
-        np.ascontiguousarray(pts[:, 0], dtype=float), np.ascontiguousarray(pts[:, 1], dtype=float),
-        local.lethal, float(local.origin[0]), float(local.origin[1]), local.resolution, width,
-    )  # fmt: skip
-    return bool(tight.any())
 
 
 def _direction_at(path_xy: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 
 from worker.explore import costmap_kernels as ck
 from worker.explore.costmap import GlobalCostmap
-from worker.explore.door import DoorPass, find_passage
+from worker.explore.door import DoorPass, _ahead, find_passage
 from worker.explore.params import ExploreParams
 
 RES = 0.05
@@ -27,6 +27,11 @@ def _door_map(door_cells: int) -> np.ndarray:
 
 def _params(**kw) -> ExploreParams:
     return dataclasses.replace(ExploreParams(), door_align=True, **kw)
+
+
+def _find(path, x, y, local, p):
+    """find_passage on the path ahead of (x, y)."""
+    return find_passage(*_ahead(path, x, y, p), local, p)
 
 
 def _drive_through(p: ExploreParams, cm: GlobalCostmap, pose, path, steps: int = 300):
@@ -99,14 +104,14 @@ def test_a_passage_is_found_where_both_sides_are_near_and_not_in_a_corridor():
 
     local = LocalCostmap(p, RES)
     local.build(2.4, 2.0, cm, 0.0, map_only=True)
-    entry, exit_ = find_passage(path, 2.4, 2.0, local, p)
+    entry, exit_ = _find(path, 2.4, 2.0, local, p)[:2]
     assert 2.7 <= entry[0] <= 3.01 and 3.1 <= exit_[0] <= 3.5  # through the wall's cells
     local.build(1.5, 2.0, cm, 0.0, map_only=True)
-    assert find_passage(path, 1.5, 2.0, local, p) is None  # farther than door_lookahead
+    assert _find(path, 1.5, 2.0, local, p) is None  # farther than door_lookahead
     wide = GlobalCostmap(p)
     wide.update(_door_map(24), RES, (0.0, 0.0))  # 1.2 m: wider than door_width
     local.build(2.4, 2.0, wide, 0.0, map_only=True)
-    assert find_passage(path, 2.4, 2.0, local, p) is None
+    assert _find(path, 2.4, 2.0, local, p) is None
 
 
 def test_the_robot_lines_up_with_a_tight_door_and_drives_through_without_touching():
@@ -154,14 +159,14 @@ def test_a_gap_between_pieces_of_furniture_is_not_a_door():
         cm = GlobalCostmap(p)
         cm.update(prob, RES, (0.0, 0.0))
         local.build(2.4, 2.0, cm, 0.0, map_only=True)
-        assert (find_passage(path, 2.4, 2.0, local, p) is not None) is is_door
+        assert (_find(path, 2.4, 2.0, local, p) is not None) is is_door
     long_cabinets = furniture.copy()
     long_cabinets[15:35, WALL_X : WALL_X + 2] = 0.9  # 1.0 m long each: wall enough
     long_cabinets[45:65, WALL_X : WALL_X + 2] = 0.9
     cm = GlobalCostmap(p)
     cm.update(long_cabinets, RES, (0.0, 0.0))
     local.build(2.4, 2.0, cm, 0.0, map_only=True)
-    assert find_passage(path, 2.4, 2.0, local, p) is not None
+    assert _find(path, 2.4, 2.0, local, p) is not None
 
 
 def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
