@@ -9,12 +9,16 @@ where the heading is far off), faces along it, and drives through at door_speed,
 checked with the exact footprint against the SLAM map's obstacles around the robot (not the
 latest scan's marks); when no motion is legal it hands back to the DWA and the recoveries.
 
-On by default (`explore.door_align`). Only a door in a wall counts: a gap whose two sides
+Off by default (`explore.door_align`). Only a door in a wall counts: a gap whose two sides
 both belong to obstacle regions at least door_wall_min long (`_in_a_wall`); every gap
 between furniture stays the DWA's, since the map alone (the passage's judge) may not hold a
 thin chair leg the laser sees. A passage the robot gets no farther into for door_patience is
-given up for the run (`refused`). Before those two rules the passage collided and stuck
-among furniture on the oracle proof (README, "Laser noise").
+given up for the run (`refused`), and a door is taken only where the DWA's local costmap
+shows it narrower than door_engage_width. Before those rules the passage collided and stuck
+among furniture on the oracle proof. It stays off because its commands bypass the safety
+controller and line the robot up with the plan's chord through the door rather than the
+door's own axis: under rbpf at 0.1 m noise it drove a corner into a jamb of a door the plan
+crossed diagonally (README, "Laser noise").
 """
 
 from __future__ import annotations

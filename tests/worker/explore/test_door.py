@@ -80,14 +80,13 @@ def test_map_lethal_is_the_map_alone_and_only_kept_for_the_door_passage():
 def test_obstacle_marks_in_cells_the_map_knows_free_can_be_left_out():
     # a noisy short reading marks a cell the map has seen free many times (0.02), another
     # marks a wall face the map shows under occupied_thresh (0.2): with obstacle_min_prob
-    # 0.1 (the default) only the second is an obstacle, with 0 both are
+    # 0.1 only the second is an obstacle, with 0 (the default) both are
     prob = _door_map(10)
     prob[10, 50] = 0.2
     scans = [
         (np.array([2.0, 2.02, 0.0]), np.array([0.62])),  # ends in cell (40, 52): p 0.02
         (np.array([2.0, 0.52, 0.0]), np.array([0.52])),  # ends in cell (10, 50): p 0.2
     ]
-    assert ExploreParams().obstacle_min_prob == 0.1
     for min_prob, expected in ((0.0, [True, True]), (0.1, [False, True])):
         cm = GlobalCostmap(dataclasses.replace(ExploreParams(), obstacle_min_prob=min_prob))
         for pose, r in scans:

@@ -109,10 +109,7 @@ def test_a_whole_run_changes_state_only_as_the_table_says():
     rng = np.random.default_rng(3)
     sim = Simulator(world, SimParams(), rng)
     slam = make_slam("odometry", SimParams().laser, SlamParams(), rng)
-    # without the door passage (and with every scan mark) this run backs out of the slit, so
-    # all states of the table are met
-    params = ExploreParams(time_limit=900.0, door_align=False, obstacle_min_prob=0.0)
-    run = Exploration(world, sim, slam, params, True, None)
+    run = Exploration(world, sim, slam, ExploreParams(time_limit=900.0), True, None)
     nav = run.nav
     S = NavState
     visited = set()
