@@ -27,6 +27,29 @@ def _segment(x0, y0, x1, y1, step=0.01):
     return np.column_stack((np.linspace(x0, x1, n), np.linspace(y0, y1, n)))
 
 
+def _until_rotate(shim, x, sense, obstacles, steps):
+    """Drive pose `x` (in place) by the shim's commands at 10 Hz until it turns on the spot
+    or `steps` run out; `sense()` gives (path, local costmap) at the current pose. The
+    kinds of command, in order. Independent check each step: the robot's 0.4 m square
+    never overlaps an obstacle point."""
+    kinds = []
+    for _ in range(steps):
+        out = shim.command(x, 0.0, *sense())
+        assert out is not None
+        v, w, kind = out
+        kinds.append(kind)
+        if kind == "rotate":
+            break
+        x[0] += v * math.cos(x[2]) * 0.1
+        x[1] += v * math.sin(x[2]) * 0.1
+        x[2] += w * 0.1
+        c, s = math.cos(x[2]), math.sin(x[2])
+        u = (obstacles[:, 0] - x[0]) * c + (obstacles[:, 1] - x[1]) * s
+        q = -(obstacles[:, 0] - x[0]) * s + (obstacles[:, 1] - x[1]) * c
+        assert not np.any((np.abs(u) < 0.2) & (np.abs(q) < 0.2))
+    return kinds
+
+
 def _path_west(x0=3.0, y=3.0):
     return np.column_stack((np.linspace(x0, 0.5, 51), np.full(51, y)))
 
@@ -60,22 +83,9 @@ def test_boxed_in_it_backs_out_until_it_can_turn():
     )  # fmt: skip
     x = np.array([3.0, 3.0, 0.0])
     shim = HeadingShim(p)
-    kinds = []
-    for _ in range(200):
-        out = shim.command(x, 0.0, _path_west(x[0] - 0.3), _local(walls, x, p))
-        assert out is not None
-        v, w, kind = out
-        kinds.append(kind)
-        if kind == "rotate":
-            break
-        x[0] += v * math.cos(x[2]) * 0.1
-        x[1] += v * math.sin(x[2]) * 0.1
-        x[2] += w * 0.1
-        # independent check: the robot's 0.4 m square never overlaps a wall point
-        c, s = math.cos(x[2]), math.sin(x[2])
-        u = (walls[:, 0] - x[0]) * c + (walls[:, 1] - x[1]) * s
-        q = -(walls[:, 0] - x[0]) * s + (walls[:, 1] - x[1]) * c
-        assert not np.any((np.abs(u) < 0.2) & (np.abs(q) < 0.2))
+    kinds = _until_rotate(
+        shim, x, lambda: (_path_west(x[0] - 0.3), _local(walls, x, p)), walls, steps=200
+    )
     assert kinds[0] == "reverse" and kinds[-1] == "rotate"
     assert x[0] < 1.2  # it backed out of the slot before it could turn
     assert shim.n_reversals == len(kinds) - 1
@@ -118,22 +128,12 @@ def test_boxed_in_among_table_legs_it_backs_out_the_way_it_came_not_into_a_slot(
     shim = HeadingShim(p)
     local = LocalCostmap(p, res)
     local.add_points(0.0, data["marks"].astype(float))
-    kinds = []
-    for _ in range(100):  # 10 s
+
+    def sense():
         local.build(x[0], x[1], costmap, x[2])
-        out = shim.command(x, 0.0, path, local)
-        assert out is not None
-        v, w, kind = out
-        kinds.append(kind)
-        if kind == "rotate":
-            break
-        x[0] += v * math.cos(x[2]) * 0.1
-        x[1] += v * math.sin(x[2]) * 0.1
-        x[2] += w * 0.1
-        c, s = math.cos(x[2]), math.sin(x[2])  # independent check: the 0.4 m square is clear
-        u = (occ_xy[:, 0] - x[0]) * c + (occ_xy[:, 1] - x[1]) * s
-        q_ = -(occ_xy[:, 0] - x[0]) * s + (occ_xy[:, 1] - x[1]) * c
-        assert not np.any((np.abs(u) < 0.2) & (np.abs(q_) < 0.2))
+        return path, local
+
+    kinds = _until_rotate(shim, x, sense, occ_xy, steps=100)  # 10 s
     assert kinds[0] == "reverse"  # out the way it came
     assert kinds[-1] == "rotate" and len(kinds) < 50  # room to turn within 5 s
     assert x[1] < data["pose"][1]  # south of where it was boxed in, not up in the slot
