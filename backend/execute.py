@@ -107,7 +107,12 @@ def execute_run(
         return job.lost(RunStatus.CANCELLED, f"run {run_id}: cancelled")
     except TransitionRefused as exc:
         return job.lost("lost", f"run {run_id}: result not stored ({exc})")
-    except Exception as exc:  # SoftTimeLimitExceeded included: the run failed, not the worker
+    except Exception as caught:  # SoftTimeLimitExceeded included: the run failed, not the worker
+        exc = signalled(caught)
+        if not isinstance(exc, Exception):  # an interrupt that came inside numba's dispatcher
+            if place.fail_on_interrupt:
+                job.failed(f"{type(exc).__name__}: {exc}")
+            raise exc from caught
         log.exception("run %s failed", run_id)
         return job.failed(f"{type(exc).__name__}: {exc}")
     except BaseException as exc:
@@ -117,6 +122,21 @@ def execute_run(
     remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
     summary = result.summary
     return Outcome(RunStatus.DONE, f"run {run_id}: {summary.outcome}", summary, str(final))
+
+
+def signalled(exc: BaseException) -> BaseException:
+    """The exception a run really ended with. One a signal handler raises (Celery's soft time
+    limit, an interrupt) while numba's dispatcher is running comes out wrapped in
+    SystemError ("... returned a result with an exception set"), the handler's exception as
+    its cause; that cause is what the run's error says."""
+    seen: set[int] = set()
+    while isinstance(exc, SystemError) and id(exc) not in seen:
+        seen.add(id(exc))
+        inner = exc.__cause__ or exc.__context__
+        if inner is None:
+            break
+        exc = inner
+    return exc
 
 
 @dataclass(frozen=True)

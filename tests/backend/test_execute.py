@@ -21,7 +21,7 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Run, RunTrajectory
 from backend.db.session import session_scope
-from backend.execute import Placement, execute_run
+from backend.execute import Placement, execute_run, signalled
 from backend.lifecycle import cancel_run, history, history_faults
 from backend.store import create_job, local_user, save_world
 from tests.backend.plans import rooms_occupancy
@@ -127,6 +127,29 @@ def test_the_soft_time_limit_fails_the_run_and_removes_its_folder(pg_url, tmp_pa
         events = history(s, run_id)
         assert [e.to_status for e in events] == ["running", "failed"]
         assert history_faults(events) == [] and events[1].attempt == run.attempt
+
+
+def test_a_soft_time_limit_raised_inside_numba_is_reported_as_itself():
+    # what CPython made of Celery's soft limit when its signal landed while numba's
+    # dispatcher unpickled a cached function (seen in this file's test above, under load):
+    # SystemError from the dispatcher, caused by SystemError from _numba_unpickle, caused
+    # by the handler's SoftTimeLimitExceeded
+    limit = SoftTimeLimitExceeded()
+    inner = SystemError("<function _numba_unpickle> returned a result with an exception set")
+    inner.__cause__ = limit
+    outer = SystemError("CPUDispatcher(<function scan_match_all>) returned a result with an ...")
+    outer.__cause__ = inner
+    assert signalled(outer) is limit
+    assert signalled(limit) is limit
+    plain = SystemError("a SystemError of its own")
+    assert signalled(plain) is plain
+    chained = ValueError("bad")  # other chains are the run's own error, as raised
+    chained.__cause__ = KeyError("k")
+    assert signalled(chained) is chained
+    interrupt = KeyboardInterrupt()
+    wrapped = SystemError("... returned a result with an exception set")
+    wrapped.__context__ = interrupt
+    assert signalled(wrapped) is interrupt
 
 
 def test_an_exception_on_a_cancelled_run_leaves_it_cancelled(pg_url, tmp_path):
