@@ -7,6 +7,7 @@ import secrets
 from datetime import timedelta
 
 from sqlalchemy import delete, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from backend.db.models import User, WebSession, utcnow
@@ -25,6 +26,11 @@ def add_user(session: Session, name: str, is_admin: bool = False) -> tuple[User,
         raise ValueError("a user name is 1 to 100 characters")
     if session.scalars(select(User).where(User.name == name)).first() is not None:
         raise ValueError(f"a user named {name!r} exists already")
+    return _new_user(session, name, is_admin)
+
+
+def _new_user(session: Session, name: str, is_admin: bool) -> tuple[User, str]:
+    """Store a user of a name checked by the caller (IntegrityError if it is taken)."""
     key = "mq_" + secrets.token_urlsafe(32)
     user = User(name=name, is_admin=is_admin, key_hash=hash_key(key))
     session.add(user)
@@ -41,11 +47,19 @@ def user_for_key(session: Session, key: str) -> User | None:
 def local_user(session: Session) -> User:
     """The owner of everything made with authentication switched off (embedded use).
 
-    Its key is random and discarded, so nobody can sign in as it over the API.
+    Its key is random and discarded, so nobody can sign in as it over the API. Two
+    processes making it at once (two `mapqual batch` started together on a new database)
+    both get the one that was stored first.
     """
-    user = session.scalars(select(User).where(User.name == LOCAL_USER)).first()
-    if user is None:
-        user, _ = add_user(session, LOCAL_USER, is_admin=True)
+    mine = select(User).where(User.name == LOCAL_USER)
+    user = session.scalars(mine).first()
+    if user is not None:
+        return user
+    try:
+        with session.begin_nested():
+            user, _ = _new_user(session, LOCAL_USER, is_admin=True)
+    except IntegrityError:  # another process stored it since the select
+        return session.scalars(mine).one()
     return user
 
 

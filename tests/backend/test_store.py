@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sqlalchemy import func, select
 
-from backend.db.models import Job, Run, RunTrajectory
+from backend.db.models import Job, Run, RunTrajectory, User
 from backend.db.session import session_scope
 from backend.lifecycle import TransitionRefused
 from backend.store import (
@@ -287,3 +287,26 @@ def test_idempotency_key_returns_the_first_job(db_url):
         c = create_job(s, **kw, idempotency_key="k2")
         assert a.id == b.id != c.id
         assert len(a.runs) == 1
+
+
+def test_the_local_user_made_by_two_processes_at_once_is_one_user(db_url, monkeypatch):
+    # two `mapqual batch` started together on a new database: both find no local user, one
+    # stores it first; the other's insert then breaks the unique name and must return the
+    # first one's user (it raised IntegrityError out of the CLI before)
+    import backend.store_users as users
+
+    real_new = users._new_user
+    winner = []
+
+    def stored_after_the_other_process(session, name, is_admin):
+        with session_scope(db_url) as other:  # the other process, committing first
+            winner.append(real_new(other, name, is_admin)[0].id)
+        return real_new(session, name, is_admin)
+
+    monkeypatch.setattr(users, "_new_user", stored_after_the_other_process)
+    with session_scope(db_url) as s:
+        got = local_user(s).id
+        assert s.get(User, got).name == "local"  # the session is usable after the failure
+    assert winner and got == winner[0]
+    with session_scope(db_url) as s:
+        assert s.scalar(select(func.count()).select_from(User)) == 1
