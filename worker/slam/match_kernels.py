@@ -52,18 +52,30 @@ CFG_FIELDS = (
     "astep",
     "iterations",
     "minimum_score",
+    "coarse_skip",
+    "coarse_levels",
 )
 C_RES, C_USABLE, C_MAX, C_LSKIP, C_KERNEL, C_SIGMA, C_LSIGMA = 0, 1, 2, 3, 4, 5, 6
 C_LSTEP, C_ASTEP, C_ITERATIONS, C_MINIMUM_SCORE = 7, 8, 9, 10
+C_COARSE_SKIP, C_COARSE_LEVELS = 11, 12
+# fields match_config fills in when left out: coarse-to-fine climbing off (GMapping's climb)
+_OPTIONAL = {"coarse_skip": 0, "coarse_levels": 0}
 
 
 def match_config(**fields: float) -> np.ndarray:
-    """The cfg array from keyword values named as CFG_FIELDS (all required)."""
+    """The cfg array from keyword values named as CFG_FIELDS (all required but coarse_skip
+    and coarse_levels, 0 when left out)."""
+    fields = {**_OPTIONAL, **fields}
     missing = set(CFG_FIELDS) - set(fields)
     if missing or len(fields) != len(CFG_FIELDS):
         raise ValueError(f"match_config needs exactly {CFG_FIELDS}; missing {sorted(missing)}")
     if not 0 <= fields["kernel"] <= MAX_KERNEL:
         raise ValueError(f"kernel must be in [0, {MAX_KERNEL}] cells, got {fields['kernel']}")
+    if fields["coarse_skip"] < 0 or not 0 <= fields["coarse_levels"] <= fields["iterations"]:
+        raise ValueError(
+            "coarse_skip must be >= 0 and coarse_levels in [0, iterations], got "
+            f"{fields['coarse_skip']} and {fields['coarse_levels']}"
+        )
     return np.array([fields[k] for k in CFG_FIELDS], dtype=np.float64)
 
 
@@ -285,33 +297,14 @@ def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
 
 
 @njit(cache=True)
-def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
-    """Hill climbing from pose (GMapping ScanMatcher::optimize): (pose (3,), score, like,
-    score at the start, like at the start).
-
-    Tries steps of +-ldelta in x and y (map frame) and +-adelta in theta, moves to the best
-    one while it improves the score, and halves both steps when none does, `iterations` times.
-    The step straight back to where the last move came from is not scored again: that pose
-    scored lower than the current one, so it can never be chosen. A candidate is dropped as
-    soon as it cannot beat the current score, so only the poses it moves to are scored whole.
-    """
-    lstep, astep, iterations = cfg[C_LSTEP], cfg[C_ASTEP], int(cfg[C_ITERATIONS])
-    m = beams.shape[0]
-    terms = np.empty(m)
-    dist2 = np.empty(m)
-    natural = np.arange(m)
-    cache = _new_cache(m, int(cfg[C_KERNEL]))
-    cur, cur_like, _ = _score(
-        mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
-        terms, dist2, cache, 0,
-    )  # fmt: skip
-    _commit(cache, 0)
-    start_score, start_like = cur, cur_like
-    order = np.argsort(terms, kind="mergesort")  # worst matched first; stable, deterministic
+def _climb(mean, bits, table, tpx0, tpy0, beams, order, cfg, cache, dist2, state):
+    """GMapping's hill climbing on `beams` (scored in `order`) from state = [x, y, theta,
+    score, like, ldelta, adelta, refinement, last level], in place: the climb ends after a
+    round without improvement at refinement `last level` (GMapping: iterations). The cache
+    holds the current pose's cells (committed)."""
+    bx, by, bt, cur, cur_like = state[0], state[1], state[2], state[3], state[4]
+    ldelta, adelta, refinement, last = state[5], state[6], int(state[7]), int(state[8])
     none = np.empty(0)
-    bx, by, bt = pose[0], pose[1], pose[2]
-    ldelta, adelta = lstep, astep
-    refinement = 0
     best = -1.0
     came_by = -1  # the move that led to the current pose at the current step size
     while True:
@@ -354,7 +347,66 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
             _commit(cache, slot)
         bx, by, bt = nx, ny, nt
         came_by = chosen
-        if not (cur > best or refinement < iterations):
+        if not (cur > best or refinement < last):
             break
-    out = np.array([bx, by, (bt + math.pi) % (2 * math.pi) - math.pi])
-    return out, cur, cur_like, start_score, start_like
+    state[0], state[1], state[2], state[3], state[4] = bx, by, bt, cur, cur_like
+    state[5], state[6], state[7] = ldelta, adelta, refinement
+
+
+@njit(cache=True)
+def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
+    """Hill climbing from pose (GMapping ScanMatcher::optimize): (pose (3,), score, like,
+    score at the start, like at the start).
+
+    Tries steps of +-ldelta in x and y (map frame) and +-adelta in theta, moves to the best
+    one while it improves the score, and halves both steps when none does, `iterations` times.
+    The step straight back to where the last move came from is not scored again: that pose
+    scored lower than the current one, so it can never be chosen. A candidate is dropped as
+    soon as it cannot beat the current score, so only the poses it moves to are scored whole.
+
+    Coarse to fine (cfg coarse_skip = s > 0 and coarse_levels = L > 0; off by default): the
+    first L step sizes climb on every (s + 1)-th beam only, the remaining ones on all beams
+    from where that climb stopped, so the score, likelihood and final pose are GMapping's
+    (all beams); only the path of the climb to them is found on fewer beams.
+    """
+    lstep, astep, iterations = cfg[C_LSTEP], cfg[C_ASTEP], int(cfg[C_ITERATIONS])
+    skip, levels = int(cfg[C_COARSE_SKIP]), int(cfg[C_COARSE_LEVELS])
+    m = beams.shape[0]
+    kernel = int(cfg[C_KERNEL])
+    terms = np.empty(m)
+    dist2 = np.empty(m)
+    natural = np.arange(m)
+    cache = _new_cache(m, kernel)
+    cur, cur_like, _ = _score(
+        mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
+        terms, dist2, cache, 0,
+    )  # fmt: skip
+    _commit(cache, 0)
+    start_score, start_like = cur, cur_like
+    state = np.array([pose[0], pose[1], pose[2], cur, cur_like, lstep, astep, 0.0, iterations])
+    if skip > 0 and levels > 0:
+        sub = beams[:: skip + 1].copy()
+        ms = sub.shape[0]
+        order = np.argsort(terms[:: skip + 1], kind="mergesort")
+        state[3], state[4] = 0.0, 0.0
+        for k in range(ms):
+            state[3] += terms[k * (skip + 1)]
+        state[8] = levels - 1
+        _climb(
+            mean, bits, table, tpx0, tpy0, sub, order, cfg, _new_cache(ms, kernel),
+            np.empty(ms), state,
+        )  # fmt: skip
+        # all beams from here, at the next step size
+        state[3], state[4], _ = _score(
+            mean, bits, table, tpx0, tpy0, state[0], state[1], state[2], beams, natural, cfg,
+            -np.inf, terms, dist2, cache, 0,
+        )  # fmt: skip
+        _commit(cache, 0)
+        state[5] *= 0.5
+        state[6] *= 0.5
+        state[7] = levels
+        state[8] = iterations
+    order = np.argsort(terms, kind="mergesort")  # worst matched first; stable, deterministic
+    _climb(mean, bits, table, tpx0, tpy0, beams, order, cfg, cache, dist2, state)
+    out = np.array([state[0], state[1], (state[2] + math.pi) % (2 * math.pi) - math.pi])
+    return out, state[3], state[4], start_score, start_like

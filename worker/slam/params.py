@@ -80,6 +80,11 @@ class SlamParams:
     lsigma: float = 0.075  # [m^2] beam log-likelihood is -mu^2 / lsigma (weights)
     ogain: float = 3.0  # gain smoothing the likelihood when normalising weights
     lskip: int = 0  # beams skipped between two used ones when matching
+    # coarse to fine (a departure from GMapping, off at 0): the hill climbing's first
+    # coarse_levels step sizes use every (coarse_skip + 1)-th used beam, the rest all of them;
+    # the final pose, score and likelihood are all-beam ones (match_kernels.optimize)
+    coarse_skip: int = 0
+    coarse_levels: int = 0
     minimum_score: float = 0.0  # below this match score, keep the odometry guess
     # scan-matching threads (numba prange over particles); results do not depend on it. At 1
     # (the default) a run executed alone takes its process's share of the cores instead
@@ -135,6 +140,11 @@ class SlamParams:
             raise InputError(f"SLAM parameter threads must be >= 1, got {self.threads}")
         if self.kernel_size < 0 or self.iterations < 0 or self.lskip < 0:
             raise InputError("SLAM parameters kernel_size, iterations and lskip must be >= 0")
+        if self.coarse_skip < 0 or not 0 <= self.coarse_levels <= self.iterations:
+            raise InputError(
+                "SLAM parameters coarse_skip must be >= 0 and coarse_levels in [0, iterations "
+                f"= {self.iterations}], got {self.coarse_skip} and {self.coarse_levels}"
+            )
         if self.kernel_size > 15:
             raise InputError(f"SLAM parameter kernel_size must be <= 15, got {self.kernel_size}")
         if not 0.0 <= self.resample_threshold <= 1.0:

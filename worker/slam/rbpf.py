@@ -15,6 +15,7 @@ from worker.slam.keyposes import Lineage, relative_many
 from worker.slam.match_all_kernels import scan_match_all, scan_match_all_parallel
 from worker.slam.match_kernels import (
     C_ASTEP,
+    C_COARSE_LEVELS,
     C_ITERATIONS,
     C_KERNEL,
     C_LSKIP,
@@ -79,6 +80,8 @@ class RbpfSlam:
             astep=params.astep,
             iterations=params.iterations,
             minimum_score=params.minimum_score,
+            coarse_skip=params.coarse_skip,
+            coarse_levels=params.coarse_levels,
         )
         wide = WideSearch()
         self._wide_cfg = self._match_cfg.copy()
@@ -88,6 +91,7 @@ class RbpfSlam:
             (C_ASTEP, wide.astep),
             (C_ITERATIONS, wide.iterations),
             (C_LSKIP, max(wide.lskip, params.lskip)),
+            (C_COARSE_LEVELS, 0),  # it skips beams already
         ):
             self._wide_cfg[key] = value
         prop = params.proposal

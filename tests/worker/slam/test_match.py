@@ -32,10 +32,11 @@ def _mapped():
     return laser, slam
 
 
-def _cfg(lskip: int = 0, kernel: int = 1) -> np.ndarray:
+def _cfg(lskip: int = 0, kernel: int = 1, coarse_skip=0, coarse_levels=0) -> np.ndarray:
     return match_config(
         res=0.05, usable_range=30.0, max_range=29.99, lskip=lskip, kernel=kernel, sigma=0.05,
         lsigma=0.075, lstep=0.05, astep=0.05, iterations=5, minimum_score=0.0,
+        coarse_skip=coarse_skip, coarse_levels=coarse_levels,
     )  # fmt: skip
 
 
@@ -105,10 +106,21 @@ class _Reference:
                 like -= best / 0.075
         return score, like
 
-    def optimize(self, pose):
-        """GMapping's ScanMatcher::optimize, every candidate scored whole."""
-        cur = self.score(pose)[0]
-        ld, ad, refinement, best, pose = 0.05, 0.05, 0, -1.0, list(pose)
+    def optimize(self, pose, coarse_skip=0, coarse_levels=0):
+        """GMapping's ScanMatcher::optimize, every candidate scored whole; coarse to fine:
+        the first coarse_levels step sizes on every (coarse_skip + 1)-th beam only."""
+        ld, ad, refinement, pose = 0.05, 0.05, 0, list(pose)
+        if coarse_skip and coarse_levels:
+            every = self.beams
+            self.beams = every[:: coarse_skip + 1]
+            pose, _, ld, ad, refinement = self._climb(pose, ld, ad, 0, coarse_levels - 1)
+            self.beams = every
+            ld, ad, refinement = ld / 2, ad / 2, coarse_levels
+        pose, cur, *_ = self._climb(pose, ld, ad, refinement, 5)
+        return np.array(pose), cur
+
+    def _climb(self, pose, ld, ad, refinement, last):
+        cur, best = self.score(pose)[0], -1.0
         while True:
             if best >= cur:
                 refinement, ld, ad = refinement + 1, ld / 2, ad / 2
@@ -120,8 +132,8 @@ class _Reference:
                 if sc > cur:
                     cur, chosen = sc, cand
             pose = chosen
-            if not (cur > best or refinement < 5):
-                return np.array(pose), cur
+            if not (cur > best or refinement < last):
+                return pose, cur, ld, ad, refinement
 
 
 def test_score_peaks_at_the_true_pose():
@@ -164,26 +176,41 @@ def test_the_early_stop_bound_is_above_exp():
     assert np.max(upper[near] - np.exp(-x[near])) < 0.4**3 / 6 + 1e-15
 
 
-@pytest.mark.parametrize("kernel, lskip", [(1, 2), (2, 4), (3, 6)])
-def test_optimize_equals_plain_hill_climbing(kernel, lskip):
-    # the kernel drops hopeless candidates early and reuses the cells of beams whose end
-    # point stays in its cell (kernel <= 2); the reference scores all, afresh: same climb
+def _assert_climbs_as_the_reference(lskip, kernel, offsets, coarse=(0, 0)):
     laser, slam = _mapped()
     m = slam.maps
     truth = np.array([3.3, 2.2, 0.4])
     ranges = box_scan(truth, laser.angles, BOX)
-    cfg = _cfg(lskip, kernel)
+    cfg = _cfg(lskip, kernel, *coarse)
     ref = _Reference(m, laser, ranges, lskip, kernel)
     beams = _beams(laser, ranges, cfg)
-    for off in ([0.12, -0.08, 0.04], [-0.07, 0.1, -0.05]):
+    for off in offsets:
         start = truth + np.array(off)
         pose, score, like, s0, l0 = optimize(
             m.mean, m.bits, m.tables[0], m.tpx0, m.tpy0, start, beams, cfg
         )
-        want_pose, want_score = ref.optimize(start)
+        want_pose, want_score = ref.optimize(start, *coarse)
         assert np.allclose(pose, want_pose, atol=1e-12) and np.isclose(score, want_score)
         assert np.allclose((score, like), ref.score(pose))
         assert np.allclose((s0, l0), ref.score(start))
+
+
+@pytest.mark.parametrize("kernel, lskip", [(1, 2), (2, 4), (3, 6)])
+def test_optimize_equals_plain_hill_climbing(kernel, lskip):
+    # the kernel drops hopeless candidates early and reuses the cells of beams whose end
+    # point stays in its cell (kernel <= 2); the reference scores all, afresh: same climb
+    _assert_climbs_as_the_reference(lskip, kernel, ([0.12, -0.08, 0.04], [-0.07, 0.1, -0.05]))
+
+
+@pytest.mark.parametrize("coarse_skip, coarse_levels", [(1, 2), (3, 4), (2, 5)])
+def test_coarse_to_fine_equals_plain_hill_climbing(coarse_skip, coarse_levels):
+    # the first step sizes climb on a subset of the beams, the rest on all of them: the same
+    # climb as the reference's (a different one from the plain climb's for most of these
+    # starts), and the score, likelihood and start figures are all-beam ones
+    offsets = ([0.12, -0.08, 0.04], [-0.07, 0.1, -0.05], [0.3, 0.2, -0.1])
+    _assert_climbs_as_the_reference(1, 1, offsets, (coarse_skip, coarse_levels))
+    with pytest.raises(ValueError, match="coarse_levels"):
+        _cfg(1, 1, 1, 6)  # more coarse step sizes than the climb has
 
 
 def test_hill_climbing_recovers_the_pose():

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from worker.errors import InputError
 from worker.evaluate.se2 import compose, relative
 from worker.slam.base import SlamAlgorithm, make_slam
 from worker.slam.params import SlamParams
@@ -49,9 +51,12 @@ def _run(slam: SlamAlgorithm, t, odom, scans):
     return np.array(est)
 
 
-def test_rbpf_corrects_drifting_odometry_and_maps_the_room():
+@pytest.mark.parametrize("coarse", [(0, 0), (1, 3)])
+def test_rbpf_corrects_drifting_odometry_and_maps_the_room(coarse):
+    # also with the coarse-to-fine climb (every second beam for the first 3 step sizes)
     laser, t, gt, odom, scans = _loop_log()
-    slam = make_slam("rbpf", laser, SlamParams(particles=20), np.random.default_rng(5))
+    params = SlamParams(particles=20, coarse_skip=coarse[0], coarse_levels=coarse[1])
+    slam = make_slam("rbpf", laser, params, np.random.default_rng(5))
     est = _run(slam, t, odom, scans)
     err_odom = np.hypot(*(odom[:, :2] - gt[:, :2]).T)
     err_rbpf = np.hypot(*(est[:, :2] - gt[:, :2]).T)
@@ -104,3 +109,19 @@ def test_threads_do_not_change_the_result():
         slam = make_slam("rbpf", laser, params, np.random.default_rng(3))
         runs.append(_run(slam, t, odom, scans))
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_coarse_to_fine_changes_the_climb_and_is_checked():
+    laser, t, gt, odom, scans = _loop_log(0.3)
+    runs = []
+    for coarse in ((0, 0), (1, 3)):
+        params = SlamParams(particles=6, coarse_skip=coarse[0], coarse_levels=coarse[1])
+        runs.append(
+            _run(make_slam("rbpf", laser, params, np.random.default_rng(3)), t, odom, scans)
+        )
+    assert not np.array_equal(runs[0], runs[1])  # the setting reaches the matcher
+    assert np.abs(runs[0] - runs[1])[:, :2].max() < 0.05  # and finds the same optimum nearly
+    with pytest.raises(InputError, match="coarse_levels in"):
+        SlamParams(coarse_skip=1, coarse_levels=6)  # more than the 5 step sizes there are
+    with pytest.raises(InputError, match="coarse_skip must be >= 0"):
+        SlamParams(coarse_skip=-1)
