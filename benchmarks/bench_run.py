@@ -13,13 +13,14 @@ Side by side (issue 21: this machine's speed drifts by a third within an hour, s
 is a ratio of runs timed alternately, the order swapped every round):
 
     .venv/bin/python benchmarks/bench_run.py --against OTHER_CHECKOUT [--rounds 3]
-        [--this-threads N] [--other-threads N] [--time-limit S]
+        [--this-threads N] [--other-threads N] [--time-limit S] [--this-slam JSON]
 
 times a whole run in this checkout and in OTHER (its own .venv's interpreter) with the same
 driver (benchmarks/run_once.py) and prints each round's real-time factors and their ratio,
 then the median. --this-threads defaults to the cores `mapqual run` gives a lone run
 (worker.slam.threads), --other-threads to the other tree's default; give both 1 for the
-one-core comparison.
+one-core comparison. --this-slam '{"coarse_skip": 0}' runs this tree with those SLAM settings
+(against itself: a setting's own speed-up, side by side).
 """
 
 from __future__ import annotations
@@ -50,7 +51,15 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
     ap.add_argument("--this-threads", type=int, default=None, help="--against: this tree's")
     ap.add_argument("--other-threads", type=int, default=None, help="--against: the other's")
+    ap.add_argument(
+        "--this-slam",
+        type=json.loads,
+        default=None,
+        help="--against: SLAM settings of this tree's runs, JSON (e.g. '{\"coarse_skip\": 1}')",
+    )
     args = ap.parse_args()
+    if args.this_slam is not None and not isinstance(args.this_slam, dict):
+        ap.error("--this-slam must be a JSON object")
     if args.slam_threads < 1:
         ap.error("--slam-threads must be >= 1")
     if args.against is not None:
@@ -110,19 +119,26 @@ def _side_by_side(args: argparse.Namespace) -> None:
     other = args.against.resolve()
     python = other / ".venv" / "bin" / "python"
     trees = {
-        "this": (Path(sys.executable), ROOT, args.this_threads or cores()),
-        "other": (python if python.exists() else Path(sys.executable), other, args.other_threads),
+        "this": (Path(sys.executable), ROOT, args.this_threads or cores(), args.this_slam),
+        "other": (
+            python if python.exists() else Path(sys.executable),
+            other,
+            args.other_threads,
+            None,
+        ),
     }
     world = Path(args.world)  # the same plan, found under each tree
     if world.is_absolute():
         world = world.resolve().relative_to(ROOT)
     print(f"side by side: this = {ROOT}, other = {other}; {args.slam}, seed {args.seed}, {world}")
+    if args.this_slam:
+        print(f"this tree's runs with slam settings {json.dumps(args.this_slam)}")
     ratios = []
     for r in range(args.rounds):
         order = list(trees) if r % 2 == 0 else list(reversed(trees))
         got = {}
         for name in order:
-            py, tree, threads = trees[name]
+            py, tree, threads, slam = trees[name]
             cmd = [
                 str(py), str(ROOT / "benchmarks" / "run_once.py"), "--tree", str(tree),
                 "--world", str(world), "--slam", args.slam, "--seed", str(args.seed),
@@ -131,6 +147,8 @@ def _side_by_side(args: argparse.Namespace) -> None:
                 cmd += ["--time-limit", str(args.time_limit)]
             if threads is not None:
                 cmd += ["--threads", str(threads)]
+            if slam:
+                cmd += ["--slam-params", json.dumps(slam)]
             out = subprocess.run(cmd, capture_output=True, text=True, cwd=tree)
             if out.returncode != 0:
                 sys.exit(f"{name} ({tree}) failed ({out.returncode}):\n{out.stderr[-2000:]}")

@@ -3,7 +3,7 @@ JSON line {sim_s, wall_s, cpu_s, outcome, threads}. Uses only what every checkou
 39ad88e has (load_world, RunParams.from_json, run_one), so the same driver times both trees:
 
     OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
-        [--seed 1] [--time-limit S] [--threads N]
+        [--seed 1] [--time-limit S] [--threads N] [--slam-params JSON]
 
 --threads N sets slam.threads (left out: the tree's own default). The numba caches are warmed
 by a 5 s run first; the report files are not written (the same in both trees).
@@ -26,6 +26,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
     ap.add_argument("--threads", type=int, default=None, help="slam.threads")
+    ap.add_argument("--slam-params", type=json.loads, default={}, help="more slam settings, JSON")
     args = ap.parse_args()
     sys.path.insert(0, str(args.tree.resolve()))
     from worker.pipeline import run_one
@@ -37,8 +38,11 @@ def main() -> None:
         from worker.pipeline import RunParams
 
     data: dict = {"algorithm": args.slam}
+    slam = dict(args.slam_params)
     if args.threads is not None:
-        data["slam"] = {"threads": args.threads}
+        slam["threads"] = args.threads
+    if slam:  # no section at all otherwise, as older trees expect
+        data["slam"] = slam
     world = load_world(args.tree / args.world)
     run_one(world, RunParams.from_json({**data, "explore": {"time_limit": 5.0}}), args.seed)
     if args.time_limit is not None:
