@@ -17,7 +17,7 @@ scan matcher reads these first and touches `mean` only for occupied cells.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 PATCH_BITS = 5
 PATCH = 1 << PATCH_BITS  # [cells] patch side
@@ -87,6 +87,7 @@ def _register_one(
     res,
     usable_range,
     max_range,
+    may_allocate=True,
 ):
     """Integrate one scan into one particle's map (GMapping ScanMatcher::registerScan).
 
@@ -95,7 +96,9 @@ def _register_one(
     one visit; the end cell, for a beam shorter than usable_range, a hit at the end point.
     The Bresenham steps are branch-free (selects), the patch is looked up only when the line
     leaves one. Returns the number of cell updates dropped for lack of pool space (0 when
-    the caller reserved enough patches).
+    the caller reserved enough patches). may_allocate False (the patches were claimed
+    beforehand, `claim_patches`; particles registered in parallel): a patch not this
+    particle's alone is not written, and its updates count as dropped.
     """
     th, tw = table.shape
     x, y, theta = pose[0], pose[1], pose[2]
@@ -137,9 +140,13 @@ def _register_one(
                 if 0 <= tx < tw and 0 <= ty < th:
                     e = table[ty, tx]
                     if e < 0 or counts[e] != 1:  # a call costs more than the checks
-                        e = _writable_patch(
-                            visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty
-                        )
+                        if may_allocate:
+                            e = _writable_patch(
+                                visits, hits, mean, bits, counts, free_stack, n_free, table,
+                                tx, ty,
+                            )  # fmt: skip
+                        else:
+                            e = -1
             if e < 0:
                 dropped += 1
             else:
@@ -224,6 +231,123 @@ def register_scans(
             max_range,
         )
     return todo.shape[0], dropped
+
+
+@njit(cache=True)
+def _line_patches(mark, out, n, tx0, ty0, a0, b0, a1, b1, swap):
+    """Add to out[:n] (marking them in `mark`) the table cells of the patches a Bresenham
+    line from cell (a0, b0) to (a1, b1) may touch (a the major axis; swap: a is y); returns
+    the new n. Per patch column along the major axis, the line's cells lie within half a
+    cell of the straight line between the end cells (Bresenham's error bound), so the minor
+    range taken, that +-1 cell, holds them."""
+    th, tw = mark.shape
+    da = a1 - a0
+    db = b1 - b0
+    a_lo, a_hi = min(a0, a1), max(a0, a1)
+    b_lo, b_hi = min(b0, b1), max(b0, b1)
+    for pa in range(a_lo >> PATCH_BITS, (a_hi >> PATCH_BITS) + 1):
+        ca = max(a_lo, pa << PATCH_BITS)
+        cb = min(a_hi, (pa << PATCH_BITS) + PATCH_MASK)
+        if da == 0:
+            m0, m1 = b_lo, b_hi
+        else:
+            u = b0 + db * (ca - a0) / da
+            v = b0 + db * (cb - a0) / da
+            m0 = max(b_lo, int(np.floor(min(u, v))) - 1)
+            m1 = min(b_hi, int(np.ceil(max(u, v))) + 1)
+        for pb in range(m0 >> PATCH_BITS, (m1 >> PATCH_BITS) + 1):
+            tx = (pb if swap else pa) - tx0
+            ty = (pa if swap else pb) - ty0
+            if 0 <= tx < tw and 0 <= ty < th and not mark[ty, tx]:
+                mark[ty, tx] = True
+                out[n] = ty * tw + tx
+                n += 1
+    return n
+
+
+@njit(cache=True, parallel=True)
+def scan_patches(
+    shape, tpx0, tpy0, poses, ranges, cos_a, sin_a, res, usable_range, max_range, todo
+):
+    """(K, P) table cells (flat, ty * TW + tx) of the patches `_register_one` may write for
+    each particle of todo, and (K,) their numbers; on numba's threads (geometry only)."""
+    th, tw = shape
+    lists = np.empty((todo.shape[0], th * tw), dtype=np.int64)
+    counts = np.zeros(todo.shape[0], dtype=np.int64)
+    for k in prange(todo.shape[0]):
+        p = todo[k]
+        mark = np.zeros((th, tw), dtype=np.bool_)
+        out = lists[k]
+        n = 0
+        x, y, theta = poses[p, 0], poses[p, 1], poses[p, 2]
+        c, s = np.cos(theta), np.sin(theta)
+        x0 = int(np.floor(x / res))
+        y0 = int(np.floor(y / res))
+        for i in range(ranges.shape[0]):
+            d = ranges[i]
+            if not (d > 0.0) or d > max_range:
+                continue
+            d = min(d, usable_range)
+            ca = c * cos_a[i] - s * sin_a[i]
+            sa = s * cos_a[i] + c * sin_a[i]
+            x1 = int(np.floor((x + d * ca) / res))
+            y1 = int(np.floor((y + d * sa) / res))
+            if abs(x1 - x0) >= abs(y1 - y0):
+                n = _line_patches(mark, out, n, tpx0, tpy0, x0, y0, x1, y1, False)
+            else:
+                n = _line_patches(mark, out, n, tpx0, tpy0, y0, x0, y1, x1, True)
+        counts[k] = n
+    return lists, counts
+
+
+@njit(cache=True)
+def claim_patches(
+    visits, hits, mean, bits, counts, free_stack, n_free, tables, lists, n_listed, need, todo,
+    start,
+):  # fmt: skip
+    """For particles todo[start:] in turn, make writable (copy-on-write, or new) the patches
+    `scan_patches` listed, so that the particles can then be registered in parallel
+    (`register_claimed`), each writing only patches that are its alone. A claimed patch no
+    line touches is a copy or an empty patch: the map reads the same. Returns the next
+    position in todo; < len(todo): grow the pool and call again."""
+    for k in range(start, todo.shape[0]):
+        p = todo[k]
+        if n_free[0] < need[p]:
+            return k
+        table = tables[p]
+        tw = table.shape[1]
+        for q in range(n_listed[k]):
+            ty = lists[k, q] // tw
+            tx = lists[k, q] - ty * tw
+            e = table[ty, tx]
+            if e >= 0 and counts[e] == 1:
+                continue
+            if (
+                _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty)
+                < 0
+            ):
+                return k  # cannot happen when need[p] patches were free: they bound the box
+    return todo.shape[0]
+
+
+@njit(cache=True, parallel=True)
+def register_claimed(
+    visits, hits, mean, bits, counts, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, res,
+    usable_range, max_range, todo,
+):  # fmt: skip
+    """Register the scan for every particle of todo, in parallel, after `claim_patches`:
+    the same cells as `register_scans` would write. Returns the updates dropped (cells off
+    the table, or in a patch that was not claimed: 0 when the claim is right)."""
+    dropped = np.zeros(todo.shape[0], dtype=np.int64)
+    none = np.zeros(0, dtype=np.int32)
+    n_free = np.zeros(1, dtype=np.int64)
+    for k in prange(todo.shape[0]):
+        p = todo[k]
+        dropped[k] = _register_one(
+            visits, hits, mean, bits, counts, none, n_free, tables[p], tpx0, tpy0, poses[p],
+            ranges, cos_a, sin_a, res, usable_range, max_range, False,
+        )  # fmt: skip
+    return dropped.sum()
 
 
 @njit(cache=True)

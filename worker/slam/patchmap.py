@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.grid import OccupancyGrid
-from worker.slam.map_kernels import PATCH, PATCH_BITS, dense_hits, dense_prob, register_scans
+from worker.slam.map_kernels import (
+    PATCH,
+    PATCH_BITS,
+    claim_patches,
+    dense_hits,
+    dense_prob,
+    register_claimed,
+    register_scans,
+    scan_patches,
+)
 
 
 class PatchMaps:
@@ -107,6 +116,7 @@ class PatchMaps:
         usable_range: float,
         max_range: float,
         same_as: np.ndarray | None = None,
+        parallel: bool = False,
     ) -> None:
         """Integrate one scan into every particle's map at its pose.
 
@@ -115,7 +125,11 @@ class PatchMaps:
         says that particle k has the same map and pose as particle j (copies made by
         resampling, before the motion model moves them apart), with same_as[j] = j: the scan
         is registered for j only and k then shares j's patches (copy-on-write, as after
-        `select`), which gives k the very cells it would have written itself.
+        `select`), which gives k the very cells it would have written itself. parallel: the
+        patches each particle may write are claimed first, in turn (`claim_patches`), then the
+        particles are registered on numba's threads (`register_claimed`); the cells are the
+        same, only pool ids and a few claimed patches the lines missed (empty, or copies)
+        differ, which no map read sees.
         """
         poses = np.ascontiguousarray(poses, dtype=np.float64).reshape(-1, 3)
         if poses.shape[0] != self.n_particles:
@@ -124,7 +138,11 @@ class PatchMaps:
         todo = self._todo(poses, same_as)
         ranges = np.ascontiguousarray(ranges_m, dtype=np.float64)
         need = self._reserve(poses, ranges, usable_range, max_range)
-        start = 0
+        if parallel and todo.size > 1:
+            self._register_parallel(
+                poses, ranges, cos_a, sin_a, usable_range, max_range, need, todo
+            )
+        start = todo.size if parallel and todo.size > 1 else 0
         while start < todo.size:
             free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
             if free_stack.size < need[todo[start]]:
@@ -157,6 +175,32 @@ class PatchMaps:
         if todo.size < n:
             self.tables = self.tables[np.asarray(same_as, dtype=np.int64)]
             self._recount()
+
+    def _register_parallel(self, poses, ranges, cos_a, sin_a, usable_range, max_range, need, todo):
+        """`register` with parallel=True: list each particle's patches (in parallel), claim
+        them in turn, then write (in parallel)."""
+        lists, n_listed = scan_patches(
+            self.tables.shape[1:], self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
+            self.resolution, usable_range, max_range, todo,
+        )  # fmt: skip
+        start = 0
+        while start < todo.size:
+            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
+            if free_stack.size < need[todo[start]]:
+                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
+                continue
+            n_free = np.array([free_stack.size], dtype=np.int64)
+            start = claim_patches(
+                self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
+                self.tables, lists, n_listed, need, todo, start,
+            )  # fmt: skip
+        dropped = register_claimed(
+            self.visits, self.hits, self.mean, self.bits, self.counts, self.tables, self.tpx0,
+            self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range, max_range,
+            todo,
+        )  # fmt: skip
+        if dropped:  # a patch the claim missed: the maps would differ from the serial ones
+            raise RuntimeError(f"parallel scan registration dropped {dropped} cell updates")
 
     def _todo(self, poses: np.ndarray, same_as: np.ndarray | None) -> np.ndarray:
         """(K,) the particles whose scan is registered: all, or one of each `same_as` group."""

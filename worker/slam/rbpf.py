@@ -156,8 +156,9 @@ class RbpfSlam:
             same_as, parents = np.zeros(self.poses.shape[0], dtype=np.int64), None
         self.lineage.update(self.poses, parents)
         self.maps.register(
-            self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range, same_as
-        )
+            self.poses, ranges, self._cos_a, self._sin_a, self._usable, self._max_range, same_as,
+            parallel=self._parallel(),
+        )  # fmt: skip
         self.updates += 1
         self._pred = None
         self._sparse = False
@@ -201,6 +202,14 @@ class RbpfSlam:
             or motion_substeps(float(np.hypot(*step[:2])), abs(float(step[2])), substep) > 1
         )
 
+    def _parallel(self) -> bool:
+        """Whether the particles are matched and registered on numba's threads (slam.threads
+        > 1; then that many, at most numba's)."""
+        if self.params.threads <= 1:
+            return False
+        numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
+        return True
+
     def _proposal_and_weights(self, ranges: np.ndarray, pred: np.ndarray | None) -> None:
         """The improved proposal; after a sparse step (a log that kept one scan a metre) each
         particle's fine climb is also started from its noise-free odometry prediction and from
@@ -209,9 +218,7 @@ class RbpfSlam:
         scans. Then, with params.proposal, each particle's pose is drawn from the Gaussian
         fitted around that optimum (`_sampled`)."""
         m = self.maps
-        parallel = self.params.threads > 1
-        if parallel:
-            numba.set_num_threads(min(self.params.threads, numba.config.NUMBA_NUM_THREADS))
+        parallel = self._parallel()
         match = scan_match_all_parallel if parallel else scan_match_all
         args = (ranges, self._cos_a, self._sin_a, self._match_cfg)
         maps = (m.mean, m.bits, m.tables, m.tpx0, m.tpy0)
