@@ -66,7 +66,7 @@ SETTINGS_SINCE_EXAMPLE = {
         "trail_trim",
         "unwedge_time",
     ],
-    "slam": ["motion_substep", "motion_substep_angle"],
+    "slam": ["coarse_levels", "coarse_skip", "motion_substep", "motion_substep_angle"],
 }
 
 

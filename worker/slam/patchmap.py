@@ -142,36 +142,18 @@ class PatchMaps:
             self._register_parallel(
                 poses, ranges, cos_a, sin_a, usable_range, max_range, need, todo
             )
-        start = todo.size if parallel and todo.size > 1 else 0
-        while start < todo.size:
-            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
-            if free_stack.size < need[todo[start]]:
-                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
-                continue
-            n_free = np.array([free_stack.size], dtype=np.int64)
-            start, dropped = register_scans(
-                self.visits,
-                self.hits,
-                self.mean,
-                self.bits,
-                self.counts,
-                free_stack,
-                n_free,
-                self.tables,
-                self.tpx0,
-                self.tpy0,
-                poses,
-                ranges,
-                cos_a,
-                sin_a,
-                self.resolution,
-                usable_range,
-                max_range,
-                need,
-                todo,
-                start,
-            )
-            self.dropped += int(dropped)
+        else:
+
+            def step(free_stack: np.ndarray, n_free: np.ndarray, start: int) -> int:
+                start, dropped = register_scans(
+                    self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
+                    self.tables, self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
+                    self.resolution, usable_range, max_range, need, todo, start,
+                )  # fmt: skip
+                self.dropped += int(dropped)
+                return start
+
+            self._in_pool(need, todo, step)
         if todo.size < n:
             self.tables = self.tables[np.asarray(same_as, dtype=np.int64)]
             self._recount()
@@ -183,17 +165,14 @@ class PatchMaps:
             self.tables.shape[1:], self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
             self.resolution, usable_range, max_range, todo,
         )  # fmt: skip
-        start = 0
-        while start < todo.size:
-            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
-            if free_stack.size < need[todo[start]]:
-                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
-                continue
-            n_free = np.array([free_stack.size], dtype=np.int64)
-            start = claim_patches(
+
+        def claim(free_stack: np.ndarray, n_free: np.ndarray, start: int) -> int:
+            return claim_patches(
                 self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
                 self.tables, lists, n_listed, need, todo, start,
             )  # fmt: skip
+
+        self._in_pool(need, todo, claim)
         dropped = register_claimed(
             self.visits, self.hits, self.mean, self.bits, self.counts, self.tables, self.tpx0,
             self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range, max_range,
@@ -201,6 +180,18 @@ class PatchMaps:
         )  # fmt: skip
         if dropped:  # a patch the claim missed: the maps would differ from the serial ones
             raise RuntimeError(f"parallel scan registration dropped {dropped} cell updates")
+
+    def _in_pool(self, need: np.ndarray, todo: np.ndarray, step) -> None:
+        """Run step(free_stack, n_free, start) -> next start over the particles of todo,
+        growing the pool whenever its free patches cannot cover the next one's worst case
+        (need: every patch of its scan's bounding box)."""
+        start = 0
+        while start < todo.size:
+            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
+            if free_stack.size < need[todo[start]]:
+                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
+                continue
+            start = step(free_stack, np.array([free_stack.size], dtype=np.int64), start)
 
     def _todo(self, poses: np.ndarray, same_as: np.ndarray | None) -> np.ndarray:
         """(K,) the particles whose scan is registered: all, or one of each `same_as` group."""
