@@ -68,6 +68,15 @@ def _update_bits(visits, hits, bits, e, ly, lx):
         bits[e, FULL, ly] &= ~bit
 
 
+@njit(cache=True, inline="always")
+def _beam_end(x, y, c, s, cos_ai, sin_ai, d, res):
+    """(hx, hy, x1, y1): the end point [m] of a beam of length d from (x, y) with heading
+    cos / sin (c, s) and beam angle cos / sin (cos_ai, sin_ai), and its cell."""
+    hx = x + d * (c * cos_ai - s * sin_ai)
+    hy = y + d * (s * cos_ai + c * sin_ai)
+    return hx, hy, int(np.floor(hx / res)), int(np.floor(hy / res))
+
+
 @njit(cache=True)
 def _register_one(
     visits,
@@ -114,12 +123,7 @@ def _register_one(
         if d >= usable_range:
             d = usable_range
             hit = False
-        ca = c * cos_a[i] - s * sin_a[i]
-        sa = s * cos_a[i] + c * sin_a[i]
-        hx = x + d * ca
-        hy = y + d * sa
-        x1 = int(np.floor(hx / res))
-        y1 = int(np.floor(hy / res))
+        hx, hy, x1, y1 = _beam_end(x, y, c, s, cos_a[i], sin_a[i], d, res)
         # Bresenham from (x0, y0) to (x1, y1), all octants
         dx = abs(x1 - x0)
         dy = -abs(y1 - y0)
@@ -287,11 +291,7 @@ def scan_patches(
             d = ranges[i]
             if not (d > 0.0) or d > max_range:
                 continue
-            d = min(d, usable_range)
-            ca = c * cos_a[i] - s * sin_a[i]
-            sa = s * cos_a[i] + c * sin_a[i]
-            x1 = int(np.floor((x + d * ca) / res))
-            y1 = int(np.floor((y + d * sa) / res))
+            _, _, x1, y1 = _beam_end(x, y, c, s, cos_a[i], sin_a[i], min(d, usable_range), res)
             if abs(x1 - x0) >= abs(y1 - y0):
                 n = _line_patches(mark, out, n, tpx0, tpy0, x0, y0, x1, y1, False)
             else:
