@@ -140,9 +140,9 @@ class Navigator:
         return self._drive(t, pose, v0, w0, ranges)
 
     def _drive(self, t: float, pose: np.ndarray, v0: float, w0: float, ranges) -> NavCommand:
-        """Follow the plan: the door passage through a tight passage ahead (door_align), the
+        """Follow the plan: the door passage through a tight door ahead (door_align), the
         heading shim when the plan lies behind, else the DWA; the safety controller has the
-        last word on the DWA's commands."""
+        last word on the DWA's and the door passage's forward commands."""
         g = self.pursuit
         shim = (
             self.door.command(pose, g.path, self.costmap, self.local)
@@ -156,6 +156,15 @@ class Navigator:
             if self._no_progress(t, pose):
                 self._give_up(t, "no progress", pose)
                 return NavCommand(0.0, 0.0, "recovering")
+            if shim[2] == "door":
+                # the door passage judges its motions on the SLAM map; what the laser sees
+                # in front of the robot (a chair leg the map lacks, a jamb the pose's error
+                # hides) is the safety controller's to veto, as for the DWA's commands
+                override = self.safety.check(t, ranges, shim[0])
+                if override is not None:
+                    self._enter(NavState.SAFETY)
+                    vw = safe_override(self.params, self.local, self.dwa, pose, override, v0, w0)
+                    return NavCommand(*vw, "safety")
             status = {"rotate": "aligning", "door_turn": "aligning", "door": "driving"}.get(
                 shim[2], "recovering"
             )

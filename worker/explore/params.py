@@ -150,6 +150,9 @@ class ExploreParams:
     # [s] a passage the robot gets no 0.05 m farther into for this long is given up to the
     # DWA and the recoveries for the rest of the run
     door_patience: float = 10.0
+    # [m] the door passage checks its motions with the footprint's half side grown by this
+    # (the SLAM pose's error against its map): a corner a few centimetres off is not a touch
+    door_margin: float = 0.03
     xy_goal_tolerance: float = 0.3  # [m]
     yaw_goal_tolerance: float = 0.2  # [rad]
     controller_patience: float = 15.0  # [s] no legal command this long -> recovery, then give up
@@ -225,7 +228,7 @@ class ExploreParams:
         may_be_zero = (
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
-            "obstacle_min_prob",
+            "obstacle_min_prob", "door_margin",
         )  # fmt: skip
         bad = []
         for f in fields(self):
@@ -240,6 +243,8 @@ class ExploreParams:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")
+        if self.door_margin > 0.1:
+            raise InputError("exploration parameter door_margin must be at most 0.1 m")
         if self.trail_trim > self.trail_cap:
             raise InputError("exploration parameter trail_trim exceeds trail_cap")
 

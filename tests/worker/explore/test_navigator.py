@@ -132,3 +132,23 @@ def test_a_whole_run_changes_state_only_as_the_table_says():
     # this run no longer meets since wall faces are no frontiers, has its own test below)
     assert {S.DRIVING, S.RETRACING, S.EXHAUSTED} <= visited
     assert nav.stats.transitions[(S.DRIVING, S.SAFETY)] == run.result(stop).safety_triggers
+
+
+def test_the_door_passage_forward_motion_is_the_safety_controllers_to_veto():
+    # door_align on, the robot on the axis of a 0.7 m door in a wall 0.1 m thick, the
+    # unexplored room beyond it: the door passage drives; something the map lacks appears
+    # 0.1 m in front of the footprint, on the axis: the safety controller backs off
+    p = ExploreParams(door_align=True)
+    nav = Navigator(p, ANGLES, 30.0)
+    prob = np.full((80, 120), np.nan, dtype=np.float32)
+    prob[:, :90] = 0.05  # known free to x = 4.5 m, unknown beyond
+    prob[:, 60:62] = 0.9  # the wall, x in [3.0, 3.1)
+    prob[33:47, 60:62] = 0.05  # the door, y in [1.65, 2.35)
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    pose = np.array([2.3, 2.0, 0.0])
+    cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
+    assert nav.door.door is not None and cmd.status == "driving"
+    assert (cmd.v, cmd.w) == (p.door_speed, 0.0)
+    cmd = nav.step(0.1, pose, cmd.v, 0.0, _scan_with_point(0.3, 0.0))
+    assert (cmd.status, cmd.v) == ("safety", p.escape_vel) and nav.state is NavState.SAFETY
+    assert nav.safety.n_triggers == 1
