@@ -124,7 +124,7 @@ class Exploration:
         self.on_progress = on_progress
         laser = sim.params.laser
         self.dt = sim.params.dt
-        self.nav = Navigator(p, laser.angles, laser.range_max)
+        self.nav = Navigator(p, laser.angles, laser.range_max, sim.params.laser_noise_sigma)
         start = np.asarray(sim.pose_gt, dtype=float)
         start_cell = (
             int(math.floor((start[0] - world.origin[0]) / world.resolution)),

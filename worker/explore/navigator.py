@@ -34,7 +34,11 @@ class Navigator:
     goal pursued is `pursuit`, a back-out under way `retrace`.
     """
 
-    def __init__(self, params: ExploreParams, angles: np.ndarray, range_max: float):
+    def __init__(
+        self, params: ExploreParams, angles: np.ndarray, range_max: float, range_noise: float = 0.0
+    ):
+        """range_noise: the laser's range noise sigma [m] (its data sheet's accuracy): with
+        noise, the safety controller median-filters the readings (safety_median_beams)."""
         self.params = params
         self.angles = np.asarray(angles, dtype=float)
         self.range_max = float(range_max)
@@ -46,7 +50,8 @@ class Navigator:
         self.dwa = DwaPlanner(params)
         self.shim = HeadingShim(params)
         self.door = DoorPass(params)
-        self.safety = SafetyController(params, self.angles, self.range_max)
+        median = params.safety_median_beams if range_noise > 0.0 else 1
+        self.safety = SafetyController(params, self.angles, self.range_max, median)
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
         self.state = NavState.WAITING

@@ -183,6 +183,11 @@ class ExploreParams:
     safety_distance: float = 0.2  # [m] obstacle this near the footprint's front: back off
     safety_backoff_time: float = 1.0  # [s] duration of one back-off manoeuvre
     safety_turn_vel: float = 0.4  # [rad/s] turn away from the obstacle while backing off
+    # [beams] on a laser with range noise the safety controller reads each beam as the median
+    # of this many neighbouring beams (laser_filters' median filter): one noisy short reading
+    # is not an obstacle, anything two beams wide still is (1: the raw readings). A noise-free
+    # laser's readings are taken as they are.
+    safety_median_beams: int = 3
     # --- failure rules ---
     max_goal_failures: int = 10  # consecutive given-up goals -> run aborted as `stuck`
     stuck_timeout: float = 180.0  # [s] no stuck_distance of motion for this long -> `stuck`
@@ -243,6 +248,8 @@ class ExploreParams:
             raise InputError("exploration parameter min_vel_x exceeds max_vel_x")
         if self.escape_vel >= 0:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")
+        if self.safety_median_beams % 2 == 0:
+            raise InputError("exploration parameter safety_median_beams must be odd")
         if self.door_margin > 0.1:
             raise InputError("exploration parameter door_margin must be at most 0.1 m")
         if self.trail_trim > self.trail_cap:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 from worker.explore.params import ExploreParams
 
@@ -37,10 +38,14 @@ def front_clearance(
 class SafetyController:
     """Overrides the planner for a short manoeuvre when an obstacle is too close in front."""
 
-    def __init__(self, params: ExploreParams, angles: np.ndarray, range_max: float):
+    def __init__(
+        self, params: ExploreParams, angles: np.ndarray, range_max: float, median: int = 1
+    ):
+        """median: each beam read as the median of this many neighbours (1: raw)."""
         self.params = params
         self.angles = angles
         self.range_max = range_max
+        self.median = int(median)
         self._until = -math.inf
         self._turn = 0.0
         self.n_triggers = 0
@@ -52,14 +57,16 @@ class SafetyController:
         """The override (v, w) for this period, or None to let the planner drive.
 
         Triggers only while moving forwards (v_cmd > 0) with a hit closer than safety_distance
-        to the footprint's front, in its way: backs off at escape_vel, turning away from the
-        obstacle's side.
+        to the footprint's front, in its way (the readings median-filtered over `median`
+        beams first): backs off at escape_vel, turning away from the obstacle's side.
         """
         p = self.params
         if t < self._until:
             return (p.escape_vel, self._turn)
         if v_cmd <= 0.0:
             return None
+        if self.median > 1:
+            ranges_m = ndimage.median_filter(np.asarray(ranges_m), size=self.median, mode="nearest")
         d, side = front_clearance(
             ranges_m, self.angles, self.range_max, p.footprint_half_m, p.footprint_padding
         )

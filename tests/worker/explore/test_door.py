@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from worker.explore import costmap_kernels as ck
+from worker.explore import door_kernels as dok
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.door import DoorPass, _ahead, find_door
 from worker.explore.params import ExploreParams
@@ -302,3 +303,25 @@ def test_a_wall_the_plan_turns_away_from_is_not_a_door():
     local.build(2.2, 2.0, cm, 0.0, map_only=True)
     assert _find(path, 2.2, 2.0, local, p) is None
     assert DoorPass(p).command(np.array([2.2, 2.0, 0.0]), path, cm) is None
+
+
+def test_nearest_sides_splits_by_side_and_keeps_to_the_cone_across_the_line():
+    # from (1.0, 1.0) along +x: a cell at (1.025, 1.325) is across on the left (0.325 m),
+    # one at (1.025, 0.575) across on the right (0.425 m); a nearer one straight ahead at
+    # (1.275, 1.025) is neither (0.28 m ahead, 0.025 m to the side); one at (1.475, 0.775)
+    # is 0.475 m ahead and 0.225 m to the right: 64.6 degrees off the normal, inside a
+    # 70 degree cone but not a 60 degree one
+    lethal = np.zeros((40, 40), dtype=np.bool_)
+    for x, y in ((1.025, 1.325), (1.025, 0.575), (1.275, 1.025), (1.475, 0.775)):
+        lethal[int(y / RES), int(x / RES)] = True
+    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, dok.ACROSS_PATH)
+    assert np.allclose(out, (1.025, 1.325, math.hypot(0.025, 0.325),
+                             1.025, 0.575, math.hypot(0.025, 0.425)))  # fmt: skip
+    wide = math.tan(math.radians(70.0))
+    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, wide)
+    assert np.allclose(out[3:], (1.025, 0.575, math.hypot(0.025, 0.425)))  # 0.425 < 0.526
+    lethal[int(0.575 / RES), int(1.025 / RES)] = False
+    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, wide)
+    assert np.allclose(out[3:], (1.475, 0.775, math.hypot(0.475, 0.225)))
+    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, dok.ACROSS_PATH)
+    assert out[5] == np.inf  # nothing across on the right any more
