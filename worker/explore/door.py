@@ -144,7 +144,7 @@ class DoorPass:
             if seen_gap is not None and not _tight_near(pts, seen_gap, found, p):
                 return None  # the DWA sees this door wide enough: it drives through at speed
             self.door = found
-            a, off = found.frame(pose)
+            off = found.frame(pose)[1]
             self.phase = "approach" if found.pre is not None and abs(off) > _ON_AXIS else "through"
         return self._drive(pose, local)
 
