@@ -63,7 +63,8 @@ class Door:
     """A door found on the path: its centre and unit axis (the way the path crosses it), the
     stretch along the axis where it is tight (s_in < 0 < s_out [m] from the centre), its
     jambs (the nearest obstacle cell centres on the left and on the right), its clear width
-    and the pre-door point (None: no place on the axis before it fits the footprint)."""
+    and the pre-door point (None: no place on the axis before it fits the footprint, or not
+    looked for: `find_door` leaves that to the passage that takes the door up)."""
 
     centre: np.ndarray
     axis: np.ndarray
@@ -71,7 +72,7 @@ class Door:
     s_out: float
     jambs: tuple[np.ndarray, np.ndarray]
     width: float
-    pre: np.ndarray | None
+    pre: np.ndarray | None = None
 
     def frame(self, xy) -> tuple[float, float]:
         """(along the axis from the centre, left of it) [m] of the point xy."""
@@ -143,9 +144,12 @@ class DoorPass:
                 return None  # none, or given up before: the DWA and the recoveries have it
             if seen_gap is not None and not _tight_near(pts, seen_gap, found, p):
                 return None  # the DWA sees this door wide enough: it drives through at speed
-            self.door = found
+            # the pre-door point (a few footprint spins) only for a door taken up, not for
+            # each one found and left to the DWA
+            pre = _pre_door_point(found.centre, found.axis, found.s_in, local, p)
+            self.door = found = dataclasses.replace(found, pre=pre)
             off = found.frame(pose)[1]
-            self.phase = "approach" if found.pre is not None and abs(off) > _ON_AXIS else "through"
+            self.phase = "approach" if pre is not None and abs(off) > _ON_AXIS else "through"
         return self._drive(pose, local)
 
     def _map_window(self, pose: np.ndarray, costmap: GlobalCostmap) -> LocalCostmap:
@@ -347,8 +351,7 @@ def _door_at(pts: np.ndarray, j: int, row: np.ndarray, local: LocalCostmap, p: E
     if width >= p.door_width or not _crosses(pts, centre, u, float(np.hypot(*(b - a)))):
         return None
     s_in, s_out = _tight_stretch(centre, u, local, p)
-    pre = _pre_door_point(centre, u, s_in, local, p)
-    return Door(centre, u, s_in, s_out, (a, b), width, pre)
+    return Door(centre, u, s_in, s_out, (a, b), width)
 
 
 def _crosses(pts: np.ndarray, centre: np.ndarray, u: np.ndarray, span: float) -> bool:

@@ -165,11 +165,9 @@ class Navigator:
                 # the door passage judges its motions on the SLAM map; what the laser sees
                 # in front of the robot (a chair leg the map lacks, a jamb the pose's error
                 # hides) is the safety controller's to veto, as for the DWA's commands
-                override = self.safety.check(t, ranges, shim[0])
-                if override is not None:
-                    self._enter(NavState.SAFETY)
-                    vw = safe_override(self.params, self.local, self.dwa, pose, override, v0, w0)
-                    return NavCommand(*vw, "safety")
+                vetoed = self._safety_veto(t, pose, ranges, shim[0], v0, w0, (0.0, 0.0))
+                if vetoed is not None:
+                    return vetoed
             status = {"rotate": "aligning", "door_turn": "aligning", "door": "driving"}.get(
                 shim[2], "recovering"
             )
@@ -189,14 +187,22 @@ class Navigator:
         if self._no_progress(t, pose):
             self._give_up(t, "no progress", pose)
             return NavCommand(0.0, 0.0, "recovering")
-        override = self.safety.check(t, ranges, cmd.v)
-        if override is not None:
-            self._enter(NavState.SAFETY)
-            vw = safe_override(
-                self.params, self.local, self.dwa, pose, override, v0, w0, (cmd.v, cmd.w)
-            )
-            return NavCommand(*vw, "safety")
+        vetoed = self._safety_veto(t, pose, ranges, cmd.v, v0, w0, (cmd.v, cmd.w))
+        if vetoed is not None:
+            return vetoed
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
+
+    def _safety_veto(
+        self, t: float, pose: np.ndarray, ranges, v: float, v0: float, w0: float, planned
+    ) -> NavCommand | None:
+        """The safety controller's override of a command driving at v, checked against the
+        local costmap (`safe_override`; `planned`, its last resort), or None: drive on."""
+        override = self.safety.check(t, ranges, v)
+        if override is None:
+            return None
+        self._enter(NavState.SAFETY)
+        vw = safe_override(self.params, self.local, self.dwa, pose, override, v0, w0, planned)
+        return NavCommand(*vw, "safety")
 
     def _dwa_command(self, pose: np.ndarray, v0: float, w0: float) -> Command:
         """The DWA's command; with nothing legal, its command on the scans alone."""
