@@ -45,6 +45,8 @@ SETTINGS_SINCE_EXAMPLE = {
         "look_fov_margin",
         "narrow_margin",
         "no_frontier_time",
+        "noisy_door_align",
+        "noisy_obstacle_min_prob",
         "obstacle_layer",
         "obstacle_min_prob",
         "obstacle_range",

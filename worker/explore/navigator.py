@@ -38,7 +38,10 @@ class Navigator:
         self, params: ExploreParams, angles: np.ndarray, range_max: float, range_noise: float = 0.0
     ):
         """range_noise: the laser's range noise sigma [m] (its data sheet's accuracy): with
-        noise, the safety controller median-filters the readings (safety_median_beams)."""
+        noise, the safety controller median-filters the readings (safety_median_beams) and
+        the stack drives with `params.for_range_noise` (the door passage on, noisy marks
+        kept out of free cells)."""
+        params = params.for_range_noise(range_noise)
         self.params = params
         self.angles = np.asarray(angles, dtype=float)
         self.range_max = float(range_max)

@@ -40,6 +40,14 @@ class ExploreParams:
     # [-] the obstacle layer's marks count only in cells the SLAM map does not know as
     # firmly free (probability at least this, or unknown); 0: everywhere
     obstacle_min_prob: float = 0.0
+    # on a laser with range noise (sim.laser_noise_sigma > 0; `for_range_noise`) the stack
+    # takes the door passage (door_align) and counts the obstacle layer's marks only where
+    # the SLAM map is not firmly free (obstacle_min_prob at least this): one scan's noisy
+    # hits at a door's jambs close it to the planner and the DWA, where the map, made of
+    # many scans, holds it open (README, "Laser noise"). A noise-free laser's runs do not
+    # change.
+    noisy_door_align: bool = True
+    noisy_obstacle_min_prob: float = 0.1
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
@@ -129,12 +137,11 @@ class ExploreParams:
     shim_angle: float = 1.2  # [rad]
     shim_release: float = 0.5  # [rad] the DWA takes over again below this
     shim_lookahead: float = 0.5  # [m]
-    # door passage (door.DoorPass), off by default (README, "Laser noise": at 0.1 m noise it
-    # takes rbpf through Freiburg79's doors, 9 of 10 completed against 1-2 of 10, but not
-    # through office_d_furnitures, 1 of 10, and the oracle proof with it on is not redone):
-    # when the path enters a door narrower than door_width (the SLAM map's walls on both
-    # sides) within door_lookahead, the robot goes to a point on the door's axis, faces along
-    # it (turning on the spot past door_angle) and drives through at door_speed
+    # door passage (door.DoorPass), off on a noise-free laser (it makes explorations 20 %
+    # longer there, README "Laser noise") and on with range noise (noisy_door_align): when
+    # the path enters a door narrower than door_width (the SLAM map's walls on both sides)
+    # within door_lookahead, the robot goes to a point on the door's axis, faces along it
+    # (turning on the spot past door_angle) and drives through at door_speed
     door_align: bool = False
     door_width: float = 0.9  # [m]
     door_lookahead: float = 1.0  # [m]
@@ -234,7 +241,7 @@ class ExploreParams:
         may_be_zero = (
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
-            "obstacle_min_prob", "door_margin",
+            "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
         )  # fmt: skip
         bad = []
         for f in fields(self):
@@ -251,6 +258,9 @@ class ExploreParams:
             raise InputError("exploration parameter escape_vel must be negative (backwards)")
         if self.safety_median_beams % 2 == 0:
             raise InputError("exploration parameter safety_median_beams must be odd")
+        if max(self.obstacle_min_prob, self.noisy_obstacle_min_prob) > 1.0:
+            raise InputError("exploration parameters obstacle_min_prob and "
+                             "noisy_obstacle_min_prob must be at most 1")  # fmt: skip
         if self.door_margin > 0.1:
             raise InputError("exploration parameter door_margin must be at most 0.1 m")
         if self.trail_trim > self.trail_cap:
@@ -260,6 +270,20 @@ class ExploreParams:
     def passable_clearance_m(self) -> float:
         """[m] centre clearance of the gaps a run must pass to be judged complete."""
         return self.footprint_half_m + self.footprint_padding + self.incomplete_cell_loss
+
+    def for_range_noise(self, sigma: float) -> ExploreParams:
+        """The settings the navigation stack drives with on a laser of range noise `sigma`
+        [m]: these, or with range noise the door passage on (noisy_door_align) and the
+        obstacle layer's marks kept out of firmly free cells (noisy_obstacle_min_prob)."""
+        if sigma <= 0.0:
+            return self
+        out = dataclasses.replace(
+            self,
+            door_align=self.door_align or self.noisy_door_align,
+            obstacle_min_prob=max(self.obstacle_min_prob, self.noisy_obstacle_min_prob),
+        )
+        object.__setattr__(out, "footprint_half_m", self.footprint_half_m)
+        return out
 
     def with_footprint(self, side_m: float) -> ExploreParams:
         """These settings for a square robot footprint of side `side_m` [m]."""

@@ -11,27 +11,48 @@ from worker.explore.params import ExploreParams
 
 
 def front_clearance(
-    ranges_m: np.ndarray, angles: np.ndarray, range_max: float, half: float, lateral: float
+    ranges_m: np.ndarray,
+    angles: np.ndarray,
+    range_max: float,
+    half: float,
+    lateral: float,
+    slack: float = 0.0,
+    min_points: int = 1,
 ) -> tuple[float, float]:
     """Distance [m] from the footprint's front edge to the nearest scan hit in the robot's way.
 
     The laser sits at the robot's centre; a hit at (x, y) in the robot frame is in the way
     when x > half and |y| < half + lateral (the band the robot sweeps driving straight on):
-    a door jamb beside the robot is not. Returns (inf, 0) when nothing is in the way; side
-    is +1 for an obstacle on the left (y > 0), -1 on the right.
+    a door jamb beside the robot is not. With `slack` > 0 a hit must also stay in the band
+    moved `slack` farther along its own beam (where it would be had the reading come out
+    that much short): a wall beside the robot read obliquely and short lands in the band,
+    the same reading at its likely place does not; a hit straight ahead barely moves
+    sideways, so the distance ahead is unchanged. With `min_points` > 1 the distance is the
+    min_points-th nearest hit in the way (nav2 collision monitor's `min_points`). Returns
+    (inf, 0) when nothing is in the way; side is +1 for an obstacle on the left (y > 0),
+    -1 on the right.
     """
     hit = ranges_m < range_max * 0.999
     if not hit.any():
         return math.inf, 0.0
     r = ranges_m[hit]
     a = angles[hit]
+    s = np.sin(a)
     x = r * np.cos(a)
-    y = r * np.sin(a)
-    ahead = (x > half) & (np.abs(y) < half + lateral)
-    if not ahead.any():
+    y = r * s
+    band = half + lateral
+    ahead = (x > half) & (np.abs(y) < band)
+    if slack > 0.0:
+        ahead &= np.abs((r + slack) * s) < band
+    n = int(np.count_nonzero(ahead))
+    if n < min_points:
         return math.inf, 0.0
     d = x[ahead] - half
-    k = int(np.argmin(d))
+    k = (
+        int(np.argpartition(d, min_points - 1)[min_points - 1])
+        if min_points > 1
+        else int(np.argmin(d))
+    )
     return float(d[k]), (1.0 if y[ahead][k] > 0 else -1.0)
 
 

@@ -173,7 +173,20 @@ class Simulator:
         [0, range_max].
         """
         laser = self.params.laser
-        ranges = cast_scan_skip(
+        ranges = self.scan_noise_free()
+        sigma = self.params.laser_noise_sigma
+        if sigma > 0.0:
+            hit = ranges < laser.range_max
+            noisy = ranges + sigma * self.rng.standard_normal(ranges.shape[0])
+            ranges = np.where(hit, np.clip(noisy, 0.0, laser.range_max), ranges)
+        return ranges
+
+    def scan_noise_free(self) -> np.ndarray:
+        """The ranges `(B,)` [m] a noise-free laser reads at the true pose (what `scan` adds
+        its noise to; for audits of what the robot believed against what was there). Draws
+        no random numbers."""
+        laser = self.params.laser
+        return cast_scan_skip(
             self._jump,
             self._res,
             self._ox,
@@ -184,9 +197,3 @@ class Simulator:
             self._angles,
             laser.range_max,
         )
-        sigma = self.params.laser_noise_sigma
-        if sigma > 0.0:
-            hit = ranges < laser.range_max
-            noisy = ranges + sigma * self.rng.standard_normal(ranges.shape[0])
-            ranges = np.where(hit, np.clip(noisy, 0.0, laser.range_max), ranges)
-        return ranges
