@@ -21,9 +21,9 @@ against the SLAM map's obstacles around the robot (not the latest scan's marks);
 motions are also the safety controller's to veto (`Navigator._drive`). When no motion is
 legal it hands back to the DWA and the recoveries.
 
-Off by default (`explore.door_align`; README, "Laser noise": measured under rbpf at 0.1 m
-noise, no collision, but office_d_furnitures still fails among its furniture, and the oracle
-proof of every plan has not been run with it). Only a door in a wall counts: the two jambs' obstacle
+On with a noisy laser (`explore.noisy_door_align`, `ExploreParams.for_range_noise`), off on
+a noise-free one (`explore.door_align`), where it makes explorations 20 % longer for no
+gain (README, "Laser noise"). Only a door in a wall counts: the two jambs' obstacle
 regions must each be at least door_wall_min long, and the path must cross the line between
 them; every gap between furniture stays the DWA's, since the map alone (the passage's judge)
 may not hold a thin chair leg the laser sees. A passage the robot makes no progress in for

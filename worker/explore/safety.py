@@ -28,9 +28,11 @@ def front_clearance(
     that much short): a wall beside the robot read obliquely and short lands in the band,
     the same reading at its likely place does not; a hit straight ahead barely moves
     sideways, so the distance ahead is unchanged. With `min_points` > 1 the distance is the
-    min_points-th nearest hit in the way (nav2 collision monitor's `min_points`). Returns
-    (inf, 0) when nothing is in the way; side is +1 for an obstacle on the left (y > 0),
-    -1 on the right.
+    min_points-th nearest hit in the way (nav2 collision monitor's `min_points`). The
+    controller uses neither: both are alternatives `benchmarks/bench_safety.py` scores, and
+    both let real obstacles pass on a noisy laser (README, "Laser noise"). Returns (inf, 0)
+    when nothing is in the way; side is +1 for an obstacle on the left (y > 0), -1 on the
+    right.
     """
     hit = ranges_m < range_max * 0.999
     if not hit.any():

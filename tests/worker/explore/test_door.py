@@ -325,3 +325,32 @@ def test_nearest_sides_splits_by_side_and_keeps_to_the_cone_across_the_line():
     assert np.allclose(out[3:], (1.475, 0.775, math.hypot(0.475, 0.225)))
     out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, dok.ACROSS_PATH)
     assert out[5] == np.inf  # nothing across on the right any more
+
+
+def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks_out():
+    # A 0.85 m door (17 cells) the map holds open; one scan's short readings at both jambs
+    # mark cells 0.25 m into the opening, leaving 0.35 m between them, less than the 0.4 m
+    # robot: to a noise-free laser's stack that closes the door (each mark is believed), to
+    # a noisy laser's stack the marks in cells the map knows as free (0.02) are noise
+    from worker.explore.navigator import Navigator
+
+    p = ExploreParams()
+    angles = np.array([math.pi / 2, -math.pi / 2])
+    free = Navigator(p, angles, 30.0)
+    noisy = Navigator(p, angles, 30.0, range_noise=0.1)
+    assert free.params is p and not free.params.door_align  # noise-free: nothing changes
+    assert noisy.params.door_align and noisy.params.obstacle_min_prob == 0.1
+    assert noisy.params.footprint_half_m == p.footprint_half_m
+    prob = _door_map(17)  # door cells: rows 32-48, y in [1.6, 2.45) m
+    # the robot in the door's middle, x = 3.05 m, reading its jambs 0.175 m from centre
+    # instead of 0.425: hits at y = 2.2 and 1.85 m, 0.25 m inside the opening
+    scan = (np.array([3.05, 2.025, 0.0]), np.array([0.175, 0.175]), angles, 30.0)
+    door_row = slice(32, 49)
+    for nav, closed in ((free, True), (noisy, False)):
+        nav.costmap.update(prob, RES, (0.0, 0.0), scan=scan)
+        through = nav.costmap.inflated[door_row, WALL_X]  # the door's cells, wall's line
+        assert bool((through >= ck.INSCRIBED).all()) == closed
+    # users may keep the noise-free stack on a noisy laser
+    plain = dataclasses.replace(p, noisy_door_align=False, noisy_obstacle_min_prob=0.0)
+    kept = plain.for_range_noise(0.1)
+    assert not kept.door_align and kept.obstacle_min_prob == 0.0

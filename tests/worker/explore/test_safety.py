@@ -75,3 +75,24 @@ def test_the_navigator_filters_only_a_noisy_lasers_readings():
     p = ExploreParams()
     assert Navigator(p, ANGLES, 30.0).safety.median == 1
     assert Navigator(p, ANGLES, 30.0, range_noise=0.1).safety.median == 3
+
+
+def test_front_clearance_slack_and_min_points_as_bench_safety_scores_them():
+    # Hand-placed: a hit at 45 degrees, (0.22, 0.21) in the robot frame, lies in the band
+    # (|y| < 0.22) 0.02 m ahead of the front; 0.1 m farther along its beam it would be at
+    # (0.29, 0.28), beside the band: with slack 0.1 it is not in the way. A hit straight
+    # ahead 0.15 m from the front moves along x only and stays.
+    side = _scan_with_point(0.22, 0.21)
+    d, _ = front_clearance(side, ANGLES, 30.0, 0.2, 0.02)
+    assert abs(d - 0.02) < 5e-3
+    assert front_clearance(side, ANGLES, 30.0, 0.2, 0.02, slack=0.1)[0] == math.inf
+    ahead = _scan_with_point(0.35, 0.0)
+    d, _ = front_clearance(ahead, ANGLES, 30.0, 0.2, 0.02, slack=0.1)
+    assert abs(d - 0.15) < 2e-3
+    # min_points: the n-th nearest hit in the way; fewer hits than that, nothing
+    both = ahead.copy()
+    k = int(np.argmax(ahead < 30.0))
+    both[k + 1] = 0.5  # a second hit, 0.3 m ahead of the front
+    assert front_clearance(ahead, ANGLES, 30.0, 0.2, 0.02, min_points=2)[0] == math.inf
+    d, _ = front_clearance(both, ANGLES, 30.0, 0.2, 0.02, min_points=2)
+    assert abs(d - 0.3) < 2e-3
