@@ -27,7 +27,9 @@ gain (README, "Laser noise"). Only a door in a wall counts: the two jambs' obsta
 regions must each be at least door_wall_min long, and the path must cross the line between
 them; every gap between furniture stays the DWA's, since the map alone (the passage's judge)
 may not hold a thin chair leg the laser sees. A passage the robot makes no progress in for
-door_patience is given up for the run (`refused`), and a door is taken only where the DWA's
+door_patience is given up for the goal being pursued (`refused`; the next goal may try it
+again: what stalled it, a safety stop on a noisy reading, a chair, may be gone), and a
+door is taken only where the DWA's
 local costmap shows it narrower than door_engage_width.
 """
 
@@ -93,7 +95,13 @@ class DoorPass:
         self.n_passages = 0  # passages driven through to their far end
         self._best = (-1, -math.inf)  # (phase rank, -remaining) the best progress so far
         self._stalled = 0  # control periods since the last progress
-        self.refused: list[np.ndarray] = []  # centres of doors given up (door_patience)
+        # centres of doors given up (door_patience) for the goal being pursued
+        self.refused: list[np.ndarray] = []
+
+    def new_goal(self) -> None:
+        """A new goal: the doors given up for the last one may be tried again."""
+        self.refused.clear()
+        self.reset()
 
     def reset(self) -> None:
         self.door = None

@@ -298,6 +298,7 @@ class Navigator:
         # the frontier search's own path: the first plan
         next_plan_t = t + 1.0 / p.planner_frequency
         self.pursuit = Pursuit(new, t, new.path_xy, next_plan_t, progress_t=t)
+        self.door.new_goal()
         self.dwa.set_plan(new.path_xy)
         self._enter(NavState.DRIVING)
 

@@ -156,7 +156,7 @@ class ExploreParams:
     # through at speed, as it does without a noisy laser
     door_engage_width: float = 0.8
     # [s] a passage the robot gets no 0.05 m farther into for this long is given up to the
-    # DWA and the recoveries for the rest of the run
+    # DWA and the recoveries while the robot pursues the same goal
     door_patience: float = 10.0
     # [m] the door passage checks its motions with the footprint's half side grown by this
     # (the SLAM pose's error against its map): a corner a few centimetres off is not a touch

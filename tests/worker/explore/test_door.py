@@ -179,7 +179,7 @@ def test_a_gap_between_pieces_of_furniture_is_not_a_door():
 def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
     # a 0.6 m door with a post the map holds 0.15 m past it, on the axis: the robot lines
     # up and drives in, but no motion takes it farther; after door_patience (10 s) the
-    # passage is refused, and the same door is not taken up again
+    # passage is refused, and the same door is not taken up again for this goal
     p = _params()
     prob = _door_map(12)
     prob[38:42, WALL_X + 5 : WALL_X + 7] = 0.9  # x in [3.25, 3.35), y in [1.9, 2.1)
@@ -192,6 +192,8 @@ def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
     assert p.door_patience * p.controller_frequency < n < 400  # it gave up, after patience
     assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
     assert door.command(poses[-1], path, cm) is None  # refused: left to the DWA
+    door.new_goal()  # the navigator's next goal: the door may be tried again
+    assert door.command(poses[-1], path, cm) is not None
 
 
 def test_the_passage_takes_over_only_where_the_dwa_sees_the_door_tight():
