@@ -192,8 +192,10 @@ def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
     assert p.door_patience * p.controller_frequency < n < 400  # it gave up, after patience
     assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
     assert door.command(poses[-1], path, cm) is None  # refused: left to the DWA
+    start = np.array([2.3, 2.0, 0.0])
+    assert door.command(start, path, cm) is None  # from before the door too
     door.new_goal()  # the navigator's next goal: the door may be tried again
-    assert door.command(poses[-1], path, cm) is not None
+    assert door.command(start, path, cm) is not None
 
 
 def test_the_passage_takes_over_only_where_the_dwa_sees_the_door_tight():
