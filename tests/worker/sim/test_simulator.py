@@ -34,6 +34,18 @@ def test_range_noise_has_the_requested_sigma():
     assert abs(err.mean()) < 0.003
 
 
+def test_the_noise_free_scan_is_what_a_clean_laser_reads_and_draws_nothing():
+    # the audit's view (bench_safety): the noisy simulator's noise-free scan equals a
+    # noise-free simulator's, and asking for it leaves the noise stream where it was, so a
+    # run audited is the run unaudited
+    world = room_world(start=(6.0, 3.0, 0.0))
+    noisy = Simulator(world, SimParams(laser_noise_sigma=0.1), np.random.default_rng(7))
+    twin = Simulator(world, SimParams(laser_noise_sigma=0.1), np.random.default_rng(7))
+    clean = Simulator(world, SimParams(), np.random.default_rng(7))
+    np.testing.assert_array_equal(noisy.scan_noise_free(), clean.scan())
+    np.testing.assert_array_equal(noisy.scan(), twin.scan())
+
+
 def test_beams_with_no_return_read_range_max_even_with_noise():
     occ = np.zeros((1400, 1400), dtype=bool)  # 70 m x 70 m open area: nothing within 30 m
     world = World.from_array(occ, RES, start_pose=(35.0, 35.0, 0.0))
