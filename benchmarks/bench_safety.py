@@ -127,7 +127,11 @@ def main() -> None:
         )
         raise SystemExit(2)
     a, _, b = args.seeds.partition("-")
-    seeds = range(int(a), int(b or a) + 1)
+    try:
+        seeds = range(int(a), int(b or a) + 1)
+    except ValueError:
+        print(f"bench_safety: --seeds must be A or A-B, not {args.seeds!r}", file=sys.stderr)
+        raise SystemExit(2) from None
     laser = SimParams().laser
     angles = laser.angles
     # per rule: stops, false stops, missed obstacles, missed within 0.1 m
