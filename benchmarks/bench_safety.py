@@ -34,17 +34,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.explore.loop import Exploration, ExploreParams  # noqa: E402
-from worker.explore.safety import front_clearance  # noqa: E402
+from worker.explore.safety import front_clearance, median_ranges  # noqa: E402
 from worker.params import load_params_file  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
-from worker.sim.simulator import Simulator  # noqa: E402
+from worker.sim.simulator import Simulator, add_range_noise  # noqa: E402
 from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_explore import world_path  # noqa: E402
-from scipy import ndimage  # noqa: E402
 
 # (name, median beams, slack in units of the laser's noise sigma, min points)
 RULES = (
@@ -80,11 +79,9 @@ class _Moments:
 
 
 def _fires(ranges, angles, range_max, p: ExploreParams, sigma, median, k, n) -> bool:
-    if median > 1:
-        ranges = ndimage.median_filter(ranges, size=median, mode="nearest")
-    d, _ = front_clearance(
-        ranges, angles, range_max, p.footprint_half_m, p.footprint_padding, k * sigma, n
-    )
+    half, lateral = p.footprint_half_m, p.footprint_padding
+    d, _ = front_clearance(median_ranges(ranges, median), angles, range_max, half, lateral,
+                           k * sigma, n)  # fmt: skip
     return d < p.safety_distance
 
 
@@ -155,12 +152,10 @@ def main() -> None:
                 close = d_true < 0.1
                 scans = [noisy]
                 if args.drive_noise_free:  # the laser read it noise-free: noisy versions
-                    hit = true < laser.range_max
                     scans = [
-                        np.where(hit, np.clip(true + args.noise * draw_rng.standard_normal(
-                            true.shape), 0.0, laser.range_max), true)
+                        add_range_noise(true, args.noise, laser.range_max, draw_rng)
                         for _ in range(args.draws)
-                    ]  # fmt: skip
+                    ]
                 for scan in scans:
                     n_moments += 1
                     n_real += real

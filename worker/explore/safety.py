@@ -10,6 +10,14 @@ from scipy import ndimage
 from worker.explore.params import ExploreParams
 
 
+def median_ranges(ranges_m: np.ndarray, beams: int) -> np.ndarray:
+    """Each reading replaced by the median of `beams` neighbours (laser_filters' median
+    filter; the ends repeat their last reading); 1: the readings as they are."""
+    if beams <= 1:
+        return ranges_m
+    return ndimage.median_filter(np.asarray(ranges_m), size=beams, mode="nearest")
+
+
 def front_clearance(
     ranges_m: np.ndarray,
     angles: np.ndarray,
@@ -88,8 +96,7 @@ class SafetyController:
             return (p.escape_vel, self._turn)
         if v_cmd <= 0.0:
             return None
-        if self.median > 1:
-            ranges_m = ndimage.median_filter(np.asarray(ranges_m), size=self.median, mode="nearest")
+        ranges_m = median_ranges(ranges_m, self.median)
         d, side = front_clearance(
             ranges_m, self.angles, self.range_max, p.footprint_half_m, p.footprint_padding
         )

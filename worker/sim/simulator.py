@@ -27,6 +27,17 @@ class Collision:
     theta: float
 
 
+def add_range_noise(
+    ranges: np.ndarray, sigma: float, range_max: float, rng: np.random.Generator
+) -> np.ndarray:
+    """`ranges (B,)` with Gaussian range noise of `sigma` [m] on the beams that hit something
+    (one normal draw per beam, hit or not), clipped to [0, range_max]; beams reading
+    range_max (no return) keep it."""
+    hit = ranges < range_max
+    noisy = ranges + sigma * rng.standard_normal(ranges.shape[0])
+    return np.where(hit, np.clip(noisy, 0.0, range_max), ranges)
+
+
 class Simulator:
     """Steps a differential-drive robot through a World in simulated time.
 
@@ -172,13 +183,10 @@ class Simulator:
         Beams that hit nothing read exactly `range_max`; noisy readings are clipped to
         [0, range_max].
         """
-        laser = self.params.laser
         ranges = self.scan_noise_free()
         sigma = self.params.laser_noise_sigma
         if sigma > 0.0:
-            hit = ranges < laser.range_max
-            noisy = ranges + sigma * self.rng.standard_normal(ranges.shape[0])
-            ranges = np.where(hit, np.clip(noisy, 0.0, laser.range_max), ranges)
+            ranges = add_range_noise(ranges, sigma, self.params.laser.range_max, self.rng)
         return ranges
 
     def scan_noise_free(self) -> np.ndarray:
