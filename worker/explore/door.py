@@ -117,13 +117,13 @@ class DoorPass:
         costmap: GlobalCostmap,
         seen: LocalCostmap | None = None,
     ) -> tuple[float, float, str] | None:
-        """(v, w, kind) with kind "door_turn", "door" or "door_back", or None (no door
-        ahead, or nothing legal: the DWA decides). Doors and motions are judged on the SLAM
-        map's obstacles alone (`GlobalCostmap.map_lethal`): one scan of a noisy laser marks
-        a door's jambs up to two sigmas into the opening along its oblique beams, the map
-        holds where many scans agree. `seen`, the DWA's local costmap (the map and the
-        laser's marks): a door takes over only where it is narrower there than
-        door_engage_width (None: every door)."""
+        """(v, w, kind) with kind "door_turn", "door", "door_reverse" or "door_back", or
+        None (no door ahead, or nothing legal: the DWA decides). Doors and motions are
+        judged on the SLAM map's obstacles alone (`GlobalCostmap.map_lethal`): one scan of
+        a noisy laser marks a door's jambs up to two sigmas into the opening along its
+        oblique beams, the map holds where many scans agree. `seen`, the DWA's local
+        costmap (the map and the laser's marks): a door takes over only where it is
+        narrower there than door_engage_width (None: every door)."""
         p = self.params
         if path_xy is None or len(path_xy) < 3 or costmap.map_lethal.shape != costmap.shape:
             self.reset()
@@ -212,6 +212,18 @@ class DoorPass:
             # lining up and backing for room got the robot no nearer: something the map
             # does not hold is in the way, or the door is too tight to line up in
             self.refused.append(door.centre.copy())
+            self.reset()
+            return None
+        if self.phase == "through" and inside and abs(err) > 0.5 * math.pi:
+            # in the door facing back along the axis (a new goal behind the robot while it
+            # was passing): drive backwards through it rather than turn round in it, where
+            # the footprint's diagonal (1.41 times its side) may stick across the door
+            back_err = wrap_angle(err + math.pi)  # the rear's heading turns with w as well
+            self._rotating = False
+            v = -p.door_speed
+            w = max(-p.max_vel_theta, min(p.max_vel_theta, _STEER_GAIN * back_err))
+            if _legal(pose, v, w, local, p, _CHECK_TIME):
+                return v, w, "door_reverse"
             self.reset()
             return None
         threshold = 0.5 * p.door_angle if self._rotating else p.door_angle

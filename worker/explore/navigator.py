@@ -171,9 +171,12 @@ class Navigator:
                 vetoed = self._safety_veto(t, pose, ranges, shim[0], v0, w0, (0.0, 0.0))
                 if vetoed is not None:
                     return vetoed
-            status = {"rotate": "aligning", "door_turn": "aligning", "door": "driving"}.get(
-                shim[2], "recovering"
-            )
+            status = {
+                "rotate": "aligning",
+                "door_turn": "aligning",
+                "door": "driving",
+                "door_reverse": "driving",
+            }.get(shim[2], "recovering")
             return NavCommand(shim[0], shim[1], status)
         cmd = self._dwa_command(pose, v0, w0)
         if cmd.kind == "aligned":

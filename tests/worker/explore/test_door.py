@@ -358,3 +358,42 @@ def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks
     plain = dataclasses.replace(p, noisy_door_align=False, noisy_obstacle_min_prob=0.0)
     kept = plain.for_range_noise(0.1)
     assert not kept.door_align and kept.obstacle_min_prob == 0.0
+
+
+def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
+    # the robot passes a 0.7 m door westwards (-x); in the door a new goal comes up behind
+    # it and the path leads east. Turning round there sweeps the footprint's diagonal
+    # (0.57 m, 0.63 m with door_margin) through a door a few centimetres wider in the map,
+    # and less in a noisy map or off a wrong pose (Freiburg79, rbpf at 0.1 m noise, seed 5:
+    # stuck across a door for 180 s); it backs out along the axis instead and leaves the
+    # turn for where it has room
+    p = _params()
+    cm = GlobalCostmap(p)
+    cm.update(_door_map(14), RES, (0.0, 0.0))
+    xs = np.arange(4.0, 1.5, -RES)
+    west = np.column_stack((xs, np.full(len(xs), 2.0)))
+    east = west[::-1]
+    door = DoorPass(p)
+    x, y, th = 3.7, 2.03, math.pi
+    poses, kinds = [], []
+    path = west
+    for _ in range(300):
+        if path is west and x < 3.05:  # half-way through the wall: the new goal
+            path = east
+            door.new_goal()  # as Navigator._choose does
+        cmd = door.command(np.array([x, y, th]), path, cm)
+        if cmd is None:
+            break
+        v, w, kind = cmd
+        kinds.append(kind)
+        for _ in range(10):  # 0.1 s in ten sub-steps
+            x += v * math.cos(th) * 0.01
+            y += v * math.sin(th) * 0.01
+            th += w * 0.01
+        poses.append((x, y, th))
+    poses = np.array(poses)
+    assert "door_reverse" in kinds and door.n_passages == 1, "did not back out through it"
+    assert poses[-1, 0] > 3.1 + p.footprint_half_m  # the whole footprint east of the wall
+    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    back = poses[kinds.index("door_reverse") :]
+    assert np.abs(np.cos(back[:, 2]) + 1.0).max() < 0.01  # kept facing west: no turn
