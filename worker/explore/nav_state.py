@@ -96,6 +96,7 @@ class Pursuit:
     next_plan_t: float  # [s] when to replan
     progress_t: float  # [s] when the goal last got progress_step nearer
     best_gap: float = math.inf  # [m] the nearest the robot has been to the goal
+    best_route: float = math.inf  # [m] the shortest rest of the plan from the robot so far
     plan_fail_since: float | None = None  # [s] the planner failing since (PLANNING)
     ctrl_fail_since: float | None = None  # [s] no legal command since (RECOVERING)
 

@@ -261,6 +261,16 @@ def path_length(path_xy: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(path_xy, axis=0).T)))
 
 
+def remaining_length(path_xy: np.ndarray | None, xy) -> float:
+    """Length [m] of the rest of a polyline `(K, 2)` from `xy`: to its vertex nearest `xy`,
+    then along it to its end (inf for no path)."""
+    if path_xy is None or len(path_xy) == 0:
+        return math.inf
+    d = np.hypot(path_xy[:, 0] - xy[0], path_xy[:, 1] - xy[1])
+    i0 = int(np.argmin(d))
+    return float(d[i0]) + path_length(path_xy[i0:])
+
+
 def cells_in_radius(radius_m: float, resolution: float) -> np.ndarray:
     """Offsets `(K, 2) int64 [dy, dx]` of the cells whose centres lie within `radius_m`."""
     r = int(math.ceil(radius_m / resolution))

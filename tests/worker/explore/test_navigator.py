@@ -152,3 +152,48 @@ def test_the_door_passage_forward_motion_is_the_safety_controllers_to_veto():
     cmd = nav.step(0.1, pose, cmd.v, 0.0, _scan_with_point(0.3, 0.0))
     assert (cmd.status, cmd.v) == ("safety", p.escape_vel) and nav.state is NavState.SAFETY
     assert nav.safety.n_triggers == 1
+
+
+def _u_pursuit(nav: Navigator):
+    """A goal 2 m east of the robot at (0, 0), reached by a plan round a wall between them:
+    5 m north, 2 m east, 5 m south (12 m)."""
+    from worker.explore.frontiers import FrontierGoal
+    from worker.explore.nav_state import Pursuit
+
+    legs = [np.column_stack((np.zeros(51), np.linspace(0, 5, 51)))]
+    legs.append(np.column_stack((np.linspace(0, 2, 21)[1:], np.full(20, 5.0))))
+    legs.append(np.column_stack((np.full(50, 2.0), np.linspace(5, 0, 51)[1:])))
+    path = np.vstack(legs)
+    goal = FrontierGoal(np.array([2.0, 0.0]), 0.0, np.array([2.3, 0.0]), 1.0, 1.0, 1, path)
+    nav.pursuit = Pursuit(goal, 0.0, path, 1.0, progress_t=0.0)
+    return path
+
+
+def test_remaining_length_is_the_rest_of_the_plan_from_its_nearest_point():
+    from worker.explore.planner import remaining_length
+
+    nav = Navigator(ExploreParams(), ANGLES, 30.0)
+    path = _u_pursuit(nav)
+    # from (0.1, 3.0): 0.1 m to the plan's vertex (0, 3), then 2 + 2 + 5 m along it
+    assert abs(remaining_length(path, (0.1, 3.0)) - 9.1) < 1e-9
+    assert remaining_length(None, (0.0, 0.0)) == np.inf
+
+
+def test_a_robot_driving_along_a_detour_makes_progress_and_one_standing_still_does_not():
+    # explore_lite measures progress as the straight-line distance to the goal; along this
+    # plan it grows for the first 5 m and is back to 2 m only after 10 m: at 0.15 m/s (the
+    # door passage's speed) that is 67 s, over the 30 s progress_timeout
+    p = ExploreParams()
+    assert p.progress_timeout == 30.0
+    nav = Navigator(p, ANGLES, 30.0)
+    path = _u_pursuit(nav)
+    d = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))))
+    for k in range(0, 700):  # 70 s at 10 Hz, 0.15 m/s along the plan
+        t = 0.1 * k
+        s = 0.15 * t
+        xy = np.array([np.interp(s, d, path[:, 0]), np.interp(s, d, path[:, 1])])
+        assert not nav._no_progress(t, np.array([xy[0], xy[1], 0.0])), f"given up at {t} s"
+    still = Navigator(p, ANGLES, 30.0)
+    _u_pursuit(still)
+    stops = [t for t in np.arange(0.0, 40.0, 0.1) if still._no_progress(t, np.zeros(3))]
+    assert abs(stops[0] - 30.0) < 0.11  # no nearer in any sense: given up after 30 s
