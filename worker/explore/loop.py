@@ -239,6 +239,8 @@ class Exploration:
         n_reach = np.count_nonzero(self.reach)
         cov = np.count_nonzero(seen) / n_reach if n_reach else 0.0
         outcome, detail = self._judge(stop, seen, cov)
+        if len(pose_gt) and (outcome == RunOutcome.INCOMPLETE or stop.reason == "stuck"):
+            detail += "; " + end_pose_error_line(T, pose_est[-1], pose_gt[-1])
         n0 = self.n_collisions0
         col = sim.collisions[n0] if len(sim.collisions) > n0 else None
         goals = tuple(nav.stats.goals)
@@ -263,6 +265,20 @@ class Exploration:
             nav_cpu_s=rec.cpu[: rec.n].copy(),
             wall_s=time.perf_counter() - self.wall0,
         )
+
+
+def end_pose_error_line(T_world_map: np.ndarray, est: np.ndarray, gt: np.ndarray) -> str:
+    """Where the SLAM pose was at the end, against the truth, in one clause: a robot stuck or
+    giving up with its pose far off drove on a map too wrong to navigate, one with its pose
+    right did not (the paths aligned as for the coverage, `align_map_to_world`)."""
+    c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
+    x = T_world_map[0] + c * est[0] - s * est[1]
+    y = T_world_map[1] + s * est[0] + c * est[1]
+    dth = abs(math.remainder(est[2] + T_world_map[2] - gt[2], math.tau))
+    return (
+        f"at the end the SLAM pose was {math.hypot(x - gt[0], y - gt[1]):.2f} m and "
+        f"{dth:.2f} rad from the true one (paths aligned)"
+    )
 
 
 def judge_outcome(

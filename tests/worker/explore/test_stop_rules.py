@@ -141,6 +141,27 @@ def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unsee
     assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
     assert "of the known map changed" in result.stop_detail and "MSE" in result.stop_detail
+    # oracle SLAM: the pose it drove on was the true one, so the loss is the navigation's
+    assert result.stop_detail.endswith(
+        "; at the end the SLAM pose was 0.00 m and 0.00 rad from the true one (paths aligned)"
+    )
+
+
+def test_the_end_pose_error_is_the_aligned_estimate_against_the_truth():
+    from worker.explore.loop import end_pose_error_line
+
+    # T_world_map (1, 2, pi/2) takes the estimate (1, 0, 0) to (1, 3, pi/2); the truth is
+    # (1, 3.5, pi/2 + 0.1): 0.5 m and 0.1 rad off
+    line = end_pose_error_line(
+        np.array([1.0, 2.0, np.pi / 2]), np.array([1.0, 0.0, 0.0]),
+        np.array([1.0, 3.5, np.pi / 2 + 0.1]),
+    )  # fmt: skip
+    assert (
+        line == "at the end the SLAM pose was 0.50 m and 0.10 rad from the true one (paths aligned)"
+    )
+    # headings compared across the +-pi seam: 3.1 and -3.1 rad are 0.08 rad apart
+    line = end_pose_error_line(np.zeros(3), np.array([0.0, 0.0, 3.1]), np.array([0.0, 0.0, -3.1]))
+    assert "0.08 rad" in line
 
 
 def _state(t=0.0, pose_gt=(0.0, 0.0, 0.0), pose_est=None, status="driving", **kw):
