@@ -35,12 +35,17 @@ def _find(path, x, y, local, p):
     return find_door(*_ahead(path, x, y, p), local, p)
 
 
-def _drive_through(p: ExploreParams, cm: GlobalCostmap, pose, path, steps: int = 300):
-    """Unicycle integration of DoorPass's commands at 10 Hz; the poses and the kinds."""
+def _drive_through(p: ExploreParams, cm: GlobalCostmap, pose, path, steps: int = 300, replan=None):
+    """Unicycle integration of DoorPass's commands at 10 Hz; the poses and the kinds.
+    replan(x, y, door): a new path for a new goal (the passage told so), or None."""
     door = DoorPass(p)
     poses, kinds = [np.array(pose, dtype=float)], []
     x, y, th = pose
     for _ in range(steps):
+        new = None if replan is None else replan(x, y, door)
+        if new is not None:
+            path = new
+            door.new_goal()  # as Navigator._choose does
         cmd = door.command(np.array([x, y, th]), path, cm)
         if cmd is None:
             break
@@ -373,25 +378,12 @@ def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
     xs = np.arange(4.0, 1.5, -RES)
     west = np.column_stack((xs, np.full(len(xs), 2.0)))
     east = west[::-1]
-    door = DoorPass(p)
-    x, y, th = 3.7, 2.03, math.pi
-    poses, kinds = [], []
-    path = west
-    for _ in range(300):
-        if path is west and x < 3.05:  # half-way through the wall: the new goal
-            path = east
-            door.new_goal()  # as Navigator._choose does
-        cmd = door.command(np.array([x, y, th]), path, cm)
-        if cmd is None:
-            break
-        v, w, kind = cmd
-        kinds.append(kind)
-        for _ in range(10):  # 0.1 s in ten sub-steps
-            x += v * math.cos(th) * 0.01
-            y += v * math.sin(th) * 0.01
-            th += w * 0.01
-        poses.append((x, y, th))
-    poses = np.array(poses)
+    goals = [east]  # half-way through the wall, a new goal
+
+    def replan(x, y, door):
+        return goals.pop() if goals and x < 3.05 else None
+
+    poses, kinds, door = _drive_through(p, cm, (3.7, 2.03, math.pi), west, replan=replan)
     assert "door_reverse" in kinds and door.n_passages == 1, "did not back out through it"
     assert poses[-1, 0] > 3.1 + p.footprint_half_m  # the whole footprint east of the wall
     assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
