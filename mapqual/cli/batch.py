@@ -206,24 +206,32 @@ def batch(
     choices = (worlds or [], runs, seeds, slam, laser_noise)
     specs, loaded = _specs(experiment, choices, params_file, time_limit, only, allow_outside)
     bdir = BatchDir(out)
-    records = bdir.load_records(s.key for s in specs)
-    redo = {k for k, r in records.items() if retry_failed and r["status"] != RecordStatus.DONE}
-    todo = [s for s in specs if s.key not in records or s.key in redo]
-    print(f"{len(specs)} runs, {len(specs) - len(todo)} finished, {len(todo)} to do -> {out}",
-          file=sys.stderr)  # fmt: skip
     if dry_run:
+        todo = _todo(bdir, specs, retry_failed)
         for s in specs:
             print(f"{s.key}  {'todo' if s in todo else RecordStatus.DONE}  {s.label}")
         return
     command = "mapqual " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
-    _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed, sim_log,
-             allow_outside=allow_outside)  # fmt: skip
+    with bdir.lock():  # one batch process per folder
+        todo = _todo(bdir, specs, retry_failed)
+        bdir.describe(command=command, runs=len(specs), mode="celery" if celery else "local")
+        _execute(specs, todo, loaded, bdir, workers or _cores(), celery, retry_failed,
+                 sim_log, allow_outside=allow_outside)  # fmt: skip
     if train_model is not None:
         from mapqual.cli.predict import train_to
 
         dirs = sorted({Path(s.world_path).parent for s in specs})  # where its worlds lie
         train_to([out], train_model, dirs, command, allow_outside)
+
+
+def _todo(bdir, specs, retry_failed: bool) -> list[Any]:
+    """The runs still to do (no record yet, or --retry-failed and not done), and one line."""
+    records = bdir.load_records(s.key for s in specs)
+    redo = {k for k, r in records.items() if retry_failed and r["status"] != RecordStatus.DONE}
+    todo = [s for s in specs if s.key not in records or s.key in redo]
+    print(f"{len(specs)} runs, {len(specs) - len(todo)} finished, {len(todo)} to do -> "
+          f"{bdir.root}", file=sys.stderr)  # fmt: skip
+    return todo
 
 
 def _specs(

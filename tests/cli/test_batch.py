@@ -368,3 +368,23 @@ def test_a_batch_retrains_the_prediction_model_on_its_runs(tmp_path):
                  "--model", "model.json", "--json")  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["b_mean_t"]["median"] > 0
+
+
+def test_a_second_batch_on_a_folder_in_use_is_refused_and_changes_nothing(worlds, tmp_path):
+    # two processes on one OUT would run the same runs twice and write each other's records
+    # and jobs over (seen: "result not stored (run 54: cannot go to done from failed)")
+    from worker.batch.state import BatchDir
+
+    env = {"DATABASE_URL": f"sqlite:///{tmp_path / 'm.db'}"}
+    args = ["batch", str(worlds / "rooms.yaml"), "--seeds", "1", "--slam", "odometry",
+            "--time-limit", "20", "--workers", "1", "-o", "out"]  # fmt: skip
+    out = BatchDir(tmp_path / "out")
+    with out.lock():  # another batch process holds the folder
+        r = _mapqual(tmp_path, env, *args)
+        assert r.returncode == 2, r.stderr
+        assert "is in use by another mapqual batch" in r.stderr
+        assert f"(pid {os.getpid()})" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+        assert sorted(p.name for p in out.root.iterdir()) == [".lock"]  # nothing written
+    r = _mapqual(tmp_path, env, *args)  # the lock goes with its holder
+    assert r.returncode == 0, r.stderr
+    assert len(_csv(out.root / "runs.csv")) == 1

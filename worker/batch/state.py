@@ -7,23 +7,27 @@ complete record or none, and resuming re-does only the runs without one.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
 import uuid
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from worker.batch.experiment import RunSpec
+from worker.errors import InputError
 from worker.report.summary import RunSummary
 from worker.status import RecordStatus
 
 RECORD = "record.json"
 BATCH = "batch.json"
 JOURNAL = "journal.jsonl"
+LOCK = ".lock"  # held by the batch process writing the folder (BatchDir.lock)
 
 
 def now_iso() -> str:
@@ -84,6 +88,29 @@ class BatchDir:
         self.root.mkdir(parents=True, exist_ok=True)
         _write_atomic(path, json.dumps({"batch_id": bid, "created": now_iso()}, indent=2) + "\n")
         return bid
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the folder for one batch process: a second one on the same OUT would run
+        the same runs again and write their records and the database's jobs over the first's.
+        An exclusive flock on OUT/.lock (released by the kernel when the process ends, killed
+        or not, so a stale lock cannot outlive a crash); held: InputError."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.root / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+                raise InputError(
+                    f"{self.root} is in use by another mapqual batch (pid {holder}); wait for "
+                    "it to end or give another -o"
+                ) from None
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            yield
+        finally:
+            os.close(fd)  # closing the last descriptor releases the lock
 
     def describe(self, **info: Any) -> None:
         """Store what the latest invocation asked for beside the batch id (for the report)."""
