@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from worker.errors import SlamFailed
+from worker.evaluate import se2
 from worker.explore.coverage import (
     align_map_to_world,
     coverage,
@@ -271,13 +272,10 @@ def end_pose_error_line(T_world_map: np.ndarray, est: np.ndarray, gt: np.ndarray
     """Where the SLAM pose was at the end, against the truth, in one clause: a robot stuck or
     giving up with its pose far off drove on a map too wrong to navigate, one with its pose
     right did not (the paths aligned as for the coverage, `align_map_to_world`)."""
-    c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
-    x = T_world_map[0] + c * est[0] - s * est[1]
-    y = T_world_map[1] + s * est[0] + c * est[1]
-    dth = abs(math.remainder(est[2] + T_world_map[2] - gt[2], math.tau))
+    err = se2.relative(gt, se2.compose(T_world_map, est))
     return (
-        f"at the end the SLAM pose was {math.hypot(x - gt[0], y - gt[1]):.2f} m and "
-        f"{dth:.2f} rad from the true one (paths aligned)"
+        f"at the end the SLAM pose was {math.hypot(err[0], err[1]):.2f} m and "
+        f"{abs(err[2]):.2f} rad from the true one (paths aligned)"
     )
 
 
