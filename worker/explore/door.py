@@ -28,9 +28,10 @@ regions must each be at least door_wall_min long, and the path must cross the li
 them; every gap between furniture stays the DWA's, since the map alone (the passage's judge)
 may not hold a thin chair leg the laser sees. A passage the robot makes no progress in for
 door_patience is given up for the goal being pursued (`refused`; the next goal may try it
-again: what stalled it, a safety stop on a noisy reading, a chair, may be gone), and a
-door is taken only where the DWA's
-local costmap shows it narrower than door_engage_width.
+again: what stalled it, a safety stop on a noisy reading, a chair, may be gone), and a door
+is taken only where the DWA's local costmap shows it narrower than door_engage_width. A
+robot in a door facing back along it (a new goal behind) reverses out rather than turning
+round in the door.
 """
 
 from __future__ import annotations
