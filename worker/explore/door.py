@@ -59,6 +59,9 @@ _AT_PRE = 0.04  # [m] the pre-door point is reached this near
 _PRE_DISTANCES = (0.35, 0.5, 0.65, 0.8)  # [m] pre-door points tried, before the door's entry
 _TURN_WEIGHT = 0.2  # [m/rad] heading error counted as distance when judging progress
 _TRIES = 4  # places of one tight stretch of the path tried as a door at most
+# a noisy reading this many sigmas short is what the safety controller's band must allow for
+_SAFETY_SIGMAS = 2.0
+_REVERSE_MAX = 1.0  # [m] the farthest the robot backs to the pre-door point
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,11 +90,16 @@ class Door:
 class DoorPass:
     """Drives the robot through the first door on its path (see the module)."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: ExploreParams, range_noise: float = 0.0):
+        """range_noise: the laser's range noise sigma [m]: a forward approach is one the
+        safety controller would let pass with readings _SAFETY_SIGMAS of it short."""
         self.params = params
+        # [m] how far ahead of the footprint's front a forward approach keeps the map clear
+        self.front_reach = params.safety_distance + _SAFETY_SIGMAS * float(range_noise)
         self.door: Door | None = None
         self.phase = "through"  # "approach" (to the pre-door point) or "through"
         self._rotating = False
+        self._reverse = False  # the approach backs to the pre-door point
         self._local: LocalCostmap | None = None  # the map's obstacles around the robot
         self.n_passages = 0  # passages driven through to their far end
         self._best = (-1, -math.inf)  # (phase rank, -remaining) the best progress so far
@@ -108,6 +116,7 @@ class DoorPass:
         self.door = None
         self.phase = "through"
         self._rotating = False
+        self._reverse = False
         self._best = (-1, -math.inf)
         self._stalled = 0
 
@@ -155,7 +164,9 @@ class DoorPass:
                 return None  # the DWA sees this door wide enough: it drives through at speed
             # the pre-door point (a few footprint spins) only for a door taken up, not for
             # each one found and left to the DWA
-            pre = _pre_door_point(found.centre, found.axis, found.s_in, local, p)
+            pre = _pre_door_point(
+                found.centre, found.axis, found.s_in, local, p, pose[:2], self.front_reach
+            )
             self.door = found = dataclasses.replace(found, pre=pre)
             off = found.frame(pose)[1]
             self.phase = "approach" if pre is not None and abs(off) > _ON_AXIS else "through"
@@ -195,12 +206,25 @@ class DoorPass:
             elif np.hypot(*(door.pre - pose[:2])) < _AT_PRE:
                 self.phase = "through"
                 self._rotating = False
+            if self.phase == "through":
+                self._reverse = False
         u = door.axis
         if self.phase == "approach":
             target = door.pre
             vec = target - pose[:2]
             dist = float(np.hypot(*vec))
-            err = wrap_angle(math.atan2(vec[1], vec[0]) - float(pose[2]))
+            if (
+                not self._reverse
+                and dist <= _REVERSE_MAX
+                and not _front_clear(pose[:2], target, local, p, self.front_reach)
+            ):
+                # driving there forwards brings a wall into the safety controller's band
+                # (a deep jamb beside the pre-door point, met at an angle): a noisy reading
+                # of it stops the robot again and again; it backs there instead, facing
+                # away from that wall, on a stretch its laser has just seen
+                self._reverse = True
+            heading = math.atan2(vec[1], vec[0]) + (math.pi if self._reverse else 0.0)
+            err = wrap_angle(heading - float(pose[2]))
             remaining = dist + (door.s_out - door.frame(target)[0])
         else:
             target = door.centre + (door.s_out + half + 0.1) * u
@@ -239,8 +263,10 @@ class DoorPass:
             v = p.door_speed if self.phase == "through" else min(p.door_speed, max(0.05, dist))
             w = max(-p.max_vel_theta, min(p.max_vel_theta, _STEER_GAIN * err))
             check = _CHECK_TIME if self.phase == "through" else min(_CHECK_TIME, dist / v)
+            if self.phase == "approach" and self._reverse:
+                v = -v  # err is the rear's heading error: w turns it the same way
             if _legal(pose, v, w, local, p, check):
-                return v, w, "door"
+                return v, w, "door" if v > 0.0 else "door_reverse"
         # neither the turn nor the drive is legal here: back up along the heading for room
         v = p.back_out_speed_ratio * p.escape_vel
         if a < door.s_out and _legal(pose, v, 0.0, local, p, _CHECK_TIME):
@@ -407,23 +433,61 @@ def _tight_stretch(centre, u, local: LocalCostmap, p: ExploreParams) -> tuple[fl
     return float(s[lo]), float(s[hi])
 
 
-def _pre_door_point(centre, u, s_in: float, local: LocalCostmap, p: ExploreParams):
+def _pre_door_point(
+    centre, u, s_in: float, local: LocalCostmap, p: ExploreParams, start=None, reach=0.0
+):
     """The nearest point on the axis before the door (_PRE_DISTANCES before its entry) where
     the footprint grown by door_margin, facing along the axis, fits and can turn on the spot
-    (failing that, where it fits at all), or None."""
+    and which the robot at `start` (None: not asked) can drive to forwards with the map's
+    obstacles out of the safety band `reach` [m] ahead of it (`_front_clear`); failing
+    that, the nearest where it fits and can turn; failing that, where it fits at all; or
+    None."""
     th = math.atan2(u[1], u[0])
     half = p.footprint_half_m + p.door_margin
     spin = 2.0 * math.pi
-    for need_spin in (True, False):
-        for dist in _PRE_DISTANCES:
-            q = centre + (s_in - dist) * u
-            if need_spin:
-                ok = _motion_legal(q, th, 0.0, 1.0, spin, local, half, p)
-            else:
-                ok = _motion_legal(q, th, 0.0, 0.0, 0.0, local, half, p)
-            if ok:
+    fits: list[np.ndarray] = []
+    for dist in _PRE_DISTANCES:
+        q = centre + (s_in - dist) * u
+        if _motion_legal(q, th, 0.0, 1.0, spin, local, half, p):
+            if start is None or _front_clear(start, q, local, p, reach):
                 return q
+            fits.append(q)
+    if fits:
+        return fits[0]
+    for dist in _PRE_DISTANCES:
+        q = centre + (s_in - dist) * u
+        if _motion_legal(q, th, 0.0, 0.0, 0.0, local, half, p):
+            return q
     return None
+
+
+def _front_clear(start, end, local: LocalCostmap, p: ExploreParams, reach: float) -> bool:
+    """Whether the robot driving straight from `start` to `end` [m], facing `end`, keeps
+    every obstacle cell of `local` out of the safety controller's band (`safety.
+    front_clearance`: ahead of the footprint's front by less than `reach` [m], within its
+    half side plus footprint_padding across) at every point of the way (every half cell)."""
+    start = np.asarray(start, dtype=float)
+    vec = np.asarray(end, dtype=float) - start
+    n = float(np.hypot(*vec))
+    if n < 1e-6:
+        return True
+    u = vec / n
+    half = p.footprint_half_m
+    res = local.resolution
+    iy, ix = np.nonzero(local.lethal)
+    cx = local.origin[0] + (ix + 0.5) * res - start[0]
+    cy = local.origin[1] + (iy + 0.5) * res - start[1]
+    near = np.hypot(cx, cy) <= n + half + reach + 2.0 * half + res
+    cx, cy = cx[near], cy[near]
+    if len(cx) == 0:
+        return True
+    s = np.linspace(0.0, n, int(n / (0.5 * res)) + 2)
+    along = (cx * u[0] + cy * u[1])[None, :] - s[:, None]
+    across = np.abs(u[0] * cy - u[1] * cx)[None, :]
+    # a cell counts from its near face (half a cell nearer than its centre)
+    ahead = along - half - 0.5 * res
+    band = (along > half) & (ahead < reach) & (across < half + p.footprint_padding)
+    return not bool(band.any())
 
 
 def _components(lethal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -52,7 +52,7 @@ class Navigator:
         self.planner = GlobalPlanner(params, self.closed)
         self.dwa = DwaPlanner(params)
         self.shim = HeadingShim(params)
-        self.door = DoorPass(params)
+        self.door = DoorPass(params, range_noise)
         median = params.safety_median_beams if range_noise > 0.0 else 1
         self.safety = SafetyController(params, self.angles, self.range_max, median)
         self.local: LocalCostmap | None = None
