@@ -12,7 +12,10 @@ robot's door-passing behaviour does:
    midpoint is the door's centre, the normal of the line between them its axis (not the
    plan's chord through the door, which may cross a thick wall 0.6 rad off it);
 2. a pre-door point on the axis, where the footprint (with door_margin) fits and can turn on
-   the spot; the robot, when off the axis, turns towards it and drives there;
+   the spot, and which the robot, when off the axis, can drive to with the map's walls out
+   of the safety controller's band (safety_distance plus two sigmas of range noise ahead);
+   it turns towards it and drives there, or, where no such point is (a jamb that is a deep
+   wall block beside the axis), turns its back to it and reverses there;
 3. it turns on the spot to face along the axis, and drives through at door_speed, steering
    back onto the axis.
 
