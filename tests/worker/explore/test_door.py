@@ -35,10 +35,22 @@ def _find(path, x, y, local, p):
     return find_door(*_ahead(path, x, y, p), local, p)
 
 
-def _drive_through(p: ExploreParams, cm: GlobalCostmap, pose, path, steps: int = 300, replan=None):
+def _drive_through(
+    p: ExploreParams,
+    cm: GlobalCostmap,
+    pose,
+    path,
+    steps: int = 300,
+    replan=None,
+    *,
+    range_noise: float = 0.0,
+    phases: list[str] | None = None,
+):
     """Unicycle integration of DoorPass's commands at 10 Hz; the poses and the kinds.
-    replan(x, y, door): a new path for a new goal (the passage told so), or None."""
-    door = DoorPass(p)
+    replan(x, y, door): a new path for a new goal (the passage told so), or None.
+    range_noise: the passage's (default 0); phases: a list that gets the passage's phase
+    after each command."""
+    door = DoorPass(p, range_noise)
     poses, kinds = [np.array(pose, dtype=float)], []
     x, y, th = pose
     for _ in range(steps):
@@ -51,6 +63,8 @@ def _drive_through(p: ExploreParams, cm: GlobalCostmap, pose, path, steps: int =
             break
         v, w, kind = cmd
         kinds.append(kind)
+        if phases is not None:
+            phases.append(door.phase)
         for _ in range(10):  # 0.1 s in ten sub-steps
             x += v * math.cos(th) * 0.01
             y += v * math.sin(th) * 0.01
@@ -427,22 +441,10 @@ def _approach_beside_a_deep_jamb(x0_cell: int, noise_seeds=range(5)):
     def scan(q):
         return cast_scan(occ, RES, 0.0, 0.0, q[0], q[1], q[2], angles, rmax)
 
-    # the same drive as _drive_through, with the passage's phase of each command recorded
-    door = DoorPass(p, 0.1)
-    poses, kinds, phases = [np.array([*start, -0.6])], [], []
-    x, y, th = poses[0]
-    for _ in range(600):
-        cmd = door.command(np.array([x, y, th]), path, cm)
-        if cmd is None:
-            break
-        kinds.append(cmd[2])
-        phases.append(door.phase)
-        for _ in range(10):
-            x += cmd[0] * math.cos(th) * 0.01
-            y += cmd[0] * math.sin(th) * 0.01
-            th += cmd[1] * 0.01
-        poses.append(np.array([x, y, th]))
-    poses = np.array(poses)
+    phases: list[str] = []
+    poses, kinds, door = _drive_through(
+        p, cm, (*start, -0.6), path, steps=600, range_noise=0.1, phases=phases
+    )
     steps = zip(kinds, phases, strict=True)
     forward = [i for i, (k, ph) in enumerate(steps) if k == "door" and ph == "approach"]
     clear = [
