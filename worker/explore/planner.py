@@ -20,8 +20,8 @@ class DijkstraSearch:
         self.shape = (0, 0)
         self.run_id = 0
         self.potential = np.zeros((0, 0))
-        self.parent = np.zeros((0, 0), dtype=np.int64)
-        self.stamp = np.zeros((0, 0), dtype=np.int64)
+        self.parent = np.zeros((0, 0), dtype=np.int32)
+        self.stamp = np.zeros((0, 0), dtype=np.int32)
         self.queue = np.zeros(0, dtype=np.int64)
 
     def run(
@@ -42,8 +42,8 @@ class DijkstraSearch:
         if costmap.shape != self.shape:
             self.shape = costmap.shape
             self.potential = np.zeros(self.shape)
-            self.parent = np.zeros(self.shape, dtype=np.int64)
-            self.stamp = np.zeros(self.shape, dtype=np.int64)
+            self.parent = np.zeros(self.shape, dtype=np.int32)
+            self.stamp = np.zeros(self.shape, dtype=np.int32)
             self.run_id = 0
         self.run_id += 1
         allow = params.allow_unknown if allow_unknown is None else allow_unknown

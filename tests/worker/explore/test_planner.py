@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra as sp_dijkstra
 
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.params import ExploreParams
-from worker.explore.planner import DijkstraSearch, GlobalPlanner, path_length
+from worker.explore.planner import DijkstraSearch, GlobalPlanner, path_length, planner_blocked_cost
 
 RES = 0.05
 
@@ -181,3 +183,44 @@ def test_pocket_escape_crosses_no_inscribed_gap_beyond_the_escape_radius():
     assert cm.inflated[iy[far], ix[far]].max() < 253
     crossing = path[np.argmin(np.abs(path[:, 0] - 3.025))]
     assert 4.75 < crossing[1] < 5.25
+
+
+def test_potentials_match_scipy_dijkstra_on_a_large_random_costmap():
+    """Every cell's potential, the search run to its end (no target), against
+    scipy.sparse.csgraph's Dijkstra on the same graph built independently: a step into a cell
+    costs (neutral + factor * cost) times 1 or sqrt(2), unknown cells 253 times that. The map
+    is large enough that the search's heap outgrows its first 4,096 entries."""
+    rng = np.random.default_rng(11)
+    n = 700
+    prob = np.where(rng.random((n, n)) < 0.001, 0.9, rng.uniform(0.0, 0.2, (n, n)))
+    prob[rng.random((n, n)) < 0.05] = np.nan
+    cm = _costmap(prob)
+    p = ExploreParams(allow_unknown=True)
+    sy, sx = n // 2, n // 2
+    cm.inflated[sy - 2 : sy + 3, sx - 2 : sx + 3] = 0  # no escaping at the start
+    cm.unknown[sy - 2 : sy + 3, sx - 2 : sx + 3] = False
+    search = DijkstraSearch()
+    found = search.run(cm, (sx, sy), np.zeros(cm.shape, dtype=bool), p, escape_m=0.0)
+    assert len(found) == 0
+
+    blocked = planner_blocked_cost(p)
+    c = cm.inflated.astype(float)
+    enter = np.where(cm.unknown, 253.0, p.neutral_cost + p.cost_factor * c)
+    enter[cm.inflated >= blocked] = np.inf  # lethal and inscribed (blocked <= 253) alike
+    idx = np.arange(n * n).reshape(n, n)
+    rows, cols, w = [], [], []
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)):
+        src = idx[max(0, -dy) : n - max(0, dy), max(0, -dx) : n - max(0, dx)]
+        dst = idx[max(0, dy) : n - max(0, -dy), max(0, dx) : n - max(0, -dx)]
+        cost = enter.reshape(-1)[dst.reshape(-1)] * math.hypot(dy, dx)
+        ok = np.isfinite(cost)
+        rows.append(src.reshape(-1)[ok])
+        cols.append(dst.reshape(-1)[ok])
+        w.append(cost[ok])
+    graph = coo_matrix((np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n * n, n * n)).tocsr()  # fmt: skip
+    ref = sp_dijkstra(graph, directed=True, indices=sy * n + sx).reshape(n, n)
+    settled = search.stamp == search.run_id
+    assert np.array_equal(settled, np.isfinite(ref))
+    assert settled.sum() > 100_000
+    np.testing.assert_allclose(search.potential[settled], ref[settled], rtol=1e-9)
