@@ -347,3 +347,59 @@ def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     for _ in range(100):
         x, y, th = x + v * math.cos(th) * 0.01, y + v * math.sin(th) * 0.01, th + w * 0.01
     assert np.all(gap(x, y, th) >= before - 1e-3)
+
+
+def _depth(pts, x, y, th, half=0.2):
+    """[m] how far the points reach into the square footprint (half side `half`) at (x, y,
+    th): the largest of their penetrations, negative when all are outside."""
+    c, s = math.cos(th), math.sin(th)
+    u = np.abs((pts[:, 0] - x) * c + (pts[:, 1] - y) * s)
+    q = np.abs(-(pts[:, 0] - x) * s + (pts[:, 1] - y) * c)
+    return float(np.max(half - np.maximum(u, q)))
+
+
+def test_edge_marks_moved_out_let_the_robot_go_along_a_wall_but_not_into_it():
+    # Oracle office_d_furnitures seed 3 at 0.1 m noise: a wall 0.15 m from the footprint's
+    # right side, readings of it 1.5-2 sigmas short landing 1 cm inside that side at every
+    # scan. Kept as obstacles, they make the robot collide where it stands (every motion
+    # illegal: it was stuck 180 s); moved out, it may go along the wall or away, not into it.
+    from worker.explore.navigator import Navigator
+
+    angles = np.linspace(-2.35, 2.35, 541)
+    pose = np.array([1.5, 1.5, 0.0])  # right side at y = 1.3
+    marks = np.column_stack((np.linspace(1.32, 1.68, 10), np.full(10, 1.29)))
+    free = np.full((60, 80), 0.05, dtype=np.float32)
+    legal = {}
+    for noise in (0.0, 0.1):
+        nav = Navigator(ExploreParams(), angles, 30.0, range_noise=noise)
+        nav.update_map(free, RES, (0.0, 0.0), True)
+        nav.local.add_points(0.0, marks)
+        L = nav.local
+        L.build(pose[0], pose[1], nav.costmap, pose[2])
+        here = ck.footprint_collides(
+            L.lethal, L.near, L.inner, *L.origin, RES, *pose, nav.params.footprint_half_m
+        )
+        legal[noise] = {
+            (v, w): dk.motion_legal(
+                *pose, v, w, 1.0, L.lethal, L.near, L.inner, *L.origin, RES, 0.2, 0.025
+            )
+            for v in (-0.1, 0.0, 0.1)
+            for w in (-0.3, 0.0, 0.3)
+            if (v, w) != (0.0, 0.0)
+        }
+        assert here == (noise == 0.0)  # noise-free: a mark touching the robot is real
+    assert not any(legal[0.0].values())
+    ok = legal[0.1]
+    assert ok[(0.1, 0.0)] and ok[(-0.1, 0.0)]  # along the wall, both ways
+    assert ok[(0.1, 0.3)]  # away from it
+    assert not ok[(0.1, -0.3)] and not ok[(0.0, -0.3)]  # into it
+    # independent check: no legal motion takes the footprint more than a cell deeper into
+    # the marks than it stands (it stands 1 cm deep)
+    start = _depth(marks, *pose)
+    for (v, w), is_legal in ok.items():
+        if not is_legal:
+            continue
+        x, y, th = pose
+        for _ in range(100):
+            x, y, th = x + v * math.cos(th) * 0.01, y + v * math.sin(th) * 0.01, th + w * 0.01
+            assert _depth(marks, x, y, th) <= start + RES
