@@ -337,7 +337,6 @@ class LocalCostmap:
             self._near, self._inner, g_lethal, g_cost, int(g_oy), int(g_ox), self._reach,
             float(x), float(y), float(theta or 0.0),
             self.params.footprint_half_m if theta is not None else -1.0, clear_touching,
-            self.params.edge_marks_out and not clear_touching,
         )  # fmt: skip
 
 

@@ -54,52 +54,10 @@ def disc_offsets(radius_cells: float) -> np.ndarray:
     return np.column_stack((dy[keep], dx[keep])).astype(np.int64)
 
 
-@njit(cache=True, inline="always")
-def _outside(iy, ix, ox, oy, resolution, rx, ry, c, s, touch, ucy, ucx, inner_widths):
-    """The first cell from (iy, ix) outwards along the footprint's axis nearer to it
-    (robot frame x when the cell's centre lies further along x than along y, else y) that
-    the footprint (cos c, sin s at (rx, ry)) does not overlap (centre at least `touch` out
-    along an axis, as `footprint_collides` tests) and whose inner disc (`inner_widths`)
-    does not cover the robot's cell (ucy, ucx) (which `footprint_collides` would take for a
-    collision): so that the robot where it stands is clear of it."""
-    dx = ox + (ix + 0.5) * resolution - rx
-    dy = oy + (iy + 0.5) * resolution - ry
-    u = dx * c + dy * s
-    v = -dx * s + dy * c
-    if abs(u) >= abs(v):
-        ax, ay = (c, s) if u >= 0.0 else (-c, -s)
-    else:
-        ax, ay = (-s, c) if v >= 0.0 else (s, -c)
-    qx = ox + (ix + 0.5) * resolution
-    qy = oy + (iy + 0.5) * resolution
-    jy, jx = iy, ix
-    for _ in range(16):  # half-cell steps: about two cells at most
-        qx += ax * 0.5 * resolution
-        qy += ay * 0.5 * resolution
-        jx = int(math.floor((qx - ox) / resolution))
-        jy = int(math.floor((qy - oy) / resolution))
-        ddx = ox + (jx + 0.5) * resolution - rx
-        ddy = oy + (jy + 0.5) * resolution - ry
-        if abs(ddx * c + ddy * s) < touch and abs(-ddx * s + ddy * c) < touch:
-            continue
-        if _covers(inner_widths, jy, jx, ucy, ucx):
-            continue
-        break
-    return jy, jx
-
-
-@njit(cache=True, inline="always")
-def _covers(inner_widths, iy, ix, ucy, ucx):
-    """Whether the inner disc (`inner_widths`) of cell (iy, ix) covers cell (ucy, ucx)."""
-    r = inner_widths.shape[0] // 2
-    my = ucy - iy
-    return abs(my) <= r and abs(ucx - ix) <= inner_widths[my + r]
-
-
 @njit(cache=True)
 def local_layers(
     px, py, ox, oy, resolution, n, near_widths, inner_widths, g_lethal, g_cost, g_oy, g_ox,
-    reach, rx, ry, rth, rhalf, clear_touching=False, push_out=False,
+    reach, rx, ry, rth, rhalf, clear_touching=False,
 ):  # fmt: skip
     """Local costmap of the window with lower-left corner (ox, oy), `n x n` cells.
 
@@ -118,11 +76,6 @@ def local_layers(
     cells are left out only when wholly under the footprint (a beam ending just at the
     robot's edge may be a real obstacle touching it), or, with clear_touching, when the
     footprint overlaps them at all (to find a way out once the robot touches something).
-    push_out (not with clear_touching): a scan cell that would make the robot collide where
-    it stands (the footprint overlaps it, or its inner disc covers the robot's cell) but is
-    not wholly under it is not marked; the first cell out along the footprint's axis nearer
-    to it (the robot frame's x or y, whichever it lies further along) that would not is
-    marked instead, so that moving along it or away is legal and moving into it is not.
     """
     lethal = np.zeros((n, n), dtype=np.bool_)
     cells = np.empty((px.shape[0], 2), dtype=np.int64)
@@ -136,10 +89,10 @@ def local_layers(
     touch = rhalf + 0.5 * resolution * (abs(c) + abs(s))
     under = np.zeros((n, n), dtype=np.bool_)
     overlap = np.zeros((n, n), dtype=np.bool_)
-    ucy = int(math.floor((ry - oy) / resolution))  # the robot's cell
-    ucx = int(math.floor((rx - ox) / resolution))
     if rhalf > 0.0:
         b = int(math.ceil(2.0 * touch / resolution)) + 1
+        ucy = int(math.floor((ry - oy) / resolution))
+        ucx = int(math.floor((rx - ox) / resolution))
         for iy in range(max(0, ucy - b), min(n, ucy + b + 1)):
             dy = oy + (iy + 0.5) * resolution - ry
             for ix in range(max(0, ucx - b), min(n, ucx + b + 1)):
@@ -153,18 +106,11 @@ def local_layers(
         iy = int(math.floor((py[i] - oy) / resolution))
         if not (0 <= ix < n and 0 <= iy < n) or lethal[iy, ix] or under[iy, ix]:
             continue
-        if clear_touching and overlap[iy, ix]:
-            continue
-        if push_out and (overlap[iy, ix] or _covers(inner_widths, iy, ix, ucy, ucx)):
-            iy, ix = _outside(
-                iy, ix, ox, oy, resolution, rx, ry, c, s, touch, ucy, ucx, inner_widths
-            )
-            if not (0 <= ix < n and 0 <= iy < n) or lethal[iy, ix]:
-                continue
-        lethal[iy, ix] = True
-        cells[k, 0] = iy
-        cells[k, 1] = ix
-        k += 1
+        if not (clear_touching and overlap[iy, ix]):
+            lethal[iy, ix] = True
+            cells[k, 0] = iy
+            cells[k, 1] = ix
+            k += 1
     gh, gw = g_cost.shape
     c0 = n // 2 - reach
     c1 = n // 2 + reach + 1

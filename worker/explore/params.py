@@ -48,16 +48,6 @@ class ExploreParams:
     # change.
     noisy_door_align: bool = True
     noisy_obstacle_min_prob: float = 0.1
-    # A scan mark in a cell the footprint's edge overlaps (not wholly under it) is, by
-    # default, taken for an obstacle touching the robot: every motion collides until it is
-    # gone. On a noisy laser a wall 0.1-0.2 m away puts readings 1-2 sigmas short into those
-    # cells at every scan, and the robot was stuck against the wall (README, "Marks at the
-    # footprint's edge"). With edge_marks_out such a mark is moved out along the footprint's
-    # nearer axis to the first cell the footprint does not overlap: the robot may move
-    # along it or away from it, not further into it (the depth of overlap may not grow).
-    # Off on a noise-free laser, on with range noise (noisy_edge_marks_out).
-    edge_marks_out: bool = False
-    noisy_edge_marks_out: bool = True
     global_costmap_rate: float = 2.0  # [Hz] global_costmap.update_frequency
     full_map_check_period: float = 30.0  # [s] whole-map re-read (catches SLAM map switches)
     growth_margin: float = 10.0  # [m] the costmap grows by this much when the map outgrows it
@@ -283,16 +273,14 @@ class ExploreParams:
 
     def for_range_noise(self, sigma: float) -> ExploreParams:
         """The settings the navigation stack drives with on a laser of range noise `sigma`
-        [m]: these, or with range noise the door passage on (noisy_door_align), the
-        obstacle layer's marks kept out of firmly free cells (noisy_obstacle_min_prob) and
-        marks at the footprint's edge moved out of it (noisy_edge_marks_out)."""
+        [m]: these, or with range noise the door passage on (noisy_door_align) and the
+        obstacle layer's marks kept out of firmly free cells (noisy_obstacle_min_prob)."""
         if sigma <= 0.0:
             return self
         out = dataclasses.replace(
             self,
             door_align=self.door_align or self.noisy_door_align,
             obstacle_min_prob=max(self.obstacle_min_prob, self.noisy_obstacle_min_prob),
-            edge_marks_out=self.edge_marks_out or self.noisy_edge_marks_out,
         )
         object.__setattr__(out, "footprint_half_m", self.footprint_half_m)
         return out

@@ -374,11 +374,9 @@ def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks
         through = nav.costmap.inflated[door_row, WALL_X]  # the door's cells, wall's line
         assert bool((through >= ck.INSCRIBED).all()) == closed
     # users may keep the noise-free stack on a noisy laser
-    plain = dataclasses.replace(
-        p, noisy_door_align=False, noisy_obstacle_min_prob=0.0, noisy_edge_marks_out=False
-    )
+    plain = dataclasses.replace(p, noisy_door_align=False, noisy_obstacle_min_prob=0.0)
     kept = plain.for_range_noise(0.1)
-    assert not kept.door_align and kept.obstacle_min_prob == 0.0 and not kept.edge_marks_out
+    assert not kept.door_align and kept.obstacle_min_prob == 0.0
 
 
 def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
