@@ -291,7 +291,12 @@ def _summary(world, seed, params, ex, errors, ate, wall_explore, wall, stage_wal
         "collision": None
         if ex.collision is None
         else dict(zip(("t", "x", "y", "theta"), ex.collision, strict=True)),
-        "goals": {"reached": ex.goals_reached, "failed": ex.goals_failed, "total": len(ex.goals)},
+        "goals": {
+            "reached": ex.goals_reached,
+            "failed": ex.goals_failed,
+            "total": len(ex.goals),
+            "look_through": sum(g.detail.startswith("look-through") for g in ex.goals),
+        },
         "safety_triggers": ex.safety_triggers,
         "recoveries": ex.recoveries,
         "timings": {

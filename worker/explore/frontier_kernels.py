@@ -292,3 +292,20 @@ def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_
                 continue
             if line_of_sight(lethal, unknown, ry, rx, jy, jx):
                 seen[jy, jx] += 1
+
+
+@njit(cache=True)
+def nearest_distance2(cy, cx, members):
+    """Squared distance [cells^2] from each cell `(cy[k], cx[k])` to the nearest of `members
+    (M, 2) [iy, ix]`; `(K,)` float64 (inf when there are no members)."""
+    out = np.full(cy.shape[0], np.inf)
+    for k in range(cy.shape[0]):
+        best = np.inf
+        for j in range(members.shape[0]):
+            dy = float(members[j, 0] - cy[k])
+            dx = float(members[j, 1] - cx[k])
+            d2 = dy * dy + dx * dx
+            if d2 < best:
+                best = d2
+        out[k] = best
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -33,6 +34,7 @@ class FrontierGoal:
     # (K, 2) [x, y] the search's own path from the robot to the goal, through known space
     # (a first plan for free), or None
     path_xy: np.ndarray | None = None
+    look_through: bool = False  # a goal of the look-through pass (FrontierSearch.choose)
 
 
 class FrontierSearch:
@@ -136,6 +138,7 @@ class FrontierSearch:
         robot_xy,
         blacklist: list[np.ndarray],
         avoid: list[np.ndarray] = (),
+        look_through: bool = False,
     ) -> FrontierGoal | None:
         """Nearest frontier cluster by travel cost through known space, backed off from walls.
 
@@ -143,6 +146,11 @@ class FrontierSearch:
         of a blacklisted point are ignored; so are goal cells within blacklist_radius of an
         `avoid` point (goals already reached without the frontier going away). None when no
         frontier can be reached.
+
+        look_through: the last pass, for frontiers no goal within goal_radius reaches (a room
+        behind a door too narrow for the robot's centre to pass): goals up to
+        look_through_radius from the frontier, the one nearest it among those that see it, so
+        that the laser looks through the door.
         """
         sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
@@ -151,10 +159,10 @@ class FrontierSearch:
         sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist)
         if not cell_valid.any():
             return None
-        found = self._search(costmap, (sx, sy), cells, labels, cell_valid, avoid)
+        found = self._search(costmap, (sx, sy), cells, labels, cell_valid, avoid, look_through)
         if found.size == 0:
             return None
-        return self._goal(costmap, robot_xy, found, cells, labels, sizes)
+        return self._goal(costmap, robot_xy, found, cells, labels, sizes, look_through)
 
     def _valid_cells(
         self, costmap: GlobalCostmap, cells: np.ndarray, labels: np.ndarray, blacklist
@@ -187,13 +195,19 @@ class FrontierSearch:
             cell_valid &= ~np.isin(labels, labels[near])
         return sizes, cell_valid
 
-    def _search(self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid):
+    def _search(
+        self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid, look_through
+    ):
         """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
         robot's cell `start (ix, iy)`: flat indices, nearest first. Tried with the planner's
         margin, then with a wider escape (a pocket the map sealed around the robot), then
         with narrow_margin (frontiers behind doors too narrow for the margin); gaps closed
-        after a failure (`ClosedGaps`) stay closed to all three."""
+        after a failure (`ClosedGaps`) stay closed to all three. look_through: goals within
+        look_through_radius of the frontier (`choose`)."""
         p = self.params
+        if look_through:
+            p = dataclasses.replace(p, goal_radius=p.look_through_radius, goal_search_extra=1.0)
+            object.__setattr__(p, "footprint_half_m", self.params.footprint_half_m)
         args = (costmap, start, cells, labels, cell_valid, avoid)
         with self.closed.applied(costmap):  # closed gaps: closed to every attempt
             found = self._search_with(*args, p, None)
@@ -229,17 +243,25 @@ class FrontierSearch:
         finally:
             self._target[marked[:, 0], marked[:, 1]] = False
 
-    def _goal(self, costmap: GlobalCostmap, robot_xy, found, cells, labels, sizes):
+    def _goal(
+        self, costmap: GlobalCostmap, robot_xy, found, cells, labels, sizes, look_through=False
+    ):
         """The goal among the cells found for the nearest cluster: the lowest-cost one
-        (nearest on ties) that sees its frontier."""
+        (nearest on ties) that sees its frontier; look_through: the one nearest the frontier
+        (the wider the view through a door) that sees it."""
         p = self.params
         owners = self._owner.reshape(-1)[found]
         pots = self.search.potential_at(found)
         same = owners == owners[0]
         cand, cand_pot = found[same], pots[same]
-        cand_cost = costmap.inflated.reshape(-1)[cand]
-        order = np.lexsort((cand_pot, cand_cost))
         members = cells[labels == owners[0]]
+        if look_through:
+            cy, cx = np.divmod(cand, costmap.shape[1])
+            near = fk.nearest_distance2(cy, cx, members)
+            order = np.lexsort((cand_pot, near))
+        else:
+            cand_cost = costmap.inflated.reshape(-1)[cand]
+            order = np.lexsort((cand_pot, cand_cost))
         # The goal must see its frontier: a cell near it but behind a door jamb would be
         # "reached" without the robot ever seeing what lies beyond.
         k = fk.first_with_sight(
@@ -265,6 +287,7 @@ class FrontierSearch:
             cluster_size_m=float(sizes[owners[0]]),
             travel_cost=float(cand_pot[best]),
             n_clusters=int(np.count_nonzero(sizes >= p.min_frontier_size)),
+            look_through=look_through,
         )
 
     def frontier_near(self, costmap: GlobalCostmap, xy, radius_m: float) -> bool:

@@ -171,9 +171,11 @@ class Exploration:
         cpu_s += time.thread_time() - u0
         self.rec.add(t, pose_gt, pose_est, nav_s, cpu_s)
         failures = self.nav.stats.consecutive_failures
+        goal = self.nav.pursuit
         state = LoopState(
-            t, self.dt, pose_gt, pose_est, cmd.status, failures, sim.collisions, slam.occupancy
-        )
+            t, self.dt, pose_gt, pose_est, cmd.status, failures, sim.collisions, slam.occupancy,
+            None if goal is None else goal.t0,
+        )  # fmt: skip
         stop = first_stop(self.rules, state)
         if self.on_progress is not None and t >= self.next_progress - 1e-9:
             self._progress(t, pose_gt, pose_est, cmd.status, ranges)

@@ -117,6 +117,9 @@ class FrontierMemory:
     blacklist: list[np.ndarray] = field(default_factory=list)  # (2,) [m] frontiers given up
     # (frontier, goal) of goals reached whose frontier did not vanish
     arrived_at: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    # (2,) [m] frontiers the look-through pass gave up (its own blacklist: the frontiers it
+    # looks at are those whose goals beyond a narrow door failed, on the blacklist above)
+    looked: list[np.ndarray] = field(default_factory=list)
 
     def avoid(self) -> list[np.ndarray]:
         """Goals already reached without their frontier going away: look from elsewhere."""
@@ -131,12 +134,20 @@ class FrontierMemory:
         self.arrived_at.clear()
         return True
 
-    def arrived(self, frontier_xy: np.ndarray, goal_xy: np.ndarray, radius: float, n: int):
+    def arrived(
+        self, frontier_xy: np.ndarray, goal_xy: np.ndarray, radius: float, n: int,
+        look_through: bool = False,
+    ):  # fmt: skip
         """A goal reached with its frontier still there: next time a goal elsewhere near it;
-        after n arrivals within 2 radius (the two blacklist discs overlap), drop the frontier."""
+        after n arrivals within 2 radius (the two blacklist discs overlap), drop the frontier
+        (from the look-through pass's list for its goals)."""
         self.arrived_at.append((frontier_xy.copy(), goal_xy.copy()))
         if sum(np.hypot(*(frontier_xy - q)) <= 2 * radius for q, _ in self.arrived_at) >= n:
-            self.blacklist.append(frontier_xy.copy())
+            self.give_up(frontier_xy, look_through)
+
+    def give_up(self, frontier_xy: np.ndarray, look_through: bool = False) -> None:
+        """Leave this frontier alone: blacklisted, or for a look-through goal, looked at."""
+        (self.looked if look_through else self.blacklist).append(frontier_xy.copy())
 
 
 @dataclass(frozen=True)

@@ -61,6 +61,7 @@ class Navigator:
         self.pursuit: Pursuit | None = None
         self.retrace: Retrace | None = None
         self.memory = FrontierMemory(params.blacklist_retries)
+        self._reopens_left = params.closed_gap_reopens  # ClosedGaps cleared when sealed in
         self.trail = Trail(params)
         self._next_choice_t = 0.0  # [s] when to choose the frontier again
         # the local costmap was cleared since the DWA last found a legal command (any goal)
@@ -283,6 +284,16 @@ class Navigator:
         if new is None and mem.retry():
             self.closed.clear()
             new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist)
+        if new is None:
+            new = self._look_through(pose)
+        if new is None and len(self.closed.points) and self._reopens_left > 0:
+            # nothing left with the closed gaps closed: one of them may seal the robot in (a
+            # room it entered through a gap it then failed to leave by): open them once
+            self._reopens_left -= 1
+            self.closed.clear()
+            new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist, mem.avoid())
+            if new is None:
+                new = self._look_through(pose)
         g = self.pursuit
         if new is None:
             if g is not None:
@@ -304,6 +315,16 @@ class Navigator:
         self.door.new_goal()
         self.dwa.set_plan(new.path_xy)
         self._enter(NavState.DRIVING)
+
+    def _look_through(self, pose: np.ndarray) -> FrontierGoal | None:
+        """The last pass: a goal that looks at a frontier through a gap the robot cannot
+        pass (`FrontierSearch.choose`, look_through), or None (or off)."""
+        if self.params.look_through_radius <= 0.0:
+            return None
+        mem = self.memory
+        return self.frontiers.choose(
+            self.costmap, pose[:2], mem.looked, mem.avoid(), look_through=True
+        )
 
     def _plan(self, t: float, pose: np.ndarray) -> None:
         g = self.pursuit
@@ -365,7 +386,7 @@ class Navigator:
         goal = self.pursuit.goal
         f, r = goal.frontier_xy, p.blacklist_radius
         if status == "reached" and self.frontiers.frontier_near(self.costmap, f, r):
-            self.memory.arrived(f, goal.goal_xy, r, p.blacklist_arrivals)
+            self.memory.arrived(f, goal.goal_xy, r, p.blacklist_arrivals, goal.look_through)
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
@@ -401,13 +422,15 @@ class Navigator:
                 self.costmap, self.params, g.path, pose[:2], self.params.closed_gap_radius
             )
         self._start_retrace(t, pose)
-        self.memory.blacklist.append(self.pursuit.goal.frontier_xy.copy())
+        self.memory.give_up(g.goal.frontier_xy, g.goal.look_through)
         self.stats.consecutive_failures += 1
         self._end_goal(t, "failed", why)
 
     def _end_goal(self, t: float, status: str, detail: str = "") -> None:
         g = self.pursuit
         x, y = float(g.goal.goal_xy[0]), float(g.goal.goal_xy[1])
+        if g.goal.look_through:
+            detail = "look-through" + (f": {detail}" if detail else "")
         self.stats.goals.append(GoalRecord(g.t0, t, x, y, status, detail))
         self.pursuit = None
         self.dwa.set_plan(None)

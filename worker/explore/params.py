@@ -76,6 +76,15 @@ class ExploreParams:
     frontier_period: float = 5.0  # [s] re-choose the frontier this often
     blacklist_radius: float = 0.5  # [m] frontier cells this near a failed goal are ignored
     blacklist_retries: int = 1  # times the blacklist is cleared when nothing else is left
+    # [m] when no frontier is left that a goal within goal_radius reaches, goals up to this
+    # far from a frontier that see it: a look through a door too narrow to pass into the room
+    # behind it (0: off). The arrivals' rule below gives each such frontier up to
+    # blacklist_arrivals viewpoints.
+    look_through_radius: float = 1.5
+    # times the gaps closed after failures (closed_gap_radius) are opened again when nothing
+    # else is left, the look-through pass included: a gap closed behind the robot must not
+    # seal it in a room for the rest of the run
+    closed_gap_reopens: int = 1
     # arrivals near a frontier that stays there (goals "reached" within 2 blacklist_radius of
     # it) after which it is blacklisted: the SLAM map updates only after some motion
     blacklist_arrivals: int = 3
@@ -213,6 +222,9 @@ class ExploreParams:
     snapshot_change: float = 0.01  # [-] share of the known map
     snapshot_tolerance: int = 1  # [cells]
     snapshot_mse: float = 5.0  # [-] e: 0..255 pixel levels squared
+    # times a run the snapshot rule waits one more period because the robot is on its way
+    # to a frontier it chose since the earlier snapshot (stop_rules.MapUnchangedRule)
+    snapshot_holds: int = 1
     time_limit: float = 7200.0  # [s] m: simulated-time limit
     # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in
     # the map must not end the run
@@ -242,6 +254,7 @@ class ExploreParams:
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
             "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
+            "look_through_radius", "closed_gap_reopens", "snapshot_holds",
         )  # fmt: skip
         bad = []
         for f in fields(self):

@@ -191,6 +191,8 @@ class LoopState:
     goal_failures: int  # goals given up in a row
     collisions: Sequence  # the simulator's collisions so far (worker.sim Collision)
     occupancy: Callable[[], object]  # the current SLAM map (OccupancyGrid), read on demand
+    # [s] when the navigation stack chose the frontier goal it pursues (None: no goal)
+    goal_t0: float | None = None
 
 
 class StopRule(Protocol):
@@ -279,10 +281,16 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    little (SnapshotRule's measures)."""
+    little (SnapshotRule's measures), and the robot is not on its way to a frontier it chose
+    since the earlier of them. A goal chosen in the last period has not been tried yet (a
+    big building's far wing, 80 m away, changes less than a share of its known map while the
+    robot drives there); the rule then waits for the next snapshot, `holds` times a run at
+    most, so that a run still ends within holds periods of when the rule first held."""
 
-    def __init__(self, period: float, mse: float, **measure):
+    def __init__(self, period: float, mse: float, holds: int = 0, **measure):
         self.snapshots = SnapshotRule(period, mse, **measure)
+        self.holds = holds  # left
+        self.held = 0  # times the rule waited for a goal
 
     def check(self, s: LoopState) -> StopReason | None:
         rule = self.snapshots
@@ -291,7 +299,15 @@ class MapUnchangedRule:
         grid = s.occupancy()
         if not rule.check(s.t, grid.prob, grid.origin, grid.resolution, grid.occ_thresh):
             return None
-        return StopReason("map_unchanged", rule.describe())
+        fresh = s.goal_t0 is not None and s.goal_t0 > s.t - rule.period
+        if fresh and self.holds > 0:
+            self.holds -= 1
+            self.held += 1
+            return None
+        detail = rule.describe()
+        if self.held:
+            detail += f" (waited {self.held} time(s) for a goal chosen since the last snapshot)"
+        return StopReason("map_unchanged", detail)
 
 
 class TimeLimitRule:
@@ -317,6 +333,7 @@ def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> 
         MapUnchangedRule(
             p.snapshot_period,
             p.snapshot_mse,
+            holds=p.snapshot_holds,
             measure=p.snapshot_measure,
             change=p.snapshot_change,
             tolerance=p.snapshot_tolerance,

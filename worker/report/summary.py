@@ -136,6 +136,8 @@ class Goals(_Part):
     reached: int
     failed: int
     total: int
+    # of the total, goals of the look-through pass (a look through a door too narrow to pass)
+    look_through: int = 0
 
 
 class Timings(_Part):

@@ -6,7 +6,9 @@ import numpy as np
 
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.frontiers import FrontierSearch
+from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
+from worker.explore.planner import planner_blocked_cost
 
 RES = 0.05
 
@@ -239,3 +241,56 @@ def test_frontier_looked_at_from_close_by_repeatedly_is_dead():
         fs.observe(cm, near, np.radians(135.0) - 0.05)
     assert (fs.seen[25:37, 59] == p.dead_frontier_looks).all()
     assert fs.choose(cm, near[:2], []) is None  # its only frontier is dead
+
+
+def _room_behind_a_narrow_door():
+    # the robot's room (x 0.25-2.5 m), a 0.25 m wall with a 0.3 m door (y 1.35-1.65), and
+    # beyond it a room known 0.75 m deep, then unknown to the grid's edge: no centre of the
+    # 0.4 m robot fits through the door, and every cell within goal_radius of the frontier
+    # lies beyond it
+    prob = np.full((60, 100), 0.9)
+    prob[5:55, 5:50] = 0.05
+    prob[27:33, 50:55] = 0.05  # the door
+    prob[10:50, 55:70] = 0.05
+    prob[10:50, 70:] = np.nan
+    return prob
+
+
+def test_a_frontier_behind_a_door_too_narrow_to_pass_is_looked_at_through_it():
+    cm, fs = _setup(_room_behind_a_narrow_door())
+    robot = (1.0, 1.5)
+    assert fs.choose(cm, robot, []) is None  # no goal within goal_radius can be reached
+    goal = fs.choose(cm, robot, [], look_through=True)
+    assert goal is not None and goal.look_through
+    p = ExploreParams()
+    ys, xs = np.nonzero(fs.frontier)
+    fx, fy = cm.cell_to_world(xs, ys)
+    d = np.hypot(fx - goal.goal_xy[0], fy - goal.goal_xy[1])
+    assert d.min() <= p.look_through_radius + 1e-9
+    # on the robot's side of the wall, in front of the door: the laser sees through it
+    assert goal.goal_xy[0] < 2.5 and abs(goal.goal_xy[1] - 1.5) < 0.15
+    # the nearest to the frontier of the cells a goal may take (below the planner's blocked
+    # cost, on the even sub-lattice, on the robot's side): none is nearer than the goal
+    ok = (cm.inflated < planner_blocked_cost(p)) & ~cm.unknown
+    ok[:, 50:] = False
+    ok[1::2, :] = ok[:, 1::2] = False
+    ys2, xs2 = np.nonzero(ok)
+    wx, wy = cm.cell_to_world(xs2, ys2)
+    nearest = np.hypot(fx[:, None] - wx, fy[:, None] - wy).min(axis=0)
+    assert d.min() <= nearest.min() + 1e-9
+    # the goals the robot reached there already (avoid) and the blacklist are respected
+    other = fs.choose(cm, robot, [], [goal.goal_xy], look_through=True)
+    assert other is not None and np.hypot(*(other.goal_xy - goal.goal_xy)) > p.blacklist_radius
+    assert fs.choose(cm, robot, [goal.frontier_xy], look_through=True) is None
+
+
+def test_the_look_through_pass_is_off_at_radius_zero():
+    p = ExploreParams(look_through_radius=0.0)
+    nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
+    nav.update_map(_room_behind_a_narrow_door().astype(np.float32), RES, (0.0, 0.0), True)
+    cmd = nav.step(0.0, np.array([1.0, 1.5, 0.0]), 0.0, 0.0, np.full(541, 30.0))
+    assert cmd.status == "no_frontier"
+    nav = Navigator(ExploreParams(), np.linspace(-2.35, 2.35, 541), 30.0)
+    nav.update_map(_room_behind_a_narrow_door().astype(np.float32), RES, (0.0, 0.0), True)
+    cmd = nav.step(0.0, np.array([1.0, 1.5, 0.0]), 0.0, 0.0, np.full(541, 30.0))
+    assert cmd.status != "no_frontier" and nav.goal.look_through

@@ -197,3 +197,30 @@ def test_a_robot_driving_along_a_detour_makes_progress_and_one_standing_still_do
     _u_pursuit(still)
     stops = [t for t in np.arange(0.0, 40.0, 0.1) if still._no_progress(t, np.zeros(3))]
     assert abs(stops[0] - 30.0) < 0.11  # no nearer in any sense: given up after 30 s
+
+
+def _room_sealed_by_a_closed_gap(reopens: int) -> tuple[Navigator, np.ndarray]:
+    # the robot's room (x, y 0.25-2.5 m) with a 1 m door in its top wall (x 1.0-2.0), a
+    # corridor above it (y 2.75-4) open to the unknown 4 m to the right; the door's cells are
+    # a gap closed after a failure (ClosedGaps), as if the robot had failed to leave by it
+    nav = Navigator(ExploreParams(closed_gap_reopens=reopens), ANGLES, 30.0)
+    prob = np.full((90, 200), 0.9, dtype=np.float32)
+    prob[5:50, 5:50] = 0.05
+    prob[50:55, 20:40] = 0.05  # the door
+    prob[55:80, 5:150] = 0.05
+    prob[55:80, 150:] = np.nan
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    xs = np.arange(1.0, 2.0, 0.05) + 0.025
+    nav.closed.points = np.column_stack((xs, np.full(xs.size, 2.625)))
+    return nav, np.array([1.5, 1.0, np.pi / 2])
+
+
+def test_a_closed_gap_that_seals_the_robot_in_is_opened_when_nothing_else_is_left():
+    nav, pose = _room_sealed_by_a_closed_gap(reopens=0)
+    cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
+    assert cmd.status == "no_frontier"  # sealed: no frontier, no look through the door
+    nav, pose = _room_sealed_by_a_closed_gap(reopens=1)
+    cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
+    assert nav.state is NavState.DRIVING and cmd.status != "no_frontier"
+    assert nav.goal.goal_xy[0] > 6.0 and not nav.goal.look_through  # the corridor's end
+    assert len(nav.closed.points) == 0 and nav._reopens_left == 0

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
@@ -135,8 +135,9 @@ def test_the_default_rule_fires_on_the_share_of_the_known_map():
 def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unseen():
     # a threshold no pair of snapshots can miss: the run ends at the second snapshot, 6 s
     # in, with the 7.8 m corridor (1.2 m wide, > 2 m^2) never seen: a done-rule that fired
-    # early is incomplete, not completed
-    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9)
+    # early is incomplete, not completed (no wait for a goal chosen since the last snapshot:
+    # the robot sets off for the corridor within those 6 s)
+    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9, snapshot_holds=0)
     assert result.outcome == "incomplete" and result.reason == "map_unchanged"
     assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
@@ -170,7 +171,7 @@ def _state(t=0.0, pose_gt=(0.0, 0.0, 0.0), pose_est=None, status="driving", **kw
     fields = {"dt": 0.1, "goal_failures": 0, "collisions": [], "occupancy": None} | kw
     return LoopState(
         t, fields["dt"], pose_gt, pose_est, status, fields["goal_failures"],
-        fields["collisions"], fields["occupancy"],
+        fields["collisions"], fields["occupancy"], fields.get("goal_t0"),
     )  # fmt: skip
 
 
@@ -257,6 +258,36 @@ def test_map_unchanged_rule_reads_the_map_only_when_a_snapshot_is_due():
     detail = "map snapshots 300 s apart: 0.00 % of the known map changed (0.0 m^2), MSE 0.00"
     assert stop == StopReason("map_unchanged", detail)
     assert stop.outcome == "completed"
+
+
+def test_map_unchanged_waits_once_for_a_goal_chosen_since_the_last_snapshot():
+    @dataclass
+    class Grid:
+        prob: np.ndarray = field(default_factory=lambda: np.full((4, 4), 0.1, np.float32))
+        origin: tuple = (0.0, 0.0)
+        resolution: float = 0.05
+        occ_thresh: float = 0.25
+
+    def at(t, goal_t0):
+        return _state(t, occupancy=Grid, goal_t0=goal_t0)
+
+    rule = MapUnchangedRule(period=300.0, mse=5.0, holds=1)
+    assert rule.check(at(300.0, None)) is None  # the first snapshot
+    # the same map, but the robot set off at 450 s for a frontier: not tried yet, wait
+    assert rule.check(at(600.0, 450.0)) is None
+    # still the same map at 900 s; the goal of 850 s would be fresh too, but the one wait
+    # the run had is used
+    stop = rule.check(at(900.0, 850.0))
+    assert stop is not None and stop.reason == "map_unchanged"
+    assert stop.detail.endswith("(waited 1 time(s) for a goal chosen since the last snapshot)")
+    # a goal chosen before the earlier snapshot (tried for a whole period) or none: no wait
+    for goal_t0 in (300.0, None):
+        rule = MapUnchangedRule(period=300.0, mse=5.0, holds=1)
+        rule.check(at(300.0, None))
+        assert rule.check(at(600.0, goal_t0)).reason == "map_unchanged"
+    rule = MapUnchangedRule(period=300.0, mse=5.0, holds=0)  # off
+    rule.check(at(300.0, None))
+    assert rule.check(at(600.0, 450.0)).reason == "map_unchanged"
 
 
 def test_rules_are_asked_in_order_and_the_first_answer_wins():
