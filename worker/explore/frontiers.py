@@ -124,10 +124,14 @@ class FrontierSearch:
         labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
         return cells, labels
 
-    def open_cells(self, costmap: GlobalCostmap, cells: np.ndarray) -> np.ndarray:
-        """`(K,) bool`: frontier cells next to unknown space larger than min_unknown_area
-        (the others border the unseen inside of furniture or walls: nothing to explore)."""
-        max_cells = int(self.params.min_unknown_area / costmap.resolution**2)
+    def open_cells(
+        self, costmap: GlobalCostmap, cells: np.ndarray, area: float | None = None
+    ) -> np.ndarray:
+        """`(K,) bool`: frontier cells next to unknown space larger than `area` [m^2]
+        (None: min_unknown_area; the others border the unseen inside of furniture or walls:
+        nothing to explore)."""
+        area = self.params.min_unknown_area if area is None else area
+        max_cells = int(area / costmap.resolution**2)
         return fk.open_frontier_cells(
             cells, costmap.unknown, self._unk_state, self._unk_stamp, self._run_id, max_cells
         )
@@ -156,7 +160,8 @@ class FrontierSearch:
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
             return None
         cells, labels = self.clusters()
-        sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist)
+        area = self.params.look_through_min_area if look_through else None
+        sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist, area)
         if not cell_valid.any():
             return None
         found = self._search(costmap, (sx, sy), cells, labels, cell_valid, avoid, look_through)
@@ -165,7 +170,12 @@ class FrontierSearch:
         return self._goal(costmap, robot_xy, found, cells, labels, sizes, look_through)
 
     def _valid_cells(
-        self, costmap: GlobalCostmap, cells: np.ndarray, labels: np.ndarray, blacklist
+        self,
+        costmap: GlobalCostmap,
+        cells: np.ndarray,
+        labels: np.ndarray,
+        blacklist,
+        area: float | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve.
 
@@ -180,7 +190,7 @@ class FrontierSearch:
         (about 0.94 m from obstacles with the thesis's inflation), which would drop doors.
         """
         p = self.params
-        is_open = self.open_cells(costmap, cells)
+        is_open = self.open_cells(costmap, cells, area)
         is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
         sizes = np.bincount(labels, weights=is_open) * costmap.resolution
         clear = costmap.inflated[cells[:, 0], cells[:, 1]] < INSCRIBED

@@ -81,6 +81,9 @@ class ExploreParams:
     # behind it (0: off). The arrivals' rule below gives each such frontier up to
     # blacklist_arrivals viewpoints.
     look_through_radius: float = 1.5
+    # [m^2] ... at a frontier next to unknown space larger than this (a room, not the unseen
+    # floor under a table or between chairs, which no viewpoint in reach reveals either)
+    look_through_min_area: float = 4.0
     # times the gaps closed after failures (closed_gap_radius) are opened again when nothing
     # else is left, the look-through pass included: a gap closed behind the robot must not
     # seal it in a room for the rest of the run

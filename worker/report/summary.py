@@ -136,8 +136,9 @@ class Goals(_Part):
     reached: int
     failed: int
     total: int
-    # of the total, goals of the look-through pass (a look through a door too narrow to pass)
-    look_through: int = 0
+    # of the total, goals of the look-through pass (a look through a door too narrow to pass);
+    # absent from runs made before the pass existed (27b16d9)
+    look_through: int | None = Field(default=None, exclude_if=lambda v: v is None)
 
 
 class Timings(_Part):

@@ -294,3 +294,18 @@ def test_the_look_through_pass_is_off_at_radius_zero():
     nav.update_map(_room_behind_a_narrow_door().astype(np.float32), RES, (0.0, 0.0), True)
     cmd = nav.step(0.0, np.array([1.0, 1.5, 0.0]), 0.0, 0.0, np.full(541, 30.0))
     assert cmd.status != "no_frontier" and nav.goal.look_through
+
+
+def test_no_look_through_at_unknown_space_smaller_than_a_room():
+    # the same door, but the unknown beyond it is a closed 0.75 x 1.0 m pocket (0.75 m^2,
+    # walled in: the unseen floor under a table is such a pocket): no viewpoint is worth it
+    prob = _room_behind_a_narrow_door()
+    prob[10:50, 85:] = 0.9
+    prob[10:20, 70:85] = prob[40:50, 70:85] = 0.9
+    cm, fs = _setup(prob)
+    assert fs.choose(cm, (1.0, 1.5), [], look_through=True) is None
+    # as a frontier for the ordinary search it is still open (over min_unknown_area)
+    cells, _ = fs.clusters()
+    assert fs.open_cells(cm, cells).any()
+    cm, fs = _setup(prob, ExploreParams(look_through_min_area=0.7))
+    assert fs.choose(cm, (1.0, 1.5), [], look_through=True) is not None

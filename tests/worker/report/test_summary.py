@@ -116,3 +116,11 @@ def test_a_summary_without_a_map_score_dumps_without_the_key_one_with_it_keeps_i
     new = RunSummary.model_validate({**old.to_dict(), "map_score": section})
     assert new.to_dict()["map_score"] == section
     assert RunSummary.model_validate_json(new.to_json_text()) == new
+
+
+def test_look_through_goals_are_kept_when_counted_and_absent_from_older_runs():
+    old = make_summary()
+    assert old.goals.look_through is None and "look_through" not in old.to_dict()["goals"]
+    new = make_summary(goals={"look_through": 3})
+    assert new.to_dict()["goals"] == {**summary_doc()["goals"], "look_through": 3}
+    assert RunSummary.model_validate_json(new.to_json_text()) == new
