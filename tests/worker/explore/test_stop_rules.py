@@ -135,9 +135,8 @@ def test_the_default_rule_fires_on_the_share_of_the_known_map():
 def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unseen():
     # a threshold no pair of snapshots can miss: the run ends at the second snapshot, 6 s
     # in, with the 7.8 m corridor (1.2 m wide, > 2 m^2) never seen: a done-rule that fired
-    # early is incomplete, not completed (no wait for a goal chosen since the last snapshot:
-    # the robot sets off for the corridor within those 6 s)
-    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9, snapshot_holds=0)
+    # early is incomplete, not completed
+    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9)
     assert result.outcome == "incomplete" and result.reason == "map_unchanged"
     assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
@@ -146,6 +145,11 @@ def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unsee
     assert result.stop_detail.endswith(
         "; at the end the SLAM pose was 0.00 m and 0.00 rad from the true one (paths aligned)"
     )
+    # with one wait: the robot set off for a goal within those 6 s, so the rule waits for
+    # the third snapshot, and says so
+    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9, snapshot_holds=1)
+    assert result.reason == "map_unchanged" and abs(result.t[-1] - 9.0) < 0.15
+    assert "(waited 1 time(s) for a goal chosen since the last snapshot)" in result.stop_detail
 
 
 def test_the_end_pose_error_is_the_aligned_estimate_against_the_truth():
