@@ -281,11 +281,11 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    little (SnapshotRule's measures), and the robot is not on its way to a frontier it chose
-    since the earlier of them. A goal chosen in the last period has not been tried yet (a
-    big building's far wing, 80 m away, changes less than a share of its known map while the
-    robot drives there); the rule then waits for the next snapshot, `holds` times a run at
-    most, so that a run still ends within holds periods of when the rule first held."""
+    little (SnapshotRule's measures). With `holds` > 0 (explore.snapshot_holds, off by
+    default) the rule does not fire while the robot is on its way to a frontier it chose
+    since the earlier snapshot, at most `holds` times a run: a goal chosen in the last
+    period has not been tried yet (a big building's far wing, 80 m away, changes less than
+    a share of its known map while the robot drives there); it waits for the next snapshot."""
 
     def __init__(self, period: float, mse: float, holds: int = 0, **measure):
         self.snapshots = SnapshotRule(period, mse, **measure)
