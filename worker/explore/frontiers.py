@@ -43,6 +43,13 @@ class FrontierSearch:
     def __init__(self, params: ExploreParams, closed: ClosedGaps | None = None):
         self.params = params
         self.closed = closed if closed is not None else ClosedGaps()  # the narrow search's
+        # the look-through pass's goal search: goals up to look_through_radius from the
+        # frontier, one such radius of travel past the first candidate
+        look = dataclasses.replace(
+            params, goal_radius=max(params.look_through_radius, 1e-9), goal_search_extra=1.0
+        )
+        object.__setattr__(look, "footprint_half_m", params.footprint_half_m)
+        self._look_params = look
         self.frontier = np.zeros((0, 0), dtype=np.bool_)
         self.n_frontier_cells = 0
         self.search = DijkstraSearch()
@@ -214,10 +221,7 @@ class FrontierSearch:
         with narrow_margin (frontiers behind doors too narrow for the margin); gaps closed
         after a failure (`ClosedGaps`) stay closed to all three. look_through: goals within
         look_through_radius of the frontier (`choose`)."""
-        p = self.params
-        if look_through:
-            p = dataclasses.replace(p, goal_radius=p.look_through_radius, goal_search_extra=1.0)
-            object.__setattr__(p, "footprint_half_m", self.params.footprint_half_m)
+        p = self._look_params if look_through else self.params
         args = (costmap, start, cells, labels, cell_valid, avoid)
         with self.closed.applied(costmap):  # closed gaps: closed to every attempt
             found = self._search_with(*args, p, None)
