@@ -71,6 +71,7 @@ class Navigator:
         self._half_fov = float(np.max(np.abs(self.angles))) - params.look_fov_margin  # [rad]
         self._beams_box: tuple[float, float, float, float] | None = None
         self._last_scan: tuple[np.ndarray, np.ndarray] | None = None  # (pose, ranges)
+        self._planned_forward = False  # the last command: the local planner's, forwards
 
     @property
     def goal(self) -> FrontierGoal | None:
@@ -113,7 +114,8 @@ class Navigator:
             return NavCommand(0.0, 0.0, "planning")
         self.local.add_scan(t, pose, ranges, self.angles, self.range_max)
         self.local.build(pose[0], pose[1], self.costmap, pose[2])
-        self.trail.grow(pose)
+        self.trail.grow(pose, self._planned_forward)
+        self._planned_forward = False
         if self._map_updated:
             self._map_updated = False
             self.frontiers.observe(self.costmap, pose, self._half_fov)
@@ -153,6 +155,13 @@ class Navigator:
         heading shim when the plan lies behind, else the DWA; the safety controller has the
         last word on the DWA's and the door passage's forward commands."""
         g = self.pursuit
+        if self.params.trap_reach > 0.0:
+            out = self.trail.closed_behind(self.local, self.params.trap_reach)
+            if out is not None:
+                # the gap behind the robot is too narrow to drive back through: back out
+                # now, on the line it came in by, before it turns away from it
+                self._give_up(t, "trapped", pose, out)
+                return NavCommand(0.0, 0.0, "recovering")
         shim = (
             self.door.command(pose, g.path, self.costmap, self.local)
             if self.params.door_align
@@ -197,6 +206,7 @@ class Navigator:
         vetoed = self._safety_veto(t, pose, ranges, cmd.v, v0, w0, (cmd.v, cmd.w))
         if vetoed is not None:
             return vetoed
+        self._planned_forward = cmd.v > 0.0
         return NavCommand(cmd.v, cmd.w, "aligning" if cmd.kind == "align" else "driving")
 
     def _safety_veto(
@@ -390,9 +400,11 @@ class Navigator:
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
-    def _start_retrace(self, t: float, pose: np.ndarray | None = None) -> None:
-        """Recovery: back out along the way the robot came (that space was free)."""
-        target = self.trail.back_target(None if pose is None else pose[:2])
+    def _start_retrace(self, t: float, pose: np.ndarray | None = None, target=None) -> None:
+        """Recovery: back out along the way the robot came (that space was free), to
+        `target` (a trail point; default `Trail.back_target`)."""
+        if target is None:
+            target = self.trail.back_target(None if pose is None else pose[:2])
         if target is None:
             return
         self.retrace = Retrace(target, t + self.params.retrace_time)
@@ -406,13 +418,14 @@ class Navigator:
         if np.hypot(*d) < self.params.retrace_tolerance or t >= self.retrace.until:
             self.trail.cut_to(self.retrace.target)
         else:
-            vw = back_out(self.params, self.local, pose, d)
+            aim = self.trail.carrot(pose[:2], self.retrace.target, self.params.retrace_lookahead)
+            vw = back_out(self.params, self.local, pose, aim - pose[:2])
         if vw is None:
             self.retrace = None
             self._enter(self._goal_layer_state())
         return vw
 
-    def _give_up(self, t: float, why: str, pose: np.ndarray | None = None) -> None:
+    def _give_up(self, t: float, why: str, pose: np.ndarray | None = None, out=None) -> None:
         """The goal given up: back out, blacklist its frontier; when the robot could not get
         on (no progress, no legal command) with its plan through a gap under the planner's
         margin near it, close that gap to the narrow fallback (`ClosedGaps`)."""
@@ -421,7 +434,7 @@ class Navigator:
             self.closed.close(
                 self.costmap, self.params, g.path, pose[:2], self.params.closed_gap_radius
             )
-        self._start_retrace(t, pose)
+        self._start_retrace(t, pose, out)
         self.memory.give_up(g.goal.frontier_xy, g.goal.look_through)
         self.stats.consecutive_failures += 1
         self._end_goal(t, "failed", why)

@@ -185,6 +185,14 @@ class ExploreParams:
     retrace_min_points: int = 4  # a trail shorter than this: no back-out
     retrace_points: int = 16  # the back-out aims this many trail points back (0.8 m)
     retrace_tolerance: float = 0.1  # [m] the back-out ends this near its target
+    # [m] trap check (recovery.Trail.closed_behind): when a pose of the last trap_reach of
+    # the way the local planner drove the robot forwards fails its padded footprint check
+    # on the map as it is now, the robot gave up its goal and backs out on that line at once
+    # (0: off)
+    trap_reach: float = 1.0
+    # [m] the back-out steers at the trail point this far back along the trail (pure
+    # pursuit of the rear): it follows the way the robot came, not a straight line to its end
+    retrace_lookahead: float = 0.25
     # [rad] the back-out reverses only while the rear points within this of its target
     retrace_max_heading_error: float = 0.6
     # backing out (the retrace, or getting room to turn) at this x escape_vel [-]; turning at
@@ -226,10 +234,12 @@ class ExploreParams:
     snapshot_tolerance: int = 1  # [cells]
     snapshot_mse: float = 5.0  # [-] e: 0..255 pixel levels squared
     # times a run the snapshot rule waits one more period because the robot is on its way
-    # to a frontier it chose since the earlier snapshot (stop_rules.MapUnchangedRule). Off:
-    # on the oracle proof it lifted virginia_cross over 95 % but kept office_g_furnitures
-    # going until the robot was stuck at 3,513 s (README, "The end of an exploration")
-    snapshot_holds: int = 0
+    # to a frontier it chose since the earlier snapshot (stop_rules.MapUnchangedRule): a
+    # robot crossing a large building to its last rooms changes little of its map in 300 s.
+    # Off until the trap check (trap_reach): without it the wait kept office_g_furnitures
+    # going until the robot was stuck in a pocket at 3,513 s (README, "The end of an
+    # exploration")
+    snapshot_holds: int = 1
     time_limit: float = 7200.0  # [s] m: simulated-time limit
     # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in
     # the map must not end the run
@@ -259,7 +269,7 @@ class ExploreParams:
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
             "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
-            "look_through_radius", "closed_gap_reopens", "snapshot_holds",
+            "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach",
         )  # fmt: skip
         bad = []
         for f in fields(self):

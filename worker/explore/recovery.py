@@ -22,13 +22,56 @@ class Trail:
     def __init__(self, params: ExploreParams):
         self.params = params
         self.points: list[np.ndarray] = []
+        # per point: the robot's heading there [rad], and whether the local planner drove
+        # it there forwards (its footprint checked with footprint_padding on the way)
+        self.headings: list[float] = []
+        self.planned: list[bool] = []
 
-    def grow(self, pose: np.ndarray) -> None:
+    def grow(self, pose: np.ndarray, planned: bool = False) -> None:
+        """Add the robot's pose if it moved trail_spacing; `planned`: it got there on the
+        local planner's forward command."""
         p = self.params
         if not self.points or np.hypot(*(pose[:2] - self.points[-1])) >= p.trail_spacing:
             self.points.append(pose[:2].copy())
+            self.headings.append(float(pose[2]))
+            self.planned.append(bool(planned))
             if len(self.points) > p.trail_cap:
                 del self.points[: p.trail_trim]
+                del self.headings[: p.trail_trim]
+                del self.planned[: p.trail_trim]
+
+    def closed_behind(self, L: LocalCostmap, reach: float) -> np.ndarray | None:
+        """The way out of a trap: when the last `reach` [m] of the trail, all of it driven
+        by the local planner, passed its footprint check (footprint_padding) then and fails
+        it now at a pose it drove through (the map drew the gap the robot came through
+        wider than it is, from the side it came from), the trail point to back out to:
+        footprint_half_m + reach before the first pose that fails, in a straight line from
+        it (or the trail's start). None: no trap (or the stretch was not all planned)."""
+        p = self.params
+        n = len(self.points)
+        if n < p.retrace_min_points:
+            return None
+        pts = np.asarray(self.points)
+        d = np.hypot(pts[:, 0] - pts[-1, 0], pts[:, 1] - pts[-1, 1])
+        within = np.flatnonzero(d <= reach)
+        k0 = int(within[0]) if within.size else n - 1
+        if k0 == n - 1 or not all(self.planned[k0:]):
+            return None
+        half = p.footprint_half_m + p.footprint_padding
+        ox, oy, res = float(L.origin[0]), float(L.origin[1]), L.resolution
+        first = -1
+        for k in range(k0, n):
+            if ck.footprint_collides(
+                L.lethal, L.near, L.inner, ox, oy, res, float(pts[k, 0]), float(pts[k, 1]),
+                self.headings[k], half,
+            ):  # fmt: skip
+                first = k
+                break
+        if first < 0:
+            return None
+        back = np.hypot(pts[:first, 0] - pts[first, 0], pts[:first, 1] - pts[first, 1])
+        far = np.flatnonzero(back >= p.footprint_half_m + reach)
+        return pts[int(far[-1]) if far.size else 0].copy()
 
     def back_target(self, xy: np.ndarray | None = None) -> np.ndarray | None:
         """The point to back out to: walking back along the trail from its newest point, the
@@ -46,6 +89,24 @@ class Trail:
         far = np.flatnonzero(np.hypot(pts[:, 0] - here[0], pts[:, 1] - here[1]) >= reach - 1e-9)
         return self.points[int(far[-1]) if far.size else 0].copy()
 
+    def carrot(self, xy, target: np.ndarray, lookahead: float) -> np.ndarray:
+        """The point to steer the back-out at: walking back along the trail towards
+        `target` (a trail point, `back_target`) from the trail point nearest the robot at
+        `xy`, the first one at least `lookahead` [m] from it, else `target`. The back-out
+        goes the way the robot came, bends included, not in a straight line across them:
+        between table legs or through a narrow door that line cuts a corner the robot's
+        way in went round."""
+        pts = np.asarray(self.points)
+        at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1]))
+        if len(at) == 0:
+            return np.asarray(target, dtype=float).copy()
+        k0 = int(at[-1])
+        seg = pts[k0:]
+        d = np.hypot(seg[:, 0] - xy[0], seg[:, 1] - xy[1])
+        near = int(np.argmin(d))
+        far = np.flatnonzero(d[: near + 1] >= lookahead)
+        return seg[int(far[-1]) if far.size else 0].copy()
+
     def cut_to(self, target: np.ndarray) -> None:
         """A back-out to `target` ended: forget the trail after the newest point at it (the
         stretch backed out of, and the back-out's own points), so the next back-out goes on
@@ -53,12 +114,16 @@ class Trail:
         pts = np.asarray(self.points)
         at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1])) if len(pts) else []
         if len(at) == 0:
-            self.points.clear()
+            self.clear()
         else:
             del self.points[int(at[-1]) + 1 :]
+            del self.headings[int(at[-1]) + 1 :]
+            del self.planned[int(at[-1]) + 1 :]
 
     def clear(self) -> None:
         self.points.clear()
+        self.headings.clear()
+        self.planned.clear()
 
 
 def _legal(p: ExploreParams, L: LocalCostmap, pose, v: float, w: float, duration: float, half):

@@ -113,3 +113,66 @@ def test_square_gap_is_the_distance_to_the_footprints_edge():
     # turned by 45 degrees the corner points along x: (0.5, 0) is 0.5 - 0.2 sqrt(2) away
     gap = square_gap(px[:1], py[:1], 0.0, 0.0, math.pi / 4, 0.2)
     assert gap == pytest.approx(0.5 - 0.2 * math.sqrt(2))
+
+
+def _gap_local(gap_lo: float, gap_hi: float, pose):
+    """A local costmap of a 4 m x 4 m map with a wall at x 2.0-2.1 m, open between y = gap_lo
+    and gap_hi [m]."""
+    p = ExploreParams()
+    nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
+    prob = np.full((80, 80), 0.05, dtype=np.float32)
+    ys = (np.arange(80) + 0.5) * RES
+    wall = (ys < gap_lo) | (ys > gap_hi)
+    prob[wall, 40:42] = 0.95
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    nav.local.build(pose[0], pose[1], nav.costmap, pose[2], use_map=True)
+    return p, nav.local
+
+
+def _straight_trail(p, x1: float, planned=lambda x: True) -> Trail:
+    trail = Trail(p)
+    for i in range(int(round(x1 / 0.05)) + 1):
+        x = 0.05 * i
+        trail.grow(np.array([x, 2.0, 0.0]), planned(x))
+    return trail
+
+
+def test_a_trap_is_a_gap_behind_the_robot_now_too_narrow_for_its_padded_footprint():
+    pose = np.array([2.6, 2.0, 0.0])
+    # the robot drove along y = 2 through the wall's gap; 0.6 m wide, the padded footprint
+    # (0.44 m) fits: no trap
+    p, local = _gap_local(1.7, 2.3, pose)
+    trail = _straight_trail(p, 2.6)
+    assert trail.closed_behind(local, 1.0) is None
+    # the same gap as mapped from the far side, 0.4 m (cells 1.8-2.2 m free): the padded
+    # footprint at x fails once its front edge (x + 0.22) is in the wall (x = 2.0): first at
+    # x = 1.8. The way out: the newest trail point at least half + reach = 1.2 m before it
+    p, local = _gap_local(1.8, 2.2, pose)
+    out = trail.closed_behind(local, 1.0)
+    assert out is not None and out[0] == pytest.approx(0.6) and out[1] == 2.0
+    # a stretch the local planner did not drive forwards (a back-off, a turn in contact)
+    # says nothing of the gap: its poses were never checked with the padding
+    trail = _straight_trail(p, 2.6, planned=lambda x: abs(x - 2.3) > 0.01)
+    assert trail.closed_behind(local, 1.0) is None
+    # a trail that has not reached the gap yet: nothing behind it fails
+    trail = _straight_trail(p, 1.7)
+    assert trail.closed_behind(local, 1.0) is None
+
+
+def test_the_back_out_steers_along_the_trail_round_its_bends():
+    # in along x to (1, 0), then up to (1, 1): backing out from (1, 1) to the start of the
+    # trail, the aim is on the way in (x = 1, lower y), not on the straight line to (0, 0)
+    p = ExploreParams(trail_spacing=0.04)  # every point below kept (0.05 m apart)
+    trail = Trail(p)
+    for i in range(21):
+        trail.grow(np.array([0.05 * i, 0.0, 0.0]))
+    for i in range(1, 21):
+        trail.grow(np.array([1.0, 0.05 * i, math.pi / 2]))
+    target = trail.points[0]
+    aim = trail.carrot(np.array([1.0, 1.0]), target, 0.25)
+    assert aim[0] == pytest.approx(1.0) and aim[1] == pytest.approx(0.75)
+    # past the bend, the aim is on the first leg
+    aim = trail.carrot(np.array([1.0, 0.1]), target, 0.25)
+    assert aim[1] == 0.0 and aim[0] == pytest.approx(0.75)  # hypot(0.25, 0.1) >= 0.25
+    # near the target: the target itself
+    assert np.array_equal(trail.carrot(np.array([0.1, 0.0]), target, 0.25), target)

@@ -136,7 +136,7 @@ def test_exploration_ends_when_the_rule_fires_incomplete_with_the_corridor_unsee
     # a threshold no pair of snapshots can miss: the run ends at the second snapshot, 6 s
     # in, with the 7.8 m corridor (1.2 m wide, > 2 m^2) never seen: a done-rule that fired
     # early is incomplete, not completed
-    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9)
+    result, _ = _run(_dead_end_world(), snapshot_period=3.0, snapshot_change=1e9, snapshot_holds=0)
     assert result.outcome == "incomplete" and result.reason == "map_unchanged"
     assert "never seen" in result.stop_detail
     assert abs(result.t[-1] - 6.0) < 0.15
