@@ -159,6 +159,19 @@ def footprint_collides(lethal, near, inner, origin_x, origin_y, resolution, x, y
 
 
 @njit(cache=True)
+def first_colliding_pose(lethal, near, inner, origin_x, origin_y, resolution, poses, half):
+    """Index of the first pose `(K, 3)` [x, y, theta] at which the square footprint (half
+    side `half` [m]) overlaps an obstacle cell (`footprint_collides`), or -1."""
+    for k in range(poses.shape[0]):
+        if footprint_collides(
+            lethal, near, inner, origin_x, origin_y, resolution,
+            poses[k, 0], poses[k, 1], poses[k, 2], half,
+        ):  # fmt: skip
+            return k
+    return -1
+
+
+@njit(cache=True)
 def inflate_tiles(lethal, kernel, cost, tiles, tile):
     """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`.
 

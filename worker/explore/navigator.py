@@ -159,7 +159,8 @@ class Navigator:
             out = self.trail.closed_behind(self.local, self.params.trap_reach)
             if out is not None:
                 # the gap behind the robot is too narrow to drive back through: back out
-                # now, on the line it came in by, before it turns away from it
+                # now, on the line it came in by, before it turns away from it (once)
+                self.trail.unchecked()
                 self._give_up(t, "trapped", pose, out)
                 return NavCommand(0.0, 0.0, "recovering")
         shim = (

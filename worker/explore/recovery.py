@@ -49,7 +49,7 @@ class Trail:
         it (or the trail's start). None: no trap (or the stretch was not all planned)."""
         p = self.params
         n = len(self.points)
-        if n < p.retrace_min_points:
+        if n < p.retrace_min_points or not self.planned[-1]:
             return None
         pts = np.asarray(self.points)
         d = np.hypot(pts[:, 0] - pts[-1, 0], pts[:, 1] - pts[-1, 1])
@@ -58,17 +58,14 @@ class Trail:
         if k0 == n - 1 or not all(self.planned[k0:]):
             return None
         half = p.footprint_half_m + p.footprint_padding
-        ox, oy, res = float(L.origin[0]), float(L.origin[1]), L.resolution
-        first = -1
-        for k in range(k0, n):
-            if ck.footprint_collides(
-                L.lethal, L.near, L.inner, ox, oy, res, float(pts[k, 0]), float(pts[k, 1]),
-                self.headings[k], half,
-            ):  # fmt: skip
-                first = k
-                break
-        if first < 0:
+        poses = np.column_stack((pts[k0:], self.headings[k0:]))
+        hit = ck.first_colliding_pose(
+            L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
+            poses, half,
+        )  # fmt: skip
+        if hit < 0:
             return None
+        first = k0 + int(hit)
         back = np.hypot(pts[:first, 0] - pts[first, 0], pts[:first, 1] - pts[first, 1])
         far = np.flatnonzero(back >= p.footprint_half_m + reach)
         return pts[int(far[-1]) if far.size else 0].copy()
@@ -106,6 +103,11 @@ class Trail:
         near = int(np.argmin(d))
         far = np.flatnonzero(d[: near + 1] >= lookahead)
         return seg[int(far[-1]) if far.size else 0].copy()
+
+    def unchecked(self) -> None:
+        """Count the trail so far as not driven by the local planner: a trap found on it
+        (`closed_behind`) is dealt with, whether or not the back-out got the robot out."""
+        self.planned = [False] * len(self.planned)
 
     def cut_to(self, target: np.ndarray) -> None:
         """A back-out to `target` ended: forget the trail after the newest point at it (the

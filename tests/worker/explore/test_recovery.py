@@ -150,6 +150,9 @@ def test_a_trap_is_a_gap_behind_the_robot_now_too_narrow_for_its_padded_footprin
     p, local = _gap_local(1.8, 2.2, pose)
     out = trail.closed_behind(local, 1.0)
     assert out is not None and out[0] == pytest.approx(0.6) and out[1] == 2.0
+    # dealt with once: the same stretch does not make every goal after it a trap again
+    trail.unchecked()
+    assert trail.closed_behind(local, 1.0) is None
     # a stretch the local planner did not drive forwards (a back-off, a turn in contact)
     # says nothing of the gap: its poses were never checked with the padding
     trail = _straight_trail(p, 2.6, planned=lambda x: abs(x - 2.3) > 0.01)
