@@ -185,10 +185,10 @@ class ExploreParams:
     retrace_min_points: int = 4  # a trail shorter than this: no back-out
     retrace_points: int = 16  # the back-out aims this many trail points back (0.8 m)
     retrace_tolerance: float = 0.1  # [m] the back-out ends this near its target
-    # [m] trap check (recovery.Trail.closed_behind): when a pose of the last trap_reach of
-    # the way the local planner drove the robot forwards fails its padded footprint check
-    # on the map as it is now, the robot gave up its goal and backs out on that line at once
-    # (0: off)
+    # [m] trap check (recovery.Trail.closed_behind): when the map as it is now puts the
+    # bare footprint on an obstacle at a pose of the last trap_reach of the way the local
+    # planner drove the robot forwards, the robot gives up its goal and backs out on that
+    # line at once, before it turns away from it (0: off)
     trap_reach: float = 1.0
     # [m] the back-out steers at the trail point this far back along the trail (pure
     # pursuit of the rear): it follows the way the robot came, not a straight line to its end

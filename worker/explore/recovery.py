@@ -42,9 +42,10 @@ class Trail:
 
     def closed_behind(self, L: LocalCostmap, reach: float) -> np.ndarray | None:
         """The way out of a trap: when the last `reach` [m] of the trail, all of it driven
-        by the local planner, passed its footprint check (footprint_padding) then and fails
-        it now at a pose it drove through (the map drew the gap the robot came through
-        wider than it is, from the side it came from), the trail point to back out to:
+        by the local planner (which checked it with footprint_padding), now puts the bare
+        footprint on an obstacle cell at a pose the robot drove through (the map drew the
+        gap it came through wider than it is, from the side it came from; the robot cannot
+        drive back through it), the trail point to back out to:
         footprint_half_m + reach before the first pose that fails, in a straight line from
         it (or the trail's start). None: no trap (or the stretch was not all planned)."""
         p = self.params
@@ -57,7 +58,11 @@ class Trail:
         k0 = int(within[0]) if within.size else n - 1
         if k0 == n - 1 or not all(self.planned[k0:]):
             return None
-        half = p.footprint_half_m + p.footprint_padding
+        # the bare footprint (as for the back-out): with the padding, a wall face mapped a
+        # cell nearer after the robot drove past it 2 cm off made traps in open rooms
+        # (Freiburg52_scan_furnitures). The local costmap's first test, a centre within the
+        # padded half side of an obstacle, is its own (`footprint_collides`' inner layer)
+        half = p.footprint_half_m
         poses = np.column_stack((pts[k0:], self.headings[k0:]))
         hit = ck.first_colliding_pose(
             L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,

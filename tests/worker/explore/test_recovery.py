@@ -117,7 +117,7 @@ def test_square_gap_is_the_distance_to_the_footprints_edge():
 
 def _gap_local(gap_lo: float, gap_hi: float, pose):
     """A local costmap of a 4 m x 4 m map with a wall at x 2.0-2.1 m, open between y = gap_lo
-    and gap_hi [m]."""
+    and gap_hi [m] (the cells whose centres lie between them)."""
     p = ExploreParams()
     nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
     prob = np.full((80, 80), 0.05, dtype=np.float32)
@@ -129,37 +129,42 @@ def _gap_local(gap_lo: float, gap_hi: float, pose):
     return p, nav.local
 
 
-def _straight_trail(p, x1: float, planned=lambda x: True) -> Trail:
-    trail = Trail(p)
+def _straight_trail(x1: float, planned=lambda x: True) -> Trail:
+    """A trail along y = 2 m from x = 0 to x1, a point every 0.05 m (all kept), heading +x."""
+    trail = Trail(ExploreParams(trail_spacing=0.04))
     for i in range(int(round(x1 / 0.05)) + 1):
         x = 0.05 * i
         trail.grow(np.array([x, 2.0, 0.0]), planned(x))
     return trail
 
 
-def test_a_trap_is_a_gap_behind_the_robot_now_too_narrow_for_its_padded_footprint():
+def test_a_trap_is_a_gap_behind_the_robot_now_narrower_than_its_body():
     pose = np.array([2.6, 2.0, 0.0])
-    # the robot drove along y = 2 through the wall's gap; 0.6 m wide, the padded footprint
-    # (0.44 m) fits: no trap
-    p, local = _gap_local(1.7, 2.3, pose)
-    trail = _straight_trail(p, 2.6)
+    # the robot drove along y = 2 through the wall's gap; 0.6 m wide, the footprint (0.4 m)
+    # fits at every pose it drove through: no trap
+    _, local = _gap_local(1.7, 2.3, pose)
+    trail = _straight_trail(2.6)
     assert trail.closed_behind(local, 1.0) is None
-    # the same gap as mapped from the far side, 0.4 m (cells 1.8-2.2 m free): the padded
-    # footprint at x fails once its front edge (x + 0.22) is in the wall (x = 2.0): first at
-    # x = 1.8. The way out: the newest trail point at least half + reach = 1.2 m before it
-    p, local = _gap_local(1.8, 2.2, pose)
+    # the same gap as the map draws it once seen from the far side, 0.3 m (cells 1.85-2.15
+    # m free): the footprint at x overlaps the wall (x 2.0-2.1) once its front edge x + 0.2
+    # is past 2.0: first at x = 1.85. The way out: the newest trail point at least
+    # half + reach = 1.2 m before it, x = 0.65
+    _, local = _gap_local(1.85, 2.15, pose)
     out = trail.closed_behind(local, 1.0)
-    assert out is not None and out[0] == pytest.approx(0.6) and out[1] == 2.0
+    assert out is not None and out[0] == pytest.approx(0.65) and out[1] == 2.0
     # dealt with once: the same stretch does not make every goal after it a trap again
     trail.unchecked()
     assert trail.closed_behind(local, 1.0) is None
     # a stretch the local planner did not drive forwards (a back-off, a turn in contact)
     # says nothing of the gap: its poses were never checked with the padding
-    trail = _straight_trail(p, 2.6, planned=lambda x: abs(x - 2.3) > 0.01)
+    trail = _straight_trail(2.6, planned=lambda x: abs(x - 2.3) > 0.01)
     assert trail.closed_behind(local, 1.0) is None
-    # a trail that has not reached the gap yet: nothing behind it fails
-    trail = _straight_trail(p, 1.7)
+    # a trail that has not reached the gap yet: nothing behind it overlaps the wall
+    trail = _straight_trail(1.8)
     assert trail.closed_behind(local, 1.0) is None
+    # a gap 0.5 m wide: the robot keeps 5 cm each side: no trap
+    _, local = _gap_local(1.75, 2.25, pose)
+    assert _straight_trail(2.6).closed_behind(local, 1.0) is None
 
 
 def test_the_back_out_steers_along_the_trail_round_its_bends():
