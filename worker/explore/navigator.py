@@ -419,7 +419,9 @@ class Navigator:
         if np.hypot(*d) < self.params.retrace_tolerance or t >= self.retrace.until:
             self.trail.cut_to(self.retrace.target)
         else:
-            aim = self.trail.carrot(pose[:2], self.retrace.target, self.params.retrace_lookahead)
+            aim = self.retrace.target
+            if self.params.retrace_lookahead > 0.0:
+                aim = self.trail.carrot(pose[:2], aim, self.params.retrace_lookahead)
             vw = back_out(self.params, self.local, pose, aim - pose[:2])
         if vw is None:
             self.retrace = None

@@ -190,9 +190,11 @@ class ExploreParams:
     # planner drove the robot forwards, the robot gives up its goal and backs out on that
     # line at once, before it turns away from it (0: off)
     trap_reach: float = 1.0
-    # [m] the back-out steers at the trail point this far back along the trail (pure
-    # pursuit of the rear): it follows the way the robot came, not a straight line to its end
-    retrace_lookahead: float = 0.25
+    # [m] > 0: the back-out steers at the trail point this far back along the trail (pure
+    # pursuit of the rear), round the bends of the way the robot came; 0: in a straight line
+    # to its target. Off: on Liselotte1 (oracle) the robot, failing goal after goal at a
+    # 0.5 m door, moved less with it and ended `stuck` at 512 s (README, "trap check")
+    retrace_lookahead: float = 0.0
     # [rad] the back-out reverses only while the rear points within this of its target
     retrace_max_heading_error: float = 0.6
     # backing out (the retrace, or getting room to turn) at this x escape_vel [-]; turning at
@@ -269,7 +271,7 @@ class ExploreParams:
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
             "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
-            "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach",
+            "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach", "retrace_lookahead",
         )  # fmt: skip
         bad = []
         for f in fields(self):
