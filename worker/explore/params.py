@@ -271,7 +271,8 @@ class ExploreParams:
             "footprint_padding", "blacklist_retries", "planner_margin", "escape_radius",
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
             "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
-            "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach", "retrace_lookahead",
+            "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach",
+            "retrace_lookahead",
         )  # fmt: skip
         bad = []
         for f in fields(self):
