@@ -224,3 +224,44 @@ def test_a_closed_gap_that_seals_the_robot_in_is_opened_when_nothing_else_is_lef
     assert nav.state is NavState.DRIVING and cmd.status != "no_frontier"
     assert nav.goal.goal_xy[0] > 6.0 and not nav.goal.look_through  # the corridor's end
     assert len(nav.closed.points) == 0 and nav._reopens_left == 0
+
+
+def _past_a_narrowed_gap(trap_reach: float) -> tuple[Navigator, np.ndarray]:
+    # the robot at (2.6, 2) drove east along y = 2 (the DWA's forward commands) through a
+    # wall at x 2.0-2.1 that the map now draws open only at y 1.85-2.15 (0.3 m, as seen from
+    # this side); its goal lies east, with unknown space from x = 4 m
+    from worker.explore.frontiers import FrontierGoal
+    from worker.explore.nav_state import Pursuit
+
+    nav = Navigator(ExploreParams(trail_spacing=0.04, trap_reach=trap_reach), ANGLES, 30.0)
+    prob = np.full((80, 100), np.nan, dtype=np.float32)
+    prob[:, :80] = 0.05
+    ys = (np.arange(80) + 0.5) * RES
+    prob[(ys < 1.85) | (ys > 2.15), 40:42] = 0.9
+    nav.update_map(prob, RES, (0.0, 0.0), True)
+    for i in range(53):
+        nav.trail.grow(np.array([0.05 * i, 2.0, 0.0]), True)
+    path = np.column_stack((np.linspace(2.6, 3.6, 21), np.full(21, 2.0)))
+    goal = FrontierGoal(np.array([3.6, 2.0]), 0.0, np.array([3.975, 2.0]), 1.0, 1.0, 1, path)
+    nav.pursuit = Pursuit(goal, 0.0, path, 1e9, progress_t=0.0)
+    nav.dwa.set_plan(path)
+    nav._next_choice_t = 1e9  # keep this goal: no new choice in the step below
+    nav._enter(NavState.DRIVING)
+    return nav, np.array([2.6, 2.0, 0.0])
+
+
+def test_a_robot_past_a_gap_the_map_closed_behind_it_gives_up_and_backs_out_at_once():
+    nav, pose = _past_a_narrowed_gap(trap_reach=1.0)
+    cmd = nav.step(0.0, pose, 0.3, 0.0, NO_HITS)
+    # the goal given up as trapped, the back-out under way to the trail point 1.2 m before
+    # the first pose the map now walls in (x = 1.85): x = 0.65 (test_recovery, by hand)
+    assert nav.stats.goals[-1].status == "failed" and nav.stats.goals[-1].detail == "trapped"
+    assert nav.state is NavState.RETRACING and cmd.status == "recovering"
+    assert abs(nav.retrace.target[0] - 0.65) < 1e-9 and nav.retrace.target[1] == 2.0
+    # backing: the rear points at the target already, so the robot reverses straight
+    cmd = nav.step(0.1, pose, 0.0, 0.0, NO_HITS)
+    assert cmd.v < 0.0 and cmd.w == 0.0 and cmd.status == "recovering"
+    # the trap check off: the robot drives on to its goal
+    nav, pose = _past_a_narrowed_gap(trap_reach=0.0)
+    cmd = nav.step(0.0, pose, 0.3, 0.0, NO_HITS)
+    assert nav.pursuit is not None and not nav.stats.goals and cmd.v > 0.0
