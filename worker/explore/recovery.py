@@ -71,9 +71,7 @@ class Trail:
         if hit < 0:
             return None
         first = k0 + int(hit)
-        back = np.hypot(pts[:first, 0] - pts[first, 0], pts[:first, 1] - pts[first, 1])
-        far = np.flatnonzero(back >= p.footprint_half_m + reach)
-        return pts[int(far[-1]) if far.size else 0].copy()
+        return _newest_from(pts, pts[first], p.footprint_half_m + reach, end=first)
 
     def back_target(self, xy: np.ndarray | None = None) -> np.ndarray | None:
         """The point to back out to: walking back along the trail from its newest point, the
@@ -87,9 +85,7 @@ class Trail:
             return None
         here = self.points[-1] if xy is None else np.asarray(xy, dtype=float)[:2]
         reach = p.retrace_points * p.trail_spacing
-        pts = np.asarray(self.points)
-        far = np.flatnonzero(np.hypot(pts[:, 0] - here[0], pts[:, 1] - here[1]) >= reach - 1e-9)
-        return self.points[int(far[-1]) if far.size else 0].copy()
+        return _newest_from(np.asarray(self.points), here, reach - 1e-9)
 
     def carrot(self, xy, target: np.ndarray, lookahead: float) -> np.ndarray:
         """The point to steer the back-out at: walking back along the trail towards
@@ -98,12 +94,10 @@ class Trail:
         goes the way the robot came, bends included, not in a straight line across them:
         between table legs or through a narrow door that line cuts a corner the robot's
         way in went round."""
-        pts = np.asarray(self.points)
-        at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1]))
-        if len(at) == 0:
+        k0 = self._index_of(target)
+        if k0 is None:
             return np.asarray(target, dtype=float).copy()
-        k0 = int(at[-1])
-        seg = pts[k0:]
+        seg = np.asarray(self.points[k0:])
         d = np.hypot(seg[:, 0] - xy[0], seg[:, 1] - xy[1])
         near = int(np.argmin(d))
         far = np.flatnonzero(d[: near + 1] >= lookahead)
@@ -118,19 +112,34 @@ class Trail:
         """A back-out to `target` ended: forget the trail after the newest point at it (the
         stretch backed out of, and the back-out's own points), so the next back-out goes on
         further the way the robot came; the whole trail when the point was trimmed off."""
-        pts = np.asarray(self.points)
-        at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1])) if len(pts) else []
-        if len(at) == 0:
+        k = self._index_of(target)
+        if k is None:
             self.clear()
         else:
-            del self.points[int(at[-1]) + 1 :]
-            del self.headings[int(at[-1]) + 1 :]
-            del self.planned[int(at[-1]) + 1 :]
+            del self.points[k + 1 :]
+            del self.headings[k + 1 :]
+            del self.planned[k + 1 :]
+
+    def _index_of(self, target: np.ndarray) -> int | None:
+        """Index of the newest trail point equal to `target`, or None (trimmed off)."""
+        if not self.points:
+            return None
+        pts = np.asarray(self.points)
+        at = np.flatnonzero((pts[:, 0] == target[0]) & (pts[:, 1] == target[1]))
+        return int(at[-1]) if at.size else None
 
     def clear(self) -> None:
         self.points.clear()
         self.headings.clear()
         self.planned.clear()
+
+
+def _newest_from(pts: np.ndarray, here, dist: float, end: int | None = None) -> np.ndarray:
+    """The newest of the points `(K, 2)` before index `end` (default all) at least `dist`
+    [m] from `here` in a straight line, else the oldest point (a copy)."""
+    old = pts[:end]
+    far = np.flatnonzero(np.hypot(old[:, 0] - here[0], old[:, 1] - here[1]) >= dist)
+    return pts[int(far[-1]) if far.size else 0].copy()
 
 
 def _legal(p: ExploreParams, L: LocalCostmap, pose, v: float, w: float, duration: float, half):
