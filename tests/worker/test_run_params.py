@@ -69,6 +69,7 @@ SETTINGS_SINCE_EXAMPLE = {
         "snapshot_holds",
         "snapshot_measure",
         "snapshot_tolerance",
+        "squeeze_margin",
         "stuck_distance",
         "trail_cap",
         "trail_spacing",

@@ -44,6 +44,12 @@ class GlobalCostmap:
     def shape(self) -> tuple[int, int]:
         return self.lethal.shape
 
+    @property
+    def map_obstacles(self) -> np.ndarray:
+        """The SLAM map's obstacles alone where they are kept (`map_lethal`, the door
+        passage on), else `lethal` (a noise-free laser's marks are where the map's are)."""
+        return self.map_lethal if self.map_lethal.shape == self.lethal.shape else self.lethal
+
     def world_to_cell(self, x: float, y: float) -> tuple[int, int]:
         """(ix, iy) of the cell holding world point (x, y), possibly outside the grid."""
         return (
@@ -315,7 +321,7 @@ class LocalCostmap:
         with the robot's heading theta, the cells under its footprint are cleared (see
         local_kernels.local_layers; clear_touching: the scan cells it touches too). use_map
         False: the map's obstacles are left out (the thesis's scan-only local costmap);
-        map_only: the SLAM map's obstacles alone (`GlobalCostmap.map_lethal`), no scans."""
+        map_only: the SLAM map's obstacles alone (`GlobalCostmap.map_obstacles`), no scans."""
         res = self.resolution
         half = self.n // 2
         g_origin = costmap.origin if costmap is not None else np.zeros(2)
@@ -328,7 +334,7 @@ class LocalCostmap:
             g_lethal, g_cost = np.zeros((1, 1), np.bool_), np.zeros((1, 1), np.uint8)
             g_oy = g_ox = -(10**6)
         else:
-            g_lethal = costmap.map_lethal if map_only else costmap.lethal
+            g_lethal = costmap.map_obstacles if map_only else costmap.lethal
             g_cost = costmap.inflated
             g_oy, g_ox = iy - half, ix - half
         self.lethal, self.near, self.inner, self.cost = lk.local_layers(

@@ -138,7 +138,7 @@ class DoorPass:
         costmap (the map and the laser's marks): a door takes over only where it is
         narrower there than door_engage_width (None: every door)."""
         p = self.params
-        if path_xy is None or len(path_xy) < 3 or costmap.map_lethal.shape != costmap.shape:
+        if path_xy is None or len(path_xy) < 3 or costmap.shape[0] == 0:
             self.reset()
             return None
         pts, along = _ahead(path_xy, float(pose[0]), float(pose[1]), p)

@@ -35,6 +35,7 @@ class FrontierGoal:
     # (a first plan for free), or None
     path_xy: np.ndarray | None = None
     look_through: bool = False  # a goal of the look-through pass (FrontierSearch.choose)
+    squeeze: bool = False  # a goal of the last pass, through a gap under narrow_margin
 
 
 class FrontierSearch:
@@ -150,6 +151,7 @@ class FrontierSearch:
         blacklist: list[np.ndarray],
         avoid: list[np.ndarray] = (),
         look_through: bool = False,
+        squeeze: bool = False,
     ) -> FrontierGoal | None:
         """Nearest frontier cluster by travel cost through known space, backed off from walls.
 
@@ -162,6 +164,10 @@ class FrontierSearch:
         behind a door too narrow for the robot's centre to pass): goals up to
         look_through_radius from the frontier, the one nearest it among those that see it, so
         that the laser looks through the door.
+
+        squeeze: the last pass, after the look-through pass: goals the narrow fallback
+        reaches only with squeeze_margin (down to the inscribed radius), through a door the
+        robot may not get back out of (`ExploreParams.squeeze_margin`).
         """
         sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
@@ -171,10 +177,13 @@ class FrontierSearch:
         sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist, area)
         if not cell_valid.any():
             return None
-        found = self._search(costmap, (sx, sy), cells, labels, cell_valid, avoid, look_through)
+        found, squeezed = self._search(
+            costmap, (sx, sy), cells, labels, cell_valid, avoid, look_through, squeeze
+        )
         if found.size == 0:
             return None
-        return self._goal(costmap, robot_xy, found, cells, labels, sizes, look_through)
+        goal = self._goal(costmap, robot_xy, found, cells, labels, sizes, look_through)
+        return dataclasses.replace(goal, squeeze=True) if squeezed else goal
 
     def _valid_cells(
         self,
@@ -213,23 +222,29 @@ class FrontierSearch:
         return sizes, cell_valid
 
     def _search(
-        self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid, look_through
-    ):
+        self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid, look_through,
+        squeeze=False,
+    ) -> tuple[np.ndarray, bool]:  # fmt: skip
         """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
-        robot's cell `start (ix, iy)`: flat indices, nearest first. Tried with the planner's
-        margin, then with a wider escape (a pocket the map sealed around the robot), then
-        with narrow_margin (frontiers behind doors too narrow for the margin); gaps closed
-        after a failure (`ClosedGaps`) stay closed to all three. look_through: goals within
-        look_through_radius of the frontier (`choose`)."""
+        robot's cell `start (ix, iy)`: flat indices, nearest first, and whether only the
+        squeeze attempt reached them. Tried with the planner's margin, then with a wider
+        escape (a pocket the map sealed around the robot), then with narrow_margin
+        (frontiers behind doors too narrow for the margin), then with `squeeze` with
+        squeeze_margin; gaps closed after a failure (`ClosedGaps`) stay closed to all of
+        them. look_through: goals within look_through_radius of the frontier (`choose`)."""
         p = self._look_params if look_through else self.params
         args = (costmap, start, cells, labels, cell_valid, avoid)
+        squeezed = False
         with self.closed.applied(costmap):  # closed gaps: closed to every attempt
             found = self._search_with(*args, p, None)
             if found.size == 0:
                 found = self._search_with(*args, p, p.pocket_escape_radius)
             if found.size == 0 and p.planner_margin > p.narrow_margin:
                 found = self._search_with(*args, narrow_params(p), None)
-        return found
+            if found.size == 0 and squeeze and p.narrow_margin > p.squeeze_margin:
+                found = self._search_with(*args, narrow_params(p, squeeze=True), None)
+                squeezed = found.size > 0
+        return found, squeezed
 
     def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, p, escape_m):
         """One goal search with settings `p` and escape radius escape_m [m] (None: p's)."""

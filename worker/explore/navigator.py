@@ -163,9 +163,11 @@ class Navigator:
                 self.trail.unchecked()
                 self._give_up(t, "trapped", pose, out)
                 return NavCommand(0.0, 0.0, "recovering")
+        # the door passage: on with a noisy laser, and for a goal of the squeeze pass, which
+        # the DWA's arcs bring to a door too tight to enter at an angle
         shim = (
             self.door.command(pose, g.path, self.costmap, self.local)
-            if self.params.door_align
+            if self.params.door_align or g.goal.squeeze
             else None
         )
         if shim is None:
@@ -297,6 +299,8 @@ class Navigator:
             new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist)
         if new is None:
             new = self._look_through(pose)
+        if new is None:
+            new = self._squeeze(pose)
         if new is None and len(self.closed.points) and self._reopens_left > 0:
             # nothing left with the closed gaps closed: one of them may seal the robot in (a
             # room it entered through a gap it then failed to leave by): open them once
@@ -305,6 +309,8 @@ class Navigator:
             new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist, mem.avoid())
             if new is None:
                 new = self._look_through(pose)
+            if new is None:
+                new = self._squeeze(pose)
         g = self.pursuit
         if new is None:
             if g is not None:
@@ -337,10 +343,20 @@ class Navigator:
             self.costmap, pose[:2], mem.looked, mem.avoid(), look_through=True
         )
 
+    def _squeeze(self, pose: np.ndarray) -> FrontierGoal | None:
+        """The last pass, after the look-through pass: a frontier behind a gap only
+        squeeze_margin lets through (`FrontierSearch.choose`, squeeze), or None (or off).
+        Last, because a robot that slipped in through such a door may not line up with it
+        again from inside, and everything still to explore elsewhere would be lost."""
+        mem = self.memory
+        return self.frontiers.choose(
+            self.costmap, pose[:2], mem.blacklist, mem.avoid(), squeeze=True
+        )
+
     def _plan(self, t: float, pose: np.ndarray) -> None:
         g = self.pursuit
         g.next_plan_t = t + 1.0 / self.params.planner_frequency
-        path = self.planner.plan(self.costmap, pose[:2], g.goal.goal_xy)
+        path = self.planner.plan(self.costmap, pose[:2], g.goal.goal_xy, g.goal.squeeze)
         if path is None:
             self.stats.plan_failures += 1
             if g.plan_fail_since is None:
@@ -447,6 +463,8 @@ class Navigator:
         x, y = float(g.goal.goal_xy[0]), float(g.goal.goal_xy[1])
         if g.goal.look_through:
             detail = "look-through" + (f": {detail}" if detail else "")
+        elif g.goal.squeeze:
+            detail = "squeeze" + (f": {detail}" if detail else "")
         self.stats.goals.append(GoalRecord(g.t0, t, x, y, status, detail))
         self.pursuit = None
         self.dwa.set_plan(None)

@@ -105,9 +105,17 @@ class ExploreParams:
     # robot can turn wherever its plan takes it (gaps between table legs are trapped otherwise)
     planner_margin: float = 0.1
     # [m] the margin when no plan or frontier is reachable with planner_margin: a door of
-    # 0.7 m clear width, mapped a cell narrower each side, leaves the robot's centre 0.25 to
-    # 0.3 m of clearance; navfn (0: any cell below the inscribed cost) plans through it
-    narrow_margin: float = 0.0
+    # 0.7 m clear width, mapped a cell narrower each side (0.6 m, 12 cells of 5 cm), leaves
+    # the robot's centre 0.3 m from the jambs' cell centres; this lets a centre 0.26 m from
+    # them through, a door the map draws 11 cells (0.55 m) wide or more
+    narrow_margin: float = 0.06
+    # [m] the last pass's margin (after the blacklist's retry and the look-through pass):
+    # navfn's own rule (0: any cell below the inscribed cost). A door the map draws 10 cells
+    # (0.5 m) wide or narrower (0.25 m from the jambs' cell centres at most: a 0.5 m door,
+    # the robot's 0.4 m and 5 cm each side) is entered only when nothing else is left: a
+    # robot that slipped in through one may not line up with it again from inside
+    # (wilbraham). Equal to narrow_margin: no such pass
+    squeeze_margin: float = 0.0
     # [m] near the robot, plans may cross the margin (not the inscribed radius): a pocket the
     # map closed around the robot as it mapped obstacles better must not trap it
     escape_radius: float = 0.5
@@ -272,7 +280,7 @@ class ExploreParams:
             "look_fov_margin", "goal_search_extra", "narrow_margin", "snapshot_tolerance",
             "obstacle_min_prob", "door_margin", "noisy_obstacle_min_prob",
             "look_through_radius", "closed_gap_reopens", "snapshot_holds", "trap_reach",
-            "retrace_lookahead",
+            "retrace_lookahead", "squeeze_margin",
         )  # fmt: skip
         bad = []
         for f in fields(self):
@@ -294,6 +302,8 @@ class ExploreParams:
                              "noisy_obstacle_min_prob must be at most 1")  # fmt: skip
         if self.door_margin > 0.1:
             raise InputError("exploration parameter door_margin must be at most 0.1 m")
+        if self.squeeze_margin > self.narrow_margin:
+            raise InputError("exploration parameter squeeze_margin exceeds narrow_margin")
         if self.trail_trim > self.trail_cap:
             raise InputError("exploration parameter trail_trim exceeds trail_cap")
 

@@ -114,8 +114,11 @@ class GlobalPlanner:
         self.search = DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
 
-    def plan(self, costmap: GlobalCostmap, start_xy, goal_xy) -> np.ndarray | None:
-        """Path `(K, 2) [x, y]` (cell centres, map frame) from the robot to the goal, or None."""
+    def plan(
+        self, costmap: GlobalCostmap, start_xy, goal_xy, squeeze: bool = False
+    ) -> np.ndarray | None:
+        """Path `(K, 2) [x, y]` (cell centres, map frame) from the robot to the goal, or None.
+        squeeze: a goal of the last pass, which may be planned with squeeze_margin."""
         sx, sy = costmap.world_to_cell(start_xy[0], start_xy[1])
         gx, gy = costmap.world_to_cell(goal_xy[0], goal_xy[1])
         if not (costmap.in_bounds(sx, sy) and costmap.in_bounds(gx, gy)):
@@ -142,9 +145,13 @@ class GlobalPlanner:
                 if found.size == 0:  # a pocket the map sealed around the robot: wider escape
                     found = attempt(p.pocket_escape_radius)
                 if found.size == 0 and p.planner_margin > p.narrow_margin:
-                    # a door narrower than the margin allows: navfn's own rule (any cell below
-                    # the inscribed cost), as move_base would plan through it
+                    # a door narrower than the margin allows
                     p = narrow_params(p)
+                    found = attempt()
+                if found.size == 0 and squeeze and p.narrow_margin > p.squeeze_margin:
+                    # the last pass: navfn's own rule (any cell below the inscribed cost), as
+                    # move_base would plan through it
+                    p = narrow_params(p, squeeze=True)
                     found = attempt()
         finally:
             self._target[gy, gx] = False
@@ -235,10 +242,12 @@ class ClosedGaps:
             costmap.inflated[iy, ix] = saved
 
 
-def narrow_params(params: ExploreParams) -> ExploreParams:
+def narrow_params(params: ExploreParams, squeeze: bool = False) -> ExploreParams:
     """The settings with planner_margin lowered to narrow_margin (the fallback that lets the
-    plans through doors whose clearance is under the margin but above the inscribed radius)."""
-    out = dataclasses.replace(params, planner_margin=params.narrow_margin)
+    plans through doors whose clearance is under the margin), or with `squeeze` to
+    squeeze_margin (the last pass's: down to the inscribed radius)."""
+    margin = params.squeeze_margin if squeeze else params.narrow_margin
+    out = dataclasses.replace(params, planner_margin=margin)
     object.__setattr__(out, "footprint_half_m", params.footprint_half_m)
     return out
 

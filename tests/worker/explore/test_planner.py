@@ -164,7 +164,7 @@ def test_sealed_off_never_contradicts_the_search():
 def test_pocket_escape_crosses_no_inscribed_gap_beyond_the_escape_radius():
     # a wall at x = 3 m with two openings: a 0.2 m slit 1 m from the robot (its cells are
     # inscribed: the 0.4 m robot does not fit) and a 0.5 m door 4 m up (under the 0.1 m
-    # margin, above the inscribed radius: the narrow fallback's). The wide escape from a
+    # margin, above the inscribed radius: the squeeze pass's). The wide escape from a
     # pocket (1.5 m) once chained through the slit's inscribed cells; the plan must take
     # the door, and no inscribed cell beyond escape_radius.
     prob = np.full((120, 120), 0.05)
@@ -175,7 +175,7 @@ def test_pocket_escape_crosses_no_inscribed_gap_beyond_the_escape_radius():
     assert cm.inflated[19:21, 60].min() >= 253
     p = ExploreParams()
     start, goal = (2.0, 1.0), (4.5, 1.0)
-    path = GlobalPlanner(p).plan(cm, start, goal)
+    path = GlobalPlanner(p).plan(cm, start, goal, squeeze=True)
     assert path is not None
     ix = np.floor(path[:, 0] / RES).astype(int)
     iy = np.floor(path[:, 1] / RES).astype(int)
