@@ -296,6 +296,7 @@ def _summary(world, seed, params, ex, errors, ate, wall_explore, wall, stage_wal
             "failed": ex.goals_failed,
             "total": len(ex.goals),
             "look_through": sum(g.detail.startswith("look-through") for g in ex.goals),
+            "squeeze": sum(g.detail.startswith("squeeze") for g in ex.goals),
         },
         "safety_triggers": ex.safety_triggers,
         "recoveries": ex.recoveries,

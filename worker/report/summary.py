@@ -139,6 +139,9 @@ class Goals(_Part):
     # of the total, goals of the look-through pass (a look through a door too narrow to pass);
     # absent from runs made before the pass existed (27b16d9)
     look_through: int | None = Field(default=None, exclude_if=lambda v: v is None)
+    # of the total, goals of the squeeze pass (through a door the map draws 0.5 m wide or
+    # narrower, entered last); absent from runs made before the pass existed
+    squeeze: int | None = Field(default=None, exclude_if=lambda v: v is None)
 
 
 class Timings(_Part):

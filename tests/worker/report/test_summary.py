@@ -124,3 +124,11 @@ def test_look_through_goals_are_kept_when_counted_and_absent_from_older_runs():
     new = make_summary(goals={"look_through": 3})
     assert new.to_dict()["goals"] == {**summary_doc()["goals"], "look_through": 3}
     assert RunSummary.model_validate_json(new.to_json_text()) == new
+
+
+def test_squeeze_goals_are_kept_when_counted_and_absent_from_older_runs():
+    old = make_summary()
+    assert old.goals.squeeze is None and "squeeze" not in old.to_dict()["goals"]
+    new = make_summary(goals={"look_through": 0, "squeeze": 2})
+    assert new.to_dict()["goals"] == {**summary_doc()["goals"], "look_through": 0, "squeeze": 2}
+    assert RunSummary.model_validate_json(new.to_json_text()) == new
