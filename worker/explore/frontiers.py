@@ -165,9 +165,10 @@ class FrontierSearch:
         look_through_radius from the frontier, the one nearest it among those that see it, so
         that the laser looks through the door.
 
-        squeeze: the last pass, after the look-through pass: goals the narrow fallback
-        reaches only with squeeze_margin (down to the inscribed radius), through a door the
-        robot may not get back out of (`ExploreParams.squeeze_margin`).
+        squeeze: the last pass, after the look-through pass (which asked with the wider
+        margins first, on the same map): goals the search reaches with squeeze_margin (down
+        to the inscribed radius), through a door the robot may not get back out of
+        (`ExploreParams.squeeze_margin`); None when squeeze_margin is narrow_margin.
         """
         sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
@@ -226,25 +227,27 @@ class FrontierSearch:
         squeeze=False,
     ) -> tuple[np.ndarray, bool]:  # fmt: skip
         """Goal cells (near valid frontier cells, not near `avoid` points) reached from the
-        robot's cell `start (ix, iy)`: flat indices, nearest first, and whether only the
-        squeeze attempt reached them. Tried with the planner's margin, then with a wider
-        escape (a pocket the map sealed around the robot), then with narrow_margin
-        (frontiers behind doors too narrow for the margin), then with `squeeze` with
-        squeeze_margin; gaps closed after a failure (`ClosedGaps`) stay closed to all of
-        them. look_through: goals within look_through_radius of the frontier (`choose`)."""
+        robot's cell `start (ix, iy)`: flat indices, nearest first, and whether the squeeze
+        attempt reached them. Tried with the planner's margin, then with a wider escape (a
+        pocket the map sealed around the robot), then with narrow_margin (frontiers behind
+        doors too narrow for the margin); `squeeze`: with squeeze_margin alone (the
+        navigator asks after the others found nothing on the same map, nothing off). Gaps
+        closed after a failure (`ClosedGaps`) stay closed to every attempt. look_through:
+        goals within look_through_radius of the frontier (`choose`)."""
         p = self._look_params if look_through else self.params
         args = (costmap, start, cells, labels, cell_valid, avoid)
-        squeezed = False
         with self.closed.applied(costmap):  # closed gaps: closed to every attempt
+            if squeeze:
+                if p.narrow_margin <= p.squeeze_margin:
+                    return np.zeros(0, dtype=np.int64), False
+                found = self._search_with(*args, narrow_params(p, squeeze=True), None)
+                return found, found.size > 0
             found = self._search_with(*args, p, None)
             if found.size == 0:
                 found = self._search_with(*args, p, p.pocket_escape_radius)
             if found.size == 0 and p.planner_margin > p.narrow_margin:
                 found = self._search_with(*args, narrow_params(p), None)
-            if found.size == 0 and squeeze and p.narrow_margin > p.squeeze_margin:
-                found = self._search_with(*args, narrow_params(p, squeeze=True), None)
-                squeezed = found.size > 0
-        return found, squeezed
+        return found, False
 
     def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, p, escape_m):
         """One goal search with settings `p` and escape radius escape_m [m] (None: p's)."""
