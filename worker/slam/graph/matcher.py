@@ -75,6 +75,7 @@ class PointMap:
         dist_penalty: tuple[float, float] = (0.0, 1.0),
         angle_penalty: tuple[float, float] = (0.0, 1.0),
         exclude: tuple[float, float, float] | None = None,
+        prior_information: np.ndarray | None = None,
     ) -> MatchResult:
         """Best pose of the scan `points` (M, 2) [m, robot frame] within +-linear_half [m] and
         +-angular_half [rad] of `prior` (3,); its score, or -1 below min_score.
@@ -82,6 +83,10 @@ class PointMap:
         dist_penalty, angle_penalty: Karto's (variance [m^2 | rad^2], minimum) penalties on
         leaving the prior; a variance <= 0 is none (Karto's loop closure matches unpenalised).
         exclude: (x, y, radius) [m]: poses whose xy lies within this disc are not candidates.
+        prior_information: (3, 3) the prior's information matrix [1/m^2, 1/rad^2] (the
+        odometry's, for the front end); given, the ICP's pose is fused with the prior by
+        their information (`fuse_with_prior`): what the walls leave free (a corridor's
+        length) comes from the prior instead of wherever the flat response put it.
         """
         prior = np.asarray(prior, dtype=np.float64)
         if len(points) == 0:
@@ -112,12 +117,14 @@ class PointMap:
             prior, dpen, apen,
         )  # fmt: skip
         if self._tree is not None:
-            fine = icp_point_to_line(
+            fine, info = icp_point_to_line(
                 points, pose, self._tree, self._normals, ICP_MAX_DIST, ICP_PRIOR_SIGMA
             )
             # trust ICP within a cell and an angular step of the grid's answer only
             if np.hypot(*(fine[:2] - pose[:2])) < self.res and abs(fine[2] - pose[2]) < step:
                 pose = fine
+                if prior_information is not None:
+                    pose = fuse_with_prior(pose, info, prior, prior_information)
         return MatchResult(pose, float(score))
 
 
@@ -129,12 +136,14 @@ def icp_point_to_line(
     max_dist: float,
     prior_sigma: tuple[float, float],
     iterations: int = 6,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """Refine pose (3,) of the scan points (M, 2) [robot frame] against the map points of
     `tree` with their unit normals (K, 2): Gauss-Newton on sum (n . (R p + t - q))^2 over
     pairs closer than max_dist [m], plus a prior holding the start pose with sigmas
     (xy [m], theta [rad]) so that directions the walls leave free (a corridor's length) stay
-    where the correlative search put them. Returns the refined pose (3,)."""
+    where the correlative search put them. Returns the refined pose (3,) and the walls'
+    information about it (3, 3) (J^T J / sigma_r^2 of the pairs at the last step, the prior
+    left out; zero when too few points pair and the start pose is returned)."""
     x = np.array(pose, dtype=np.float64, copy=True)
     start = x.copy()
     map_pts = tree.data
@@ -146,7 +155,7 @@ def icp_point_to_line(
         dist, idx = tree.query(np.column_stack([px, py]), distance_upper_bound=max_dist)
         ok = np.isfinite(dist)
         if ok.sum() < 10:
-            return np.array(pose, dtype=np.float64, copy=True)
+            return np.array(pose, dtype=np.float64, copy=True), np.zeros((3, 3))
         q, n = map_pts[idx[ok]], map_normals[idx[ok]]
         keep = (n**2).sum(axis=1) > 0.5
         q, n = q[keep], n[keep]
@@ -156,7 +165,8 @@ def icp_point_to_line(
         jt = n[:, 0] * -(ey - x[1]) + n[:, 1] * (ex - x[0])
         jac = np.column_stack([n[:, 0], n[:, 1], jt])
         sigma_r = 0.5 * max_dist  # residual scale: the pairing distance
-        h = jac.T @ jac / sigma_r**2 + np.diag(w_prior)
+        info = jac.T @ jac / sigma_r**2
+        h = info + np.diag(w_prior)
         d_prior = x - start
         d_prior[2] = (d_prior[2] + np.pi) % (2 * np.pi) - np.pi
         g = jac.T @ r / sigma_r**2 + w_prior * d_prior
@@ -164,7 +174,21 @@ def icp_point_to_line(
         x += step
         if np.abs(step[:2]).max() < 1e-4 and abs(step[2]) < 1e-5:
             break
-    return x
+    return x, info
+
+
+def fuse_with_prior(
+    pose: np.ndarray, info: np.ndarray, prior: np.ndarray, prior_info: np.ndarray
+) -> np.ndarray:
+    """(3,) the pose that best agrees with both a match `pose` (3,) of information `info`
+    (3, 3) and a `prior` (3,) of information `prior_info` (3, 3): the minimum of
+    |x - pose|^2_info + |x - prior|^2_prior_info (headings compared on the circle), i.e.
+    pose + (info + prior_info)^-1 prior_info (prior - pose). Along what the match fixes
+    (info >> prior_info) it stays at the match; along what it leaves free (info ~ 0: a
+    corridor's length, a featureless wall) it goes to the prior."""
+    d = np.asarray(prior, dtype=np.float64) - pose
+    d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
+    return pose + np.linalg.solve(info + prior_info, prior_info @ d)
 
 
 def point_map_around(

@@ -39,6 +39,12 @@ class GraphSlamParams:
     branch_and_bound_depth: int = (
         5  # pyramid levels above the map (Cartographer: 7 local, 8 global)
     )
+    # the front end's pose: the match fused with the odometry's prediction by their
+    # information (the ICP's J^T J against the odometry sigmas below), so that what the walls
+    # leave free (a corridor's length, a flat response) follows the odometry, as
+    # Cartographer's Ceres scan matcher weighs the predicted pose (translation_weight,
+    # rotation_weight); off: the match alone, held only by Karto's penalties
+    odometry_fusion: bool = True
     # edges' standard deviations (Karto derives them from the match response; fixed here)
     match_sigma_xy: float = 0.05  # [m] of a scan-match edge
     match_sigma_theta: float = 0.02  # [rad]
@@ -66,6 +72,10 @@ class GraphSlamParams:
     # match covariance does); rivals turned by more than loop_corridor_max_rotation are not
     loop_corridor_sigma: float = 1.0  # [m] along the shift (about free); 0 drops them all
     loop_corridor_max_rotation: float = 0.02  # [rad]
+    # the closure checked the other way round: the candidate's scan matched against the
+    # nodes leading to the current one must land where the closure puts it (within
+    # loop_ambiguity_radius and loop_gate_theta), or the closure is not made
+    loop_reverse_check: bool = True
     loop_attempt_every: int = 3  # [nodes] a loop search every this many nodes (Cartographer
     # samples 0.3 of the nodes for constraints: sampling_ratio 0.3)
     # a closure that moves the current node less than this is added without optimising at

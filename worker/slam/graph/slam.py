@@ -53,6 +53,7 @@ class GraphSlam:
         )  # fmt: skip
         self.closures: list[LoopClosure] = []
         self.rejected_closures = 0  # matched, then undone by the chi^2 check
+        self.reverse_rejected_closures = 0  # matched, but the reverse match put it elsewhere
         self.ambiguous_closures = 0  # matched, but as well somewhere else
         self.corridor_closures = 0  # ambiguous along one shift only: added, free along it
         self.match_failures = 0  # nodes tied by odometry alone
@@ -92,19 +93,27 @@ class GraphSlam:
         prev = nodes.n - 1
         odo = relative3(nodes.odom[prev], pose_odom)
         prior = compose3(nodes.poses[prev], odo)
-        match = self._link_match(self._local_nodes(prev, prior), pts, prior)
+        odo_sigma = self._odometry_sigma(odo)
+        info = np.diag(1.0 / np.square(odo_sigma)) if g.odometry_fusion else None
+        match = self._link_match(self._local_nodes(prev, prior), pts, prior, None, info)
         if match.score >= g.link_match_minimum_response_fine:
             pose = match.pose
             z = relative3(nodes.poses[prev], pose)
             sigma = (g.match_sigma_xy, g.match_sigma_xy, g.match_sigma_theta)
         else:
             self.match_failures += 1
-            pose, z = prior, odo
-            s_xy = max(0.01, g.odom_sigma_xy_per_m * math.hypot(odo[0], odo[1]))
-            sigma = (s_xy, s_xy, 0.01 + g.odom_sigma_theta_per_rad * abs(odo[2]))
+            pose, z, sigma = prior, odo, odo_sigma
         k = nodes.add(pose, pose_odom, t, self._scans.path_m, ranges, pts, nrm, reach)
         self.edges.add(prev, k, z, sigma, robust=False)
         return k
+
+    def _odometry_sigma(self, odo: np.ndarray) -> tuple[float, float, float]:
+        """[m, m, rad] the odometry's standard deviations over the step `odo` (3,): in x and y
+        odom_sigma_xy_per_m of the way (at least 0.01 m), in heading 0.01 rad plus
+        odom_sigma_theta_per_rad of the turn."""
+        g = self.graph_params
+        s_xy = max(0.01, g.odom_sigma_xy_per_m * math.hypot(odo[0], odo[1]))
+        return (s_xy, s_xy, 0.01 + g.odom_sigma_theta_per_rad * abs(odo[2]))
 
     def _local_nodes(self, last: int, prior: np.ndarray) -> np.ndarray:
         """(K,) the last scan_buffer_size nodes up to `last` within
@@ -120,11 +129,13 @@ class GraphSlam:
         points: np.ndarray,
         prior: np.ndarray,
         poses: np.ndarray | None = None,
+        prior_information: np.ndarray | None = None,
     ) -> MatchResult:
         """The front end's match of scan `points` (M, 2) [robot frame] near `prior` (3,)
         against the smeared map of nodes `idx` placed at `poses` (N, 3) (None: the nodes'
         current poses), cut to what the scan can reach: the correlative window around the
-        prior with Karto's penalties for leaving it."""
+        prior with Karto's penalties for leaving it; with `prior_information` (3, 3) the
+        result is fused with the prior (`PointMap.match`)."""
         g, nodes = self.graph_params, self.nodes
         pts, nrm = nodes.map_points(idx, poses)
         reach = self._match_max + 0.5 * g.correlation_search_space_dimension
@@ -140,6 +151,7 @@ class GraphSlam:
             g.link_match_minimum_response_fine,
             (g.distance_variance_penalty, g.minimum_distance_penalty),
             (g.angle_variance_penalty, g.minimum_angle_penalty),
+            prior_information=prior_information,
         )
 
     def _try_loop_closure(self, k: int) -> None:
@@ -172,6 +184,11 @@ class GraphSlam:
                 return
             self.corridor_closures += 1
             sigma = (g.loop_corridor_sigma, g.loop_sigma_xy, g.loop_sigma_theta)
+        if g.loop_reverse_check and not self._reverse_agrees(
+            k, cand.node, cur, match.pose, lin, ang
+        ):
+            self.reverse_rejected_closures += 1
+            return
         z = relative3(nodes.poses[cand.node], match.pose)
         self.edges.add(cand.node, k, z, sigma, robust=True, frame=frame)
         moved = relative3(cur, match.pose)
@@ -185,6 +202,36 @@ class GraphSlam:
             return
         self.closures.append(
             LoopClosure(k, cand.node, float(nodes.t[k]), match.score, cur, nodes.poses[k].copy())
+        )
+
+    def _reverse_agrees(
+        self, k: int, cand: int, cur: np.ndarray, pose: np.ndarray, lin: float, ang: float
+    ) -> bool:
+        """The closure checked the other way round: the candidate node's scan matched against
+        the map of the nodes leading to node k (as many as a candidate's chain), around where
+        the closure puts it (node k at its estimate `cur`, the candidate where the closure's
+        relative pose `pose` says). False when that match finds a better place for it farther
+        than loop_ambiguity_radius or loop_gate_theta from there: the two scans then agree on
+        a different relative pose than the one found, as when the current scan saw mostly
+        what the candidate's chain never saw and fitted a like wall elsewhere. A reverse match
+        below the minimum response (the recent nodes saw too little of the candidate's place)
+        is no evidence either way."""
+        g, nodes = self.graph_params, self.nodes
+        expected = compose3(cur, relative3(pose, nodes.poses[cand]))
+        recent = np.arange(max(0, k - g.loop_match_minimum_chain_size), k + 1)
+        pts, nrm = nodes.map_points(recent)
+        recent_map = point_map_around(
+            pts, nrm, expected, self._match_max + lin, self.params.delta,
+            g.loop_search_space_smear_deviation, g.loop_branch_and_bound_depth,
+        )  # fmt: skip
+        min_score = g.loop_match_minimum_response_fine
+        back = recent_map.match(nodes.points[cand], expected, lin, ang, min_score)
+        if back.score < min_score:
+            return True
+        off = relative3(expected, back.pose)
+        return (
+            math.hypot(off[0], off[1]) <= g.loop_ambiguity_radius
+            and abs(off[2]) <= g.loop_gate_theta
         )
 
     def _optimise_and_check(self, optimise: bool) -> bool:

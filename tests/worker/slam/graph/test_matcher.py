@@ -4,6 +4,8 @@ between two closed-form scans of a box room is found."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
+from scipy.spatial import cKDTree
 
 from tests.worker.slam.helpers import Laser, box_scan
 from worker.slam.graph.match_kernels import (
@@ -12,7 +14,7 @@ from worker.slam.graph.match_kernels import (
     point_normals,
     scan_points,
 )
-from worker.slam.graph.matcher import PointMap, angular_step
+from worker.slam.graph.matcher import PointMap, angular_step, fuse_with_prior, icp_point_to_line
 
 LASER = Laser()
 BOX = (0.0, 0.0, 8.0, 5.0)
@@ -102,3 +104,48 @@ def test_pyramid_levels_are_block_maxima():
         for iy in range(13):
             for ix in range(17):
                 assert pyr[k, iy, ix] == grid[iy : iy + n, ix : ix + n].max()
+
+
+def test_fusion_with_the_prior_is_the_information_weighted_mean():
+    # hand-derived: x fixed by the match (1e4 against the prior's 1e2), y left free (0),
+    # heading half and half; headings compared on the circle (3.1 and -3.1 are 0.083 apart)
+    pose = np.array([1.0, 2.0, 3.1])
+    prior = np.array([1.5, 2.4, -3.1])
+    info = np.diag([1e4, 0.0, 1e2])
+    prior_info = np.diag([1e2, 1e2, 1e2])
+    fused = fuse_with_prior(pose, info, prior, prior_info)
+    d_theta = 2 * np.pi - 6.2
+    assert fused[0] == pytest.approx(1.0 + 0.5 * 1e2 / (1e4 + 1e2), abs=1e-12)
+    assert fused[1] == pytest.approx(2.4, abs=1e-12)
+    assert fused[2] == pytest.approx(3.1 + 0.5 * d_theta, abs=1e-12)
+
+
+def test_in_a_corridor_the_walls_fix_the_offset_across_and_the_prior_the_way_along():
+    # a 2 m wide corridor, its ends out of an 8 m laser's reach: the scan's walls say nothing
+    # about how far along it the robot is (no information along x), everything across it
+    corridor = (0.0, 0.0, 100.0, 2.0)
+    a = np.array([50.0, 1.0, 0.0])
+    b = np.array([50.3, 1.05, 0.01])  # the scan's true pose
+
+    def pts(pose):
+        ang = LASER.angles
+        return scan_points(box_scan(pose, ang, corridor, 8.0), np.cos(ang), np.sin(ang), 7.9, 0.05)
+
+    map_pts = _to_map(a, pts(a))
+    tree = cKDTree(map_pts)
+    pose, info = icp_point_to_line(pts(b), b + [0.0, 0.02, 0.0], tree, _normals_map(a, pts(a)),
+                                   0.15, (0.05, 0.02))  # fmt: skip
+    assert pose[1] == pytest.approx(1.05, abs=0.002) and pose[2] == pytest.approx(0.01, abs=5e-4)
+    assert info[0, 0] < 1e-6 * info[1, 1]
+    # the odometry's prediction is 0.2 m short along the corridor and 5 cm off across it
+    prior = np.array([50.1, 1.0, 0.0])
+    odo_info = np.diag([1 / 0.05**2, 1 / 0.05**2, 1 / 0.02**2])
+    fused = fuse_with_prior(pose, info, prior, odo_info)
+    assert fused[0] == pytest.approx(50.1, abs=0.002)  # along: the prior's
+    assert fused[1] == pytest.approx(1.05, abs=0.003)  # across: the walls'
+    assert fused[2] == pytest.approx(0.01, abs=5e-4)
+    # and through PointMap.match, from the correlative search on
+    pm = PointMap(map_pts, 0.05, 0.1, 5, None, _normals_map(a, pts(a)))
+    res = pm.match(pts(b), prior, 0.25, 0.349, 0.1, prior_information=odo_info)
+    assert res.pose[0] == pytest.approx(50.1, abs=0.005)
+    assert res.pose[1] == pytest.approx(1.05, abs=0.003)

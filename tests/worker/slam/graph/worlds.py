@@ -77,6 +77,7 @@ class Log:
     pose_odom: np.ndarray
     ranges: np.ndarray
     laser: object
+    odom_factors: np.ndarray | None = None  # (3,) the simulator's per-run error factors
 
 
 def drive(
@@ -85,11 +86,15 @@ def drive(
     seed: int,
     odom_error: float,
     laser: LaserSpec | None = None,
+    odom_factors: tuple[float, float, float] | None = None,
 ) -> Log:
     """Follow the waypoints on the true pose with Stage odometry whose per-run error factors
-    are uniform in +-odom_error / 2, logging every 0.1 s scan."""
+    are uniform in +-odom_error / 2 (or exactly odom_factors: x, y, theta), logging every
+    0.1 s scan."""
     params = SimParams(odom_error=(odom_error, odom_error, odom_error), laser=laser or LaserSpec())
     sim = Simulator(world, params, np.random.default_rng(seed))
+    if odom_factors is not None:
+        sim.odom_error_factors = np.asarray(odom_factors, dtype=float)
     follower = WaypointFollower(waypoints, FollowParams(v_max=0.8, tolerance=0.3))
     t, gt, odom, ranges = [], [], [], []
     for _ in range(20000):
@@ -100,4 +105,7 @@ def drive(
         if follower.finished:
             break
         sim.step(*follower.command(sim.pose_gt))
-    return Log(np.array(t), np.array(gt), np.array(odom), np.array(ranges), params.laser)
+    return Log(
+        np.array(t), np.array(gt), np.array(odom), np.array(ranges), params.laser,
+        sim.odom_error_factors.copy(),
+    )  # fmt: skip
