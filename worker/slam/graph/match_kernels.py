@@ -275,11 +275,15 @@ def _penalised(grid, ox, oy, res, points, x, y, th, prior, dist_pen, ang_pen):
 
 
 @njit(cache=True)
-def refine(grid, ox, oy, res, points, pose, lin_step, ang_step, halvings, prior, dist_pen, ang_pen):
+def refine(
+    grid, ox, oy, res, points, pose, lin_step, ang_step, halvings, prior, dist_pen, ang_pen,
+    lin_half, ang_half,
+):  # fmt: skip
     """Hill climbing from `pose` on the bilinearly interpolated grid, with the penalties for
     leaving `prior` (as branch_and_bound): move to the best of the 26 neighbours at
     (lin_step [m], ang_step [rad]) while it improves, then halve the steps, `halvings` times
-    (GMapping's scan matcher optimisation, over the three axes at once)."""
+    (GMapping's scan matcher optimisation, over the three axes at once). It stays within the
+    search window, +-lin_half [m] in x and y and +-ang_half [rad] of `prior`."""
     x, y, th = pose[0], pose[1], pose[2]
     best = _penalised(grid, ox, oy, res, points, x, y, th, prior, dist_pen, ang_pen)
     ls, as_ = lin_step, ang_step
@@ -292,6 +296,12 @@ def refine(grid, ox, oy, res, points, pose, lin_step, ang_step, halvings, prior,
                         if i == 0 and j == 0 and q == 0:
                             continue
                         cx, cy, ct = x + j * ls, y + q * ls, th + i * as_
+                        if (
+                            abs(cx - prior[0]) > lin_half
+                            or abs(cy - prior[1]) > lin_half
+                            or abs(ct - prior[2]) > ang_half
+                        ):
+                            continue
                         s = _penalised(grid, ox, oy, res, points, cx, cy, ct, prior, dist_pen,
                                        ang_pen)  # fmt: skip
                         if s > best:

@@ -114,7 +114,7 @@ class PointMap:
         # it on the bilinearly interpolated grid; the response stays the cell score
         pose, _ = refine(
             self.grid, ox, oy, self.res, points, coarse, 0.5 * self.res, step, 3,
-            prior, dpen, apen,
+            prior, dpen, apen, window * self.res + 1e-9, n_ang * step + 1e-9,
         )  # fmt: skip
         if self._tree is not None:
             fine, info = icp_point_to_line(

@@ -45,6 +45,12 @@ class GraphSlamParams:
     # Cartographer's Ceres scan matcher weighs the predicted pose (translation_weight,
     # rotation_weight); off: the match alone, held only by Karto's penalties
     odometry_fusion: bool = True
+    # innovation gate on the front end's match: a match farther from the odometry's
+    # prediction than this chi^2 (3 dof; 16.27 = 0.999) under the odometry sigmas below is
+    # an optimum the odometry rules out (a scan fitted turned by 0.28 rad in a room whose
+    # walls allow it, drawing a wall across a door); the scan is matched again within
+    # sqrt(chi^2) sigmas of the prediction. 0: off
+    link_gate_chi2: float = 16.27
     # edges' standard deviations (Karto derives them from the match response; fixed here)
     match_sigma_xy: float = 0.05  # [m] of a scan-match edge
     match_sigma_theta: float = 0.02  # [rad]
@@ -134,7 +140,7 @@ class GraphSlamParams:
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"graph parameter {name} must be a positive number, got {value}")
         for name in ("loop_gate_xy_per_m", "loop_gate_theta_per_m", "loop_corridor_sigma",
-                     "loop_corridor_max_rotation"):  # fmt: skip
+                     "loop_corridor_max_rotation", "link_gate_chi2"):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise InputError(f"graph parameter {name} must be >= 0, got {value}")

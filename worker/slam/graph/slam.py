@@ -57,6 +57,7 @@ class GraphSlam:
         self.ambiguous_closures = 0  # matched, but as well somewhere else
         self.corridor_closures = 0  # ambiguous along one shift only: added, free along it
         self.match_failures = 0  # nodes tied by odometry alone
+        self.gated_matches = 0  # front-end optima the odometry ruled out (matched again)
         self.optimisations = 0
         self.updates = 0
         self._pose_odom = np.zeros(3)
@@ -95,7 +96,20 @@ class GraphSlam:
         prior = compose3(nodes.poses[prev], odo)
         odo_sigma = self._odometry_sigma(odo)
         info = np.diag(1.0 / np.square(odo_sigma)) if g.odometry_fusion else None
-        match = self._link_match(self._local_nodes(prev, prior), pts, prior, None, info)
+        local = self._local_nodes(prev, prior)
+        match = self._link_match(local, pts, prior, None, info)
+        if g.link_gate_chi2 > 0 and match.score >= g.link_match_minimum_response_fine:
+            d = match.pose - prior
+            d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
+            if float((np.square(d) / np.square(odo_sigma)).sum()) > g.link_gate_chi2:
+                # the odometry rules this optimum out: the best match it allows instead, if
+                # the scan fits there nearly as well (else the scan's evidence wins)
+                reach = math.sqrt(g.link_gate_chi2)
+                window = (reach * odo_sigma[0], reach * odo_sigma[2])
+                near = self._link_match(local, pts, prior, None, info, window)
+                if near.score >= g.loop_ambiguity_ratio * match.score:
+                    self.gated_matches += 1
+                    match = near
         if match.score >= g.link_match_minimum_response_fine:
             pose = match.pose
             z = relative3(nodes.poses[prev], pose)
@@ -130,12 +144,14 @@ class GraphSlam:
         prior: np.ndarray,
         poses: np.ndarray | None = None,
         prior_information: np.ndarray | None = None,
+        window: tuple[float, float] | None = None,
     ) -> MatchResult:
         """The front end's match of scan `points` (M, 2) [robot frame] near `prior` (3,)
         against the smeared map of nodes `idx` placed at `poses` (N, 3) (None: the nodes'
         current poses), cut to what the scan can reach: the correlative window around the
         prior with Karto's penalties for leaving it; with `prior_information` (3, 3) the
-        result is fused with the prior (`PointMap.match`)."""
+        result is fused with the prior (`PointMap.match`). window: (+-[m], +-[rad]) narrower
+        than the correlative search's own (each is capped by it)."""
         g, nodes = self.graph_params, self.nodes
         pts, nrm = nodes.map_points(idx, poses)
         reach = self._match_max + 0.5 * g.correlation_search_space_dimension
@@ -143,11 +159,14 @@ class GraphSlam:
             pts, nrm, prior, reach, self.params.delta,
             g.correlation_search_space_smear_deviation, g.branch_and_bound_depth,
         )  # fmt: skip
+        lin, ang = 0.5 * g.correlation_search_space_dimension, g.coarse_search_angle_offset
+        if window is not None:
+            lin, ang = min(lin, window[0]), min(ang, window[1])
         return point_map.match(
             points,
             prior,
-            0.5 * g.correlation_search_space_dimension,
-            g.coarse_search_angle_offset,
+            lin,
+            ang,
             g.link_match_minimum_response_fine,
             (g.distance_variance_penalty, g.minimum_distance_penalty),
             (g.angle_variance_penalty, g.minimum_angle_penalty),

@@ -1,0 +1,98 @@
+"""The front end's match: the hill climb keeps to the search window, and the innovation gate
+takes the best match the odometry allows when the scan fits it nearly as well."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.worker.slam.helpers import Laser, box_scan
+from worker.slam.base import make_slam
+from worker.slam.graph.match_kernels import scan_points
+from worker.slam.graph.matcher import MatchResult, PointMap, angular_step
+from worker.slam.graph.params import GraphSlamParams
+from worker.slam.params import SlamParams
+
+LASER = Laser()
+BOX = (0.0, 0.0, 8.0, 5.0)
+
+
+def _points(pose):
+    a = LASER.angles
+    return scan_points(box_scan(pose, a, BOX), np.cos(a), np.sin(a), 29.0, 0.05)
+
+
+def _to_map(pose, pts):
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.column_stack([pose[0] + c * pts[:, 0] - s * pts[:, 1],
+                            pose[1] + s * pts[:, 0] + c * pts[:, 1]])  # fmt: skip
+
+
+@pytest.mark.parametrize("half", [0.1, 0.2])
+def test_the_hill_climb_stays_in_the_angular_window(half):
+    # the scan's true heading is 0.3 rad from the prior: a window of +-0.1 or +-0.2 rad
+    # must not return it (the climb from the window's edge would reach it unbounded)
+    a = np.array([4.0, 2.5, 0.0])
+    b = np.array([4.0, 2.5, 0.3])
+    pm = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5)
+    res = pm.match(_points(b), a, 0.25, half, 0.1)
+    step = angular_step(_points(b), 0.05)  # the search's angles: whole steps, rounded up
+    assert abs(res.pose[2] - a[2]) <= np.ceil(half / step) * step + 1e-9 < 0.3 - 0.05
+    wide = pm.match(_points(b), a, 0.25, 0.349, 0.1)
+    assert wide.pose[2] == pytest.approx(0.3, abs=0.01)
+
+
+def test_the_hill_climb_stays_in_the_linear_window():
+    a = np.array([4.0, 2.5, 0.0])
+    b = np.array([4.4, 2.7, 0.0])  # 0.4 m and 0.2 m from the prior
+    pm = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5)
+    res = pm.match(_points(b), a, 0.15, 0.349, 0.1)
+    assert abs(res.pose[0] - a[0]) <= 0.15 + 1e-9 and abs(res.pose[1] - a[1]) <= 0.15 + 1e-9
+
+
+class _Scripted:
+    """Stands in for GraphSlam._link_match: the first call (the full window) answers `far`,
+    a call with a narrower window answers `near`; records the windows asked for."""
+
+    def __init__(self, far: MatchResult, near: MatchResult):
+        self.far, self.near, self.windows = far, near, []
+
+    def __call__(self, idx, points, prior, poses=None, prior_information=None, window=None):
+        self.windows.append(window)
+        return self.far if window is None else self.near
+
+
+def _second_node(graph: GraphSlamParams, far_score: float, near_score: float):
+    slam = make_slam("graph", LASER, SlamParams(graph=graph))
+    p0 = np.array([4.0, 2.5, 0.0])
+    slam.process(0.0, p0, box_scan(p0, LASER.angles, BOX))
+    p1 = np.array([4.6, 2.5, 0.0])  # odometry: 0.6 m ahead, no turn (sigmas 0.06 m, 0.01 rad)
+    far = MatchResult(np.array([4.6, 2.5, 0.25]), far_score)  # turned 0.25 rad: chi^2 625
+    near = MatchResult(np.array([4.61, 2.5, 0.01]), near_score)
+    script = _Scripted(far, near)
+    slam._link_match = script
+    slam.process(0.1, p1, box_scan(p1, LASER.angles, BOX))
+    return slam, script
+
+
+def test_a_match_the_odometry_rules_out_gives_way_to_one_nearly_as_good_within_the_gate():
+    slam, script = _second_node(GraphSlamParams(), 0.60, 0.56)  # 0.56 >= 0.9 * 0.60
+    assert slam.nodes.poses[1] == pytest.approx([4.61, 2.5, 0.01])
+    assert slam.gated_matches == 1
+    # the window asked: sqrt(16.27) sigmas of the odometry (0.06 m, 0.01 rad)
+    lin, ang = script.windows[1]
+    assert lin == pytest.approx(np.sqrt(16.27) * 0.06) and ang == pytest.approx(
+        np.sqrt(16.27) * 0.01
+    )
+
+
+def test_the_scans_evidence_wins_when_the_gated_match_fits_clearly_worse():
+    slam, _ = _second_node(GraphSlamParams(), 0.60, 0.50)  # 0.50 < 0.9 * 0.60
+    assert slam.nodes.poses[1] == pytest.approx([4.6, 2.5, 0.25])
+    assert slam.gated_matches == 0
+
+
+def test_with_the_gate_off_the_first_match_stands():
+    slam, script = _second_node(GraphSlamParams(link_gate_chi2=0.0), 0.60, 0.59)
+    assert slam.nodes.poses[1] == pytest.approx([4.6, 2.5, 0.25])
+    assert script.windows == [None]
