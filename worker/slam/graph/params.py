@@ -93,7 +93,7 @@ class GraphSlamParams:
     loop_gate_xy: float = 0.3  # [m] floor of the gate
     # [m/m] plus this per metre of path between the two nodes: 3 % of the way, an odometry's
     # drift (the front end, fused with the odometry, drifts at most as the odometry where the
-    # walls leave a direction free; less elsewhere). 0.1 before a7357c4's successor: wide
+    # walls leave a direction free; less elsewhere). 0.1 until c7a071a: wide
     # enough for a like room 2-3.5 m away to close in lab_a_scan and office_b_furnitures
     loop_gate_xy_per_m: float = 0.03
     loop_gate_theta: float = 0.1  # [rad] floor

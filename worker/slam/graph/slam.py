@@ -183,11 +183,7 @@ class GraphSlam:
         path = min(cand.path_m, self.edges.graph_distance(nodes.n, cand.node, k, cand.path_m))
         lin, ang = search_window(path, g)
         cur = nodes.poses[k].copy()
-        pts, nrm = nodes.map_points(cand.chain)
-        chain_map = point_map_around(
-            pts, nrm, cur, self._match_max + lin, self.params.delta,
-            g.loop_search_space_smear_deviation, g.loop_branch_and_bound_depth,
-        )  # fmt: skip
+        chain_map = self._loop_map(cand.chain, cur, lin)
         min_score = g.loop_match_minimum_response_fine
         match = chain_map.match(nodes.points[k], cur, lin, ang, min_score)
         if match.score < min_score:
@@ -223,6 +219,16 @@ class GraphSlam:
             LoopClosure(k, cand.node, float(nodes.t[k]), match.score, cur, nodes.poses[k].copy())
         )
 
+    def _loop_map(self, idx: np.ndarray, centre: np.ndarray, lin: float):
+        """The loop closure's map of nodes `idx` (smeared finely, Cartographer's deeper
+        pyramid), cut to what a scan matched within +-lin [m] of `centre` (3,) can reach."""
+        g = self.graph_params
+        pts, nrm = self.nodes.map_points(idx)
+        return point_map_around(
+            pts, nrm, centre, self._match_max + lin, self.params.delta,
+            g.loop_search_space_smear_deviation, g.loop_branch_and_bound_depth,
+        )  # fmt: skip
+
     def _reverse_agrees(
         self, k: int, cand: int, cur: np.ndarray, pose: np.ndarray, lin: float, ang: float
     ) -> bool:
@@ -238,11 +244,7 @@ class GraphSlam:
         g, nodes = self.graph_params, self.nodes
         expected = compose3(cur, relative3(pose, nodes.poses[cand]))
         recent = np.arange(max(0, k - g.loop_match_minimum_chain_size), k + 1)
-        pts, nrm = nodes.map_points(recent)
-        recent_map = point_map_around(
-            pts, nrm, expected, self._match_max + lin, self.params.delta,
-            g.loop_search_space_smear_deviation, g.loop_branch_and_bound_depth,
-        )  # fmt: skip
+        recent_map = self._loop_map(recent, expected, lin)
         min_score = g.loop_match_minimum_response_fine
         back = recent_map.match(nodes.points[cand], expected, lin, ang, min_score)
         if back.score < min_score:

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.worker.slam.graph.worlds import box_points, to_map
 from tests.worker.slam.helpers import Laser, box_scan
 from worker.slam.base import make_slam
-from worker.slam.graph.match_kernels import scan_points
 from worker.slam.graph.matcher import MatchResult, PointMap, angular_step
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.params import SlamParams
@@ -18,14 +18,7 @@ BOX = (0.0, 0.0, 8.0, 5.0)
 
 
 def _points(pose):
-    a = LASER.angles
-    return scan_points(box_scan(pose, a, BOX), np.cos(a), np.sin(a), 29.0, 0.05)
-
-
-def _to_map(pose, pts):
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    return np.column_stack([pose[0] + c * pts[:, 0] - s * pts[:, 1],
-                            pose[1] + s * pts[:, 0] + c * pts[:, 1]])  # fmt: skip
+    return box_points(pose, LASER, BOX)
 
 
 @pytest.mark.parametrize("half", [0.1, 0.2])
@@ -34,7 +27,7 @@ def test_the_hill_climb_stays_in_the_angular_window(half):
     # must not return it (the climb from the window's edge would reach it unbounded)
     a = np.array([4.0, 2.5, 0.0])
     b = np.array([4.0, 2.5, 0.3])
-    pm = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5)
+    pm = PointMap(to_map(a, _points(a)), 0.05, 0.1, 5)
     res = pm.match(_points(b), a, 0.25, half, 0.1)
     step = angular_step(_points(b), 0.05)  # the search's angles: whole steps, rounded up
     assert abs(res.pose[2] - a[2]) <= np.ceil(half / step) * step + 1e-9 < 0.3 - 0.05
@@ -45,7 +38,7 @@ def test_the_hill_climb_stays_in_the_angular_window(half):
 def test_the_hill_climb_stays_in_the_linear_window():
     a = np.array([4.0, 2.5, 0.0])
     b = np.array([4.4, 2.7, 0.0])  # 0.4 m and 0.2 m from the prior
-    pm = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5)
+    pm = PointMap(to_map(a, _points(a)), 0.05, 0.1, 5)
     res = pm.match(_points(b), a, 0.15, 0.349, 0.1)
     assert abs(res.pose[0] - a[0]) <= 0.15 + 1e-9 and abs(res.pose[1] - a[1]) <= 0.15 + 1e-9
 

@@ -172,7 +172,7 @@ def test_a_closure_the_reverse_match_contradicts_is_not_made():
     # up the left corridor. Matched the other way round, the start's scan fits the nodes
     # leading to the corner where it truly is, so the closure is refused, and the right
     # one is made a few nodes later. The drift gate is widened to 0.1 m per metre (its
-    # default until a7357c4's successor), wide enough to let the 2.7 m shift through
+    # default until c7a071a), wide enough to let the 2.7 m shift through
     log = drive(
         corridor_ring(), RING_PATH, seed=1, odom_error=0.1, laser=LaserSpec(range_max=8.0),
         odom_factors=(0.08, 0.0, 0.0),

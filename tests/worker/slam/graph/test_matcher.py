@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from tests.worker.slam.graph.worlds import box_points, to_map
 from tests.worker.slam.helpers import Laser, box_scan
 from worker.slam.graph.match_kernels import (
     branch_and_bound,
@@ -21,14 +22,7 @@ BOX = (0.0, 0.0, 8.0, 5.0)
 
 
 def _points(pose):
-    a = LASER.angles
-    return scan_points(box_scan(pose, a, BOX), np.cos(a), np.sin(a), 29.0, 0.05)
-
-
-def _to_map(pose, pts):
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    return np.column_stack([pose[0] + c * pts[:, 0] - s * pts[:, 1],
-                            pose[1] + s * pts[:, 0] + c * pts[:, 1]])  # fmt: skip
+    return box_points(pose, LASER, BOX)
 
 
 def _normals_map(pose, pts):
@@ -40,14 +34,14 @@ def _normals_map(pose, pts):
 def test_known_offset_between_two_scans_is_found():
     a = np.array([3.0, 2.0, 0.3])
     b = np.array([3.13, 1.93, 0.35])  # the second scan's true pose
-    grid_only = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5)
+    grid_only = PointMap(to_map(a, _points(a)), 0.05, 0.1, 5)
     res = grid_only.match(_points(b), a, 0.25, 0.349, 0.1)  # prior: the first pose
     assert res.score > 0.8
     # the grid alone: within half a cell (5 cm) and a degree
     assert np.hypot(*(res.pose[:2] - b[:2])) < 0.025
     assert abs(res.pose[2] - b[2]) < 0.0175
     # with the point-to-line ICP on the map's points: within 2 mm and 0.03 degrees
-    with_icp = PointMap(_to_map(a, _points(a)), 0.05, 0.1, 5, None, _normals_map(a, _points(a)))
+    with_icp = PointMap(to_map(a, _points(a)), 0.05, 0.1, 5, None, _normals_map(a, _points(a)))
     res = with_icp.match(_points(b), a, 0.25, 0.349, 0.1)
     assert np.hypot(*(res.pose[:2] - b[:2])) < 0.002
     assert abs(res.pose[2] - b[2]) < 0.0005
@@ -56,7 +50,7 @@ def test_known_offset_between_two_scans_is_found():
 def test_branch_and_bound_equals_exhaustive_search():
     rng = np.random.default_rng(5)
     a = np.array([3.0, 2.0, 0.0])
-    map_pts = _to_map(a, _points(a)) + rng.normal(0, 0.02, size=(1, 2))
+    map_pts = to_map(a, _points(a)) + rng.normal(0, 0.02, size=(1, 2))
     pm = PointMap(map_pts, 0.05, 0.1, 4)
     scan = _points(np.array([2.9, 2.1, 0.04]))[::3]
     prior, window = a, 6
@@ -131,7 +125,7 @@ def test_in_a_corridor_the_walls_fix_the_offset_across_and_the_prior_the_way_alo
         ang = LASER.angles
         return scan_points(box_scan(pose, ang, corridor, 8.0), np.cos(ang), np.sin(ang), 7.9, 0.05)
 
-    map_pts = _to_map(a, pts(a))
+    map_pts = to_map(a, pts(a))
     tree = cKDTree(map_pts)
     pose, info = icp_point_to_line(pts(b), b + [0.0, 0.02, 0.0], tree, _normals_map(a, pts(a)),
                                    0.15, (0.05, 0.02))  # fmt: skip

@@ -7,9 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tests.worker.slam.helpers import box_scan
 from worker.sim.drivers import FollowParams, WaypointFollower
 from worker.sim.laser import LaserSpec
 from worker.sim.simulator import SimParams, Simulator
+from worker.slam.graph.match_kernels import scan_points
 from worker.world.world import World
 
 RES = 0.05  # [m]
@@ -109,3 +111,20 @@ def drive(
         np.array(t), np.array(gt), np.array(odom), np.array(ranges), params.laser,
         sim.odom_error_factors.copy(),
     )  # fmt: skip
+
+
+BOX_ROOM = (0.0, 0.0, 8.0, 5.0)  # [m] an 8 x 5 m room (x0, y0, x1, y1)
+
+
+def box_points(pose, laser, box=BOX_ROOM) -> np.ndarray:
+    """(M, 2) [m, robot frame] the graph matcher's scan points of a closed-form scan of the
+    axis-aligned `box` from `pose` (a point every 5 cm, beams to 29 m)."""
+    a = laser.angles
+    return scan_points(box_scan(pose, a, box), np.cos(a), np.sin(a), 29.0, 0.05)
+
+
+def to_map(pose, pts) -> np.ndarray:
+    """(M, 2) robot-frame points `pts` placed at `pose` (3,)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.column_stack([pose[0] + c * pts[:, 0] - s * pts[:, 1],
+                            pose[1] + s * pts[:, 0] + c * pts[:, 1]])  # fmt: skip
