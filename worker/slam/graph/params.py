@@ -49,7 +49,8 @@ class GraphSlamParams:
     # prediction than this chi^2 (3 dof; 16.27 = 0.999) under the odometry sigmas below is
     # an optimum the odometry rules out (a scan fitted turned by 0.28 rad in a room whose
     # walls allow it, drawing a wall across a door); the scan is matched again within
-    # sqrt(chi^2) sigmas of the prediction. 0: off
+    # sqrt(chi^2) sigmas of the prediction, and that match is taken when it scores at least
+    # loop_ambiguity_ratio (0.9) of the first (else the scan's evidence stands). 0: off
     link_gate_chi2: float = 16.27
     # edges' standard deviations (Karto derives them from the match response; fixed here)
     match_sigma_xy: float = 0.05  # [m] of a scan-match edge
