@@ -184,3 +184,13 @@ def search_window(path_m: float, g: GraphSlamParams) -> tuple[float, float]:
     lin = min(0.5 * g.loop_search_space_dimension, g.loop_gate_xy + g.loop_gate_xy_per_m * path_m)
     ang = min(g.loop_angular_search_window, g.loop_gate_theta + g.loop_gate_theta_per_m * path_m)
     return lin, ang
+
+
+def loop_min_score(lin: float, g: GraphSlamParams) -> float:
+    """The response a loop match must reach in a search of +-lin [m]: from
+    loop_match_minimum_response_fine at the drift gate's floor (loop_gate_xy) linearly up to
+    loop_match_minimum_response_wide at the window's cap (0.5 loop_search_space_dimension)."""
+    lo, hi = g.loop_gate_xy, 0.5 * g.loop_search_space_dimension
+    share = 1.0 if hi <= lo else min(1.0, max(0.0, (lin - lo) / (hi - lo)))
+    fine, wide = g.loop_match_minimum_response_fine, g.loop_match_minimum_response_wide
+    return fine + share * (wide - fine)

@@ -67,6 +67,14 @@ class GraphSlamParams:
     # slam_toolbox accepts 0.45; Cartographer 0.55 (constraint_builder min_score): corridor
     # shifts of a chain that saw only part of the place reach 0.47 here, true closures 0.7-0.97
     loop_match_minimum_response_fine: float = 0.55
+    # the minimum response of a closure whose search window is at its cap (the drift allowed
+    # since the candidate filled 0.5 loop_search_space_dimension): a wider search scores
+    # more poses, so a wrong one reaches a fixed bar more often (a like room 3.6 m off in
+    # office_b_furnitures at 0.571, a corridor slid 0.4-1.6 m in office_i_furnitures at
+    # 0.556-0.568). It rises linearly from loop_match_minimum_response_fine at the drift
+    # gate's floor (loop_gate_xy) to this; Cartographer asks 0.6 of a search over a whole
+    # submap (global_localization_min_score) where a windowed one needs 0.55 (min_score)
+    loop_match_minimum_response_wide: float = 0.6
     loop_branch_and_bound_depth: int = 7  # Cartographer's constraint builder: 7
     # ambiguity check (the role of Karto's loop_match_maximum_variance_coarse): the best match
     # farther than loop_ambiguity_radius from the found one must score below this share of it,
@@ -151,11 +159,17 @@ class GraphSlamParams:
                 raise InputError(f"graph parameter {name} must be >= 0, got {value}")
         unit = (
             "link_match_minimum_response_fine", "loop_match_minimum_response_fine",
+            "loop_match_minimum_response_wide",
             "minimum_distance_penalty", "minimum_angle_penalty", "loop_ambiguity_ratio",
         )  # fmt: skip
         for name in unit:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise InputError(f"graph parameter {name} must be in [0, 1]")
+        if self.loop_match_minimum_response_wide < self.loop_match_minimum_response_fine:
+            raise InputError(
+                "graph parameter loop_match_minimum_response_wide must be at least "
+                "loop_match_minimum_response_fine"
+            )
         counts = {
             "scan_buffer_size": (1, 1000),
             "loop_match_minimum_chain_size": (1, 1000),

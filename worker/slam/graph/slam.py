@@ -12,7 +12,14 @@ from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.mapping import NodeMap, scan_reach
 from worker.slam.graph.match_kernels import point_normals, scan_points
 from worker.slam.graph.matcher import MatchResult, point_map_around
-from worker.slam.graph.nodes import EdgeList, LoopClosure, NodeStore, find_candidate, search_window
+from worker.slam.graph.nodes import (
+    EdgeList,
+    LoopClosure,
+    NodeStore,
+    find_candidate,
+    loop_min_score,
+    search_window,
+)
 from worker.slam.graph.optimize import edge_errors, optimize
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.grid import OccupancyGrid
@@ -98,18 +105,27 @@ class GraphSlam:
         info = np.diag(1.0 / np.square(odo_sigma)) if g.odometry_fusion else None
         local = self._local_nodes(prev, prior)
         match = self._link_match(local, pts, prior, None, info)
-        if g.link_gate_chi2 > 0 and match.score >= g.link_match_minimum_response_fine:
-            d = match.pose - prior
-            d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
-            if float((np.square(d) / np.square(odo_sigma)).sum()) > g.link_gate_chi2:
-                # the odometry rules this optimum out: the best match it allows instead, if
-                # the scan fits there nearly as well (else the scan's evidence wins)
-                reach = math.sqrt(g.link_gate_chi2)
+        gate = g.link_gate_chi2
+        if (
+            gate > 0
+            and match.score >= g.link_match_minimum_response_fine
+            and _chi2(match.pose, prior, odo_sigma) > gate
+        ):
+            # the odometry rules this optimum out: the best match it allows instead, if
+            # the scan fits there nearly as well (else the scan's evidence wins). The
+            # search window is a box: first the one around the gate's ellipsoid
+            # (+-sqrt(chi^2) sigma), then, if its best is still outside the gate (a room
+            # that fits turned 0.23 rad and 0.12 m off, each within its axis's bound),
+            # the one inside it (+-sqrt(chi^2 / 3) sigma)
+            near = None
+            for reach in (math.sqrt(gate), math.sqrt(gate / 3.0)):
                 window = (reach * odo_sigma[0], reach * odo_sigma[2])
                 near = self._link_match(local, pts, prior, None, info, window)
-                if near.score >= g.loop_ambiguity_ratio * match.score:
-                    self.gated_matches += 1
-                    match = near
+                if _chi2(near.pose, prior, odo_sigma) <= gate:
+                    break
+            if near.score >= g.loop_ambiguity_ratio * match.score:
+                self.gated_matches += 1
+                match = near
         if match.score >= g.link_match_minimum_response_fine:
             pose = match.pose
             z = relative3(nodes.poses[prev], pose)
@@ -184,15 +200,16 @@ class GraphSlam:
         lin, ang = search_window(path, g)
         cur = nodes.poses[k].copy()
         chain_map = self._loop_map(cand.chain, cur, lin)
-        min_score = g.loop_match_minimum_response_fine
+        min_score = loop_min_score(lin, g)
         match = chain_map.match(nodes.points[k], cur, lin, ang, min_score)
         if match.score < min_score:
             return
         excl = (float(match.pose[0]), float(match.pose[1]), g.loop_ambiguity_radius)
-        other = chain_map.match(nodes.points[k], cur, lin, ang, min_score, exclude=excl)
+        rival_bar = g.loop_ambiguity_ratio * match.score  # a rival below the bar is none
+        other = chain_map.match(nodes.points[k], cur, lin, ang, rival_bar, exclude=excl)
         sigma = (g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_theta)
         frame = 0.0
-        if other.score >= g.loop_ambiguity_ratio * match.score:
+        if other.score >= rival_bar:
             frame = _shift_frame(match.pose, other.pose, g.loop_corridor_max_rotation)
             if frame is None or g.loop_corridor_sigma <= 0:
                 self.ambiguous_closures += 1
@@ -357,6 +374,13 @@ class GraphSlam:
         """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
         self.occupancy()  # brings the map up to the nodes' poses
         return self.map.occupancy(with_hits=True)
+
+
+def _chi2(pose: np.ndarray, prior: np.ndarray, sigma: tuple[float, float, float]) -> float:
+    """chi^2 of `pose` (3,) against `prior` (3,) under independent `sigma` [m, m, rad]."""
+    d = pose - prior
+    d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
+    return float((np.square(d) / np.square(sigma)).sum())
 
 
 def _inverse3(a: np.ndarray) -> np.ndarray:

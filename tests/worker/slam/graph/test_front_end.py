@@ -44,32 +44,38 @@ def test_the_hill_climb_stays_in_the_linear_window():
 
 
 class _Scripted:
-    """Stands in for GraphSlam._link_match: the first call (the full window) answers `far`,
-    a call with a narrower window answers `near`; records the windows asked for."""
+    """Stands in for GraphSlam._link_match: the i-th call answers answers[i] (the last one
+    for any call after); records the windows asked for."""
 
-    def __init__(self, far: MatchResult, near: MatchResult):
-        self.far, self.near, self.windows = far, near, []
+    def __init__(self, *answers: MatchResult):
+        self.answers, self.windows = answers, []
 
     def __call__(self, idx, points, prior, poses=None, prior_information=None, window=None):
         self.windows.append(window)
-        return self.far if window is None else self.near
+        return self.answers[min(len(self.windows), len(self.answers)) - 1]
 
 
-def _second_node(graph: GraphSlamParams, far_score: float, near_score: float):
+def _second_node(graph: GraphSlamParams, far_score: float, *answers: MatchResult):
+    """The second node's match scripted: the full window finds a pose turned 0.25 rad
+    (chi^2 625 under the odometry's sigmas 0.06 m, 0.01 rad), then `answers` in turn, or
+    one 0.01 m and 0.01 rad from the prediction scoring `far_score` if a float is given."""
     slam = make_slam("graph", LASER, SlamParams(graph=graph))
     p0 = np.array([4.0, 2.5, 0.0])
     slam.process(0.0, p0, box_scan(p0, LASER.angles, BOX))
     p1 = np.array([4.6, 2.5, 0.0])  # odometry: 0.6 m ahead, no turn (sigmas 0.06 m, 0.01 rad)
-    far = MatchResult(np.array([4.6, 2.5, 0.25]), far_score)  # turned 0.25 rad: chi^2 625
-    near = MatchResult(np.array([4.61, 2.5, 0.01]), near_score)
-    script = _Scripted(far, near)
+    far = MatchResult(np.array([4.6, 2.5, 0.25]), far_score)
+    script = _Scripted(far, *answers)
     slam._link_match = script
     slam.process(0.1, p1, box_scan(p1, LASER.angles, BOX))
     return slam, script
 
 
+def _near(score: float) -> MatchResult:
+    return MatchResult(np.array([4.61, 2.5, 0.01]), score)  # chi^2 1/36 + 1 from the prediction
+
+
 def test_a_match_the_odometry_rules_out_gives_way_to_one_nearly_as_good_within_the_gate():
-    slam, script = _second_node(GraphSlamParams(), 0.60, 0.56)  # 0.56 >= 0.9 * 0.60
+    slam, script = _second_node(GraphSlamParams(), 0.60, _near(0.56))  # >= 0.9 * 0.60
     assert slam.nodes.poses[1] == pytest.approx([4.61, 2.5, 0.01])
     assert slam.gated_matches == 1
     # the window asked: sqrt(16.27) sigmas of the odometry (0.06 m, 0.01 rad)
@@ -77,15 +83,30 @@ def test_a_match_the_odometry_rules_out_gives_way_to_one_nearly_as_good_within_t
     assert lin == pytest.approx(np.sqrt(16.27) * 0.06) and ang == pytest.approx(
         np.sqrt(16.27) * 0.01
     )
+    assert len(script.windows) == 2  # the gated match is inside the gate: no third search
+
+
+def test_a_gated_match_still_outside_the_gate_is_searched_for_inside_it():
+    # the box around the gate's ellipsoid (+-4.03 sigma per axis) holds poses the gate rules
+    # out: 3 sigmas ahead and 3 sigmas turned is chi^2 18 > 16.27 (office_c seed 2: a room
+    # that fitted 0.12 m and 0.23 rad off drew a wall across a door). Then the box inside
+    # the ellipsoid (+-sqrt(16.27 / 3) = 2.33 sigma) is searched, and its best taken
+    corner = MatchResult(np.array([4.6 + 3 * 0.06, 2.5, 3 * 0.01]), 0.59)
+    slam, script = _second_node(GraphSlamParams(), 0.60, corner, _near(0.56))
+    assert slam.nodes.poses[1] == pytest.approx([4.61, 2.5, 0.01])
+    assert len(script.windows) == 3
+    lin, ang = script.windows[2]
+    inner = np.sqrt(16.27 / 3)
+    assert lin == pytest.approx(inner * 0.06) and ang == pytest.approx(inner * 0.01)
 
 
 def test_the_scans_evidence_wins_when_the_gated_match_fits_clearly_worse():
-    slam, _ = _second_node(GraphSlamParams(), 0.60, 0.50)  # 0.50 < 0.9 * 0.60
+    slam, _ = _second_node(GraphSlamParams(), 0.60, _near(0.50))  # 0.50 < 0.9 * 0.60
     assert slam.nodes.poses[1] == pytest.approx([4.6, 2.5, 0.25])
     assert slam.gated_matches == 0
 
 
 def test_with_the_gate_off_the_first_match_stands():
-    slam, script = _second_node(GraphSlamParams(link_gate_chi2=0.0), 0.60, 0.59)
+    slam, script = _second_node(GraphSlamParams(link_gate_chi2=0.0), 0.60, _near(0.59))
     assert slam.nodes.poses[1] == pytest.approx([4.6, 2.5, 0.25])
     assert script.windows == [None]

@@ -20,6 +20,7 @@ from tests.worker.slam.graph.worlds import (
 from worker.sim.laser import LaserSpec
 from worker.slam.base import make_slam
 from worker.slam.graph.mapping import NodeMap
+from worker.slam.graph.nodes import loop_min_score
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.params import SlamParams
 
@@ -172,20 +173,51 @@ def test_a_closure_the_reverse_match_contradicts_is_not_made():
     # up the left corridor. Matched the other way round, the start's scan fits the nodes
     # leading to the corner where it truly is, so the closure is refused, and the right
     # one is made a few nodes later. The drift gate is widened to 0.1 m per metre (its
-    # default until c7a071a), wide enough to let the 2.7 m shift through
-    log = drive(
-        corridor_ring(), RING_PATH, seed=1, odom_error=0.1, laser=LaserSpec(range_max=8.0),
-        odom_factors=(0.08, 0.0, 0.0),
-    )  # fmt: skip
-    wide = GraphSlamParams(loop_gate_xy_per_m=0.1)
+    # default until c7a071a), wide enough to let the 2.7 m shift through, and the bar a
+    # match must reach is the same whatever the window (as before the wide bar; below)
+    log = _overread_ring()
+    wide = GraphSlamParams(loop_gate_xy_per_m=0.1, loop_match_minimum_response_wide=0.55)
     slam, est = _run(log, SlamParams(graph=wide))
     assert slam.reverse_rejected_closures >= 1
     assert slam.closures
     assert all(a <= b + 0.05 for b, a in _closure_errors(log, slam))
     assert np.hypot(*(est[-1, :2] - log.pose_gt[-1, :2])) < 0.3
     unchecked, _ = _run(log, SlamParams(graph=replace(wide, loop_reverse_check=False)))
-    assert max(a - b for b, a in _closure_errors(log, unchecked)) > 2.0
+    # a closure makes the error worse by metres (1.8 m here), not centimetres
+    assert max(a - b for b, a in _closure_errors(log, unchecked)) > 1.0
     # with the default gate (0.03 m per metre) the shift is out of reach, and no closure
     # makes the error worse either
     default, _ = _run(log, SlamParams())
     assert all(a <= b + 0.05 for b, a in _closure_errors(log, default))
+
+
+def _overread_ring():
+    return drive(
+        corridor_ring(), RING_PATH, seed=1, odom_error=0.1, laser=LaserSpec(range_max=8.0),
+        odom_factors=(0.08, 0.0, 0.0),
+    )  # fmt: skip
+
+
+def test_the_bar_a_loop_match_must_reach_rises_with_its_window():
+    # by hand: 0.55 at the drift gate's floor (0.3 m), 0.6 at the cap (4 m), linear between
+    g = GraphSlamParams()
+    assert loop_min_score(0.3, g) == pytest.approx(0.55)
+    assert loop_min_score(0.1, g) == pytest.approx(0.55)
+    assert loop_min_score(2.15, g) == pytest.approx(0.575)
+    assert loop_min_score(4.0, g) == pytest.approx(0.6)
+    assert loop_min_score(9.0, g) == pytest.approx(0.6)
+    assert loop_min_score(4.0, replace(g, loop_match_minimum_response_wide=0.55)) == 0.55
+
+
+def test_a_wide_search_refuses_the_wrong_closure_a_flat_bar_lets_through():
+    # the over-read ring with the drift gate at 0.1 m per metre and no reverse check: the
+    # corner's scan fits the start's chain 2.7 m off with a response of 0.552 in a window at
+    # its cap (+-4 m), where the bar is 0.6; with a flat bar (0.55) that closure is made
+    log = _overread_ring()
+    gate = GraphSlamParams(loop_gate_xy_per_m=0.1, loop_reverse_check=False)
+    rising, _ = _run(log, SlamParams(graph=gate))
+    assert rising.closures
+    assert all(a <= b + 0.05 for b, a in _closure_errors(log, rising))
+    flat = replace(gate, loop_match_minimum_response_wide=0.55)
+    made, _ = _run(log, SlamParams(graph=flat))
+    assert max(a - b for b, a in _closure_errors(log, made)) > 1.0
