@@ -186,11 +186,14 @@ def search_window(path_m: float, g: GraphSlamParams) -> tuple[float, float]:
     return lin, ang
 
 
-def loop_min_score(lin: float, g: GraphSlamParams) -> float:
-    """The response a loop match must reach in a search of +-lin [m]: from
-    loop_match_minimum_response_fine at the drift gate's floor (loop_gate_xy) linearly up to
-    loop_match_minimum_response_wide at the window's cap (0.5 loop_search_space_dimension)."""
-    lo, hi = g.loop_gate_xy, 0.5 * g.loop_search_space_dimension
-    share = 1.0 if hi <= lo else min(1.0, max(0.0, (lin - lo) / (hi - lo)))
+def loop_min_score(correction: float, lin: float, g: GraphSlamParams) -> float:
+    """The response a loop match must reach when it moves the current node `correction` [m]
+    in a search of +-lin [m] (the drift the path allows): the drift is a prior on the
+    correction, and a weak match may not pull the robot to where that prior rules it
+    nearly out. From loop_match_minimum_response_fine at no correction up to
+    loop_match_minimum_response_wide at the window's edge, with the square of the
+    correction's share of the window (the log of a Gaussian prior, as Karto's penalties
+    on leaving the odometry)."""
+    share = 1.0 if lin <= 0 else min(1.0, (correction / lin) ** 2)
     fine, wide = g.loop_match_minimum_response_fine, g.loop_match_minimum_response_wide
     return fine + share * (wide - fine)

@@ -67,13 +67,14 @@ class GraphSlamParams:
     # slam_toolbox accepts 0.45; Cartographer 0.55 (constraint_builder min_score): corridor
     # shifts of a chain that saw only part of the place reach 0.47 here, true closures 0.7-0.97
     loop_match_minimum_response_fine: float = 0.55
-    # the minimum response of a closure whose search window is at its cap (the drift allowed
-    # since the candidate filled 0.5 loop_search_space_dimension): a wider search scores
-    # more poses, so a wrong one reaches a fixed bar more often (a like room 3.6 m off in
-    # office_b_furnitures at 0.571, a corridor slid 0.4-1.6 m in office_i_furnitures at
-    # 0.556-0.568). It rises linearly from loop_match_minimum_response_fine at the drift
-    # gate's floor (loop_gate_xy) to this; Cartographer asks 0.6 of a search over a whole
-    # submap (global_localization_min_score) where a windowed one needs 0.55 (min_score)
+    # the minimum response of a closure that moves the robot to the edge of its search
+    # window (the drift the path since the candidate allows): the bar rises from
+    # loop_match_minimum_response_fine with the square of the correction's share of the
+    # window (`nodes.loop_min_score`), so that a weak match may not pull the robot where the
+    # drift nearly rules it out (a like room 3.6 m off in a +-3.9 m window in
+    # office_b_furnitures seed 2 at 0.571; true closures of the real logs correct up to 0.43
+    # of their window, at 0.553-0.64). Cartographer asks 0.6 of a search without a prior
+    # (global_localization_min_score) where a windowed one needs 0.55 (min_score)
     loop_match_minimum_response_wide: float = 0.6
     loop_branch_and_bound_depth: int = 7  # Cartographer's constraint builder: 7
     # ambiguity check (the role of Karto's loop_match_maximum_variance_coarse): the best match

@@ -64,6 +64,7 @@ class GraphSlam:
         self.ambiguous_closures = 0  # matched, but as well somewhere else
         self.corridor_closures = 0  # ambiguous along one shift only: added, free along it
         self.match_failures = 0  # nodes tied by odometry alone
+        self.weak_far_closures = 0  # loop matches too weak for how far they move the robot
         self.gated_matches = 0  # front-end optima the odometry ruled out (matched again)
         self.optimisations = 0
         self.updates = 0
@@ -200,9 +201,13 @@ class GraphSlam:
         lin, ang = search_window(path, g)
         cur = nodes.poses[k].copy()
         chain_map = self._loop_map(cand.chain, cur, lin)
-        min_score = loop_min_score(lin, g)
+        min_score = g.loop_match_minimum_response_fine
         match = chain_map.match(nodes.points[k], cur, lin, ang, min_score)
         if match.score < min_score:
+            return
+        correction = math.hypot(match.pose[0] - cur[0], match.pose[1] - cur[1])
+        if match.score < loop_min_score(correction, lin, g):
+            self.weak_far_closures += 1
             return
         excl = (float(match.pose[0]), float(match.pose[1]), g.loop_ambiguity_radius)
         rival_bar = g.loop_ambiguity_ratio * match.score  # a rival below the bar is none

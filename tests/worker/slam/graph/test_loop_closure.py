@@ -198,26 +198,32 @@ def _overread_ring():
     )  # fmt: skip
 
 
-def test_the_bar_a_loop_match_must_reach_rises_with_its_window():
-    # by hand: 0.55 at the drift gate's floor (0.3 m), 0.6 at the cap (4 m), linear between
+def test_the_bar_a_loop_match_must_reach_rises_with_the_correction():
+    # by hand: 0.55 for no correction, 0.6 at the window's edge and beyond, with the square
+    # of the correction's share of the window between (half the window: 0.55 + 0.05 / 4)
     g = GraphSlamParams()
-    assert loop_min_score(0.3, g) == pytest.approx(0.55)
-    assert loop_min_score(0.1, g) == pytest.approx(0.55)
-    assert loop_min_score(2.15, g) == pytest.approx(0.575)
-    assert loop_min_score(4.0, g) == pytest.approx(0.6)
-    assert loop_min_score(9.0, g) == pytest.approx(0.6)
-    assert loop_min_score(4.0, replace(g, loop_match_minimum_response_wide=0.55)) == 0.55
+    assert loop_min_score(0.0, 4.0, g) == pytest.approx(0.55)
+    assert loop_min_score(2.0, 4.0, g) == pytest.approx(0.5625)
+    assert loop_min_score(0.3, 0.6, g) == pytest.approx(0.5625)
+    assert loop_min_score(4.0, 4.0, g) == pytest.approx(0.6)
+    assert loop_min_score(5.0, 4.0, g) == pytest.approx(0.6)
+    flat = replace(g, loop_match_minimum_response_wide=0.55)
+    assert loop_min_score(4.0, 4.0, flat) == 0.55
 
 
-def test_a_wide_search_refuses_the_wrong_closure_a_flat_bar_lets_through():
+def test_a_weak_match_far_off_is_refused_where_a_flat_bar_lets_it_through():
     # the over-read ring with the drift gate at 0.1 m per metre and no reverse check: the
     # corner's scan fits the start's chain 2.7 m off with a response of 0.552 in a window at
-    # its cap (+-4 m), where the bar is 0.6; with a flat bar (0.55) that closure is made
+    # its cap (+-4 m), where the bar for that correction is 0.55 + 0.05 (2.7 / 4)^2 = 0.573;
+    # with a flat bar (0.55) that closure is made and puts the robot metres off
     log = _overread_ring()
     gate = GraphSlamParams(loop_gate_xy_per_m=0.1, loop_reverse_check=False)
     rising, _ = _run(log, SlamParams(graph=gate))
+    assert rising.weak_far_closures >= 1
     assert rising.closures
     assert all(a <= b + 0.05 for b, a in _closure_errors(log, rising))
+    assert np.hypot(*(rising.pose_estimate()[:2] - log.pose_gt[-1, :2])) < 0.3
     flat = replace(gate, loop_match_minimum_response_wide=0.55)
     made, _ = _run(log, SlamParams(graph=flat))
+    assert made.weak_far_closures == 0
     assert max(a - b for b, a in _closure_errors(log, made)) > 1.0
