@@ -69,6 +69,7 @@ def bench_log(name: str, args: argparse.Namespace) -> dict[str, float]:
                 f"{slam.ambiguous_closures} ambiguous, {slam.rejected_closures} rejected, "
                 f"{slam.reverse_rejected_closures} refused by the reverse match, "
                 f"{slam.weak_far_closures} too weak for their correction, "
+                f"{slam.opposed_closures} onto a wall's other face, "
                 f"{slam.match_failures} match failures, {slam.gated_matches} gated; "
                 f"final optimisation "
                 f"{cpu_final:.1f} s CPU, {slam.final_matched} nodes matched again"

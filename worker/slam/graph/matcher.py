@@ -191,6 +191,39 @@ def fuse_with_prior(
     return pose + np.linalg.solve(info + prior_info, prior_info @ d)
 
 
+def _turned(pose: np.ndarray, points: np.ndarray, normals: np.ndarray):
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    xy = np.column_stack([pose[0] + c * points[:, 0] - s * points[:, 1],
+                          pose[1] + s * points[:, 0] + c * points[:, 1]])  # fmt: skip
+    nrm = np.column_stack([c * normals[:, 0] - s * normals[:, 1],
+                           s * normals[:, 0] + c * normals[:, 1]])  # fmt: skip
+    return xy, nrm
+
+
+def opposed_share(
+    point_map: PointMap, points: np.ndarray, normals: np.ndarray, pose: np.ndarray, radius: float
+) -> tuple[float, int]:
+    """(share, pairs): of the scan points (M, 2) [robot frame] placed at `pose` (3,) that lie
+    within `radius` [m] of a map point, the share whose normal faces the map point's the
+    other way (cosine under -0.5). A scan's normals face the sensor that saw it
+    (`point_normals`: the tangent in beam order turned left), so a scan matched onto the
+    other face of a wall it never saw from that side (the occupancy score cannot tell the
+    two faces apart) has nearly all its pairs opposed; a true match has nearly none. Points
+    without a normal (isolated) are left out; (0.0, 0) without a map with normals."""
+    tree, map_normals = point_map._tree, point_map._normals
+    if tree is None or map_normals is None or len(points) == 0:
+        return 0.0, 0
+    has = np.hypot(normals[:, 0], normals[:, 1]) > 0.5
+    xy, nrm = _turned(pose, points[has], normals[has])
+    dist, idx = tree.query(xy, distance_upper_bound=radius)
+    near = np.isfinite(dist)
+    mn = map_normals[idx[near]]
+    dots = (nrm[near] * mn).sum(axis=1)
+    paired = np.hypot(mn[:, 0], mn[:, 1]) > 0.5
+    n = int(paired.sum())
+    return (float((dots[paired] < -0.5).mean()), n) if n else (0.0, 0)
+
+
 def point_map_around(
     points: np.ndarray,
     normals: np.ndarray,

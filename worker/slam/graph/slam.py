@@ -11,7 +11,7 @@ from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.mapping import NodeMap, scan_reach
 from worker.slam.graph.match_kernels import point_normals, scan_points
-from worker.slam.graph.matcher import MatchResult, point_map_around
+from worker.slam.graph.matcher import MatchResult, opposed_share, point_map_around
 from worker.slam.graph.nodes import (
     EdgeList,
     LoopClosure,
@@ -28,6 +28,8 @@ from worker.slam.motion import compose3, relative3
 from worker.slam.params import SlamParams
 
 NORMAL_GAP = 0.3  # [m] scan points farther apart are not neighbours when estimating normals
+OPPOSED_RADIUS = 0.1  # [m] a loop match's scan point and a map point this close are a pair
+OPPOSED_MIN_PAIRS = 10  # fewer pairs are no evidence of a wall's other face
 
 
 class GraphSlam:
@@ -65,6 +67,7 @@ class GraphSlam:
         self.corridor_closures = 0  # ambiguous along one shift only: added, free along it
         self.match_failures = 0  # nodes tied by odometry alone
         self.weak_far_closures = 0  # loop matches too weak for how far they move the robot
+        self.opposed_closures = 0  # loop matches onto the other face of a wall
         self.gated_matches = 0  # front-end optima the odometry ruled out (matched again)
         self.optimisations = 0
         self.updates = 0
@@ -209,6 +212,13 @@ class GraphSlam:
         if match.score < loop_min_score(correction, lin, g):
             self.weak_far_closures += 1
             return
+        if g.loop_max_opposed_share < 1.0:
+            share, pairs = opposed_share(
+                chain_map, nodes.points[k], nodes.normals[k], match.pose, OPPOSED_RADIUS
+            )
+            if pairs >= OPPOSED_MIN_PAIRS and share > g.loop_max_opposed_share:
+                self.opposed_closures += 1
+                return
         excl = (float(match.pose[0]), float(match.pose[1]), g.loop_ambiguity_radius)
         rival_bar = g.loop_ambiguity_ratio * match.score  # a rival below the bar is none
         other = chain_map.match(nodes.points[k], cur, lin, ang, rival_bar, exclude=excl)
