@@ -15,7 +15,13 @@ from worker.slam.graph.match_kernels import (
     point_normals,
     scan_points,
 )
-from worker.slam.graph.matcher import PointMap, angular_step, fuse_with_prior, icp_point_to_line
+from worker.slam.graph.matcher import (
+    PointMap,
+    angular_step,
+    fuse_with_prior,
+    icp_point_to_line,
+    opposed_share,
+)
 
 LASER = Laser()
 BOX = (0.0, 0.0, 8.0, 5.0)
@@ -143,3 +149,30 @@ def test_in_a_corridor_the_walls_fix_the_offset_across_and_the_prior_the_way_alo
     res = pm.match(pts(b), prior, 0.25, 0.349, 0.1, prior_information=odo_info)
     assert res.pose[0] == pytest.approx(50.1, abs=0.005)
     assert res.pose[1] == pytest.approx(1.05, abs=0.003)
+
+
+def _wall_face(x_sensor: float):
+    """A wall along x = 0, y in [-1, 1], as a scan from a sensor at (x_sensor, 0) facing the
+    wall sees it: points (robot frame) 2 m ahead and their normals turned toward the sensor."""
+    y = np.linspace(-1.0, 1.0, 41)
+    pts = np.column_stack([np.full_like(y, abs(x_sensor)), y])
+    return pts, point_normals(pts, 0.3)
+
+
+def test_a_scan_placed_on_a_walls_other_face_has_its_normals_opposed():
+    # by hand: the map saw the wall's west face from (-2, 0) facing east, so its normals
+    # point west (-1, 0). The same scan geometry from (2, 0) facing west (heading pi) lands
+    # on the same cells, but its normals point east: every pair is opposed. From (-2, 0)
+    # facing east (the face the map saw) none is
+    pts, nrm = _wall_face(-2.0)
+    assert nrm[:, 0] == pytest.approx(-1.0)  # toward the sensor, in the robot frame
+    west = np.array([-2.0, 0.0, 0.0])
+    map_pts, map_nrm = to_map(west, pts), nrm.copy()
+    pm = PointMap(map_pts, 0.05, 0.1, 3, normals=map_nrm)
+    share, pairs = opposed_share(pm, pts, nrm, west, 0.1)
+    assert share == 0.0 and pairs == 41
+    east = np.array([2.0, 0.0, np.pi])
+    share, pairs = opposed_share(pm, pts, nrm, east, 0.1)
+    assert share == 1.0 and pairs == 41
+    # out of reach of every map point: no pairs, no evidence
+    assert opposed_share(pm, pts, nrm, np.array([-2.0, 5.0, 0.0]), 0.1) == (0.0, 0)
