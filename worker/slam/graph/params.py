@@ -80,8 +80,8 @@ class GraphSlamParams:
     # a loop match whose scan points face the candidate's points the other way (normals
     # turned toward the sensor) in more than this share of their pairs within 0.1 m (at
     # least 10 pairs) is refused: it fitted the other face of a wall (office_a_furnitures
-    # seed 1: 0.97-0.98 in three such closures; true ones 0-0.02 in the simulated plans,
-    # up to 0.13 on the real logs). 1: off
+    # seed 1: 0.97-0.98 in three such closures; its true ones in the first 300 s 0-0.02,
+    # those of the three real logs at seed 0 up to 0.13). 1: off
     loop_max_opposed_share: float = 0.5
     # ambiguity check (the role of Karto's loop_match_maximum_variance_coarse): the best match
     # farther than loop_ambiguity_radius from the found one must score below this share of it,
