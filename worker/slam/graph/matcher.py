@@ -12,6 +12,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from worker.slam.graph.match_kernels import branch_and_bound, max_pyramid, refine, smear_grid
+from worker.slam.graph.nodes import place
 
 ICP_MAX_DIST = 0.15  # [m] pairs farther apart are not used by the ICP refinement
 ICP_PRIOR_SIGMA = (0.05, 0.02)  # [m], [rad] what holds the unconstrained directions
@@ -191,15 +192,6 @@ def fuse_with_prior(
     return pose + np.linalg.solve(info + prior_info, prior_info @ d)
 
 
-def _turned(pose: np.ndarray, points: np.ndarray, normals: np.ndarray):
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    xy = np.column_stack([pose[0] + c * points[:, 0] - s * points[:, 1],
-                          pose[1] + s * points[:, 0] + c * points[:, 1]])  # fmt: skip
-    nrm = np.column_stack([c * normals[:, 0] - s * normals[:, 1],
-                           s * normals[:, 0] + c * normals[:, 1]])  # fmt: skip
-    return xy, nrm
-
-
 def opposed_share(
     point_map: PointMap, points: np.ndarray, normals: np.ndarray, pose: np.ndarray, radius: float
 ) -> tuple[float, int]:
@@ -214,7 +206,7 @@ def opposed_share(
     if tree is None or map_normals is None or len(points) == 0:
         return 0.0, 0
     has = np.hypot(normals[:, 0], normals[:, 1]) > 0.5
-    xy, nrm = _turned(pose, points[has], normals[has])
+    xy, nrm = place(pose, points[has], normals[has])
     dist, idx = tree.query(xy, distance_upper_bound=radius)
     near = np.isfinite(dist)
     mn = map_normals[idx[near]]

@@ -58,14 +58,25 @@ class NodeStore:
         poses = self.poses if poses is None else poses
         out, nrm = [], []
         for k in idx:
-            p, pts, n = poses[k], self.points[k], self.normals[k]
-            c, s = np.cos(p[2]), np.sin(p[2])
-            out.append(np.column_stack([p[0] + c * pts[:, 0] - s * pts[:, 1],
-                                        p[1] + s * pts[:, 0] + c * pts[:, 1]]))  # fmt: skip
-            nrm.append(np.column_stack([c * n[:, 0] - s * n[:, 1], s * n[:, 0] + c * n[:, 1]]))
+            xy, n = place(poses[k], self.points[k], self.normals[k])
+            out.append(xy)
+            nrm.append(n)
         if not out:
             return np.zeros((0, 2)), np.zeros((0, 2))
         return np.concatenate(out), np.concatenate(nrm)
+
+
+def place(
+    pose: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Scan points (M, 2) [m] and their normals (M, 2), robot frame, placed at `pose` (3,):
+    (points, normals) in the map frame."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    xy = np.column_stack([pose[0] + c * points[:, 0] - s * points[:, 1],
+                          pose[1] + s * points[:, 0] + c * points[:, 1]])  # fmt: skip
+    nrm = np.column_stack([c * normals[:, 0] - s * normals[:, 1],
+                           s * normals[:, 0] + c * normals[:, 1]])  # fmt: skip
+    return xy, nrm
 
 
 class EdgeList:

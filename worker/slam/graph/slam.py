@@ -121,7 +121,6 @@ class GraphSlam:
             # (+-sqrt(chi^2) sigma), then, if its best is still outside the gate (a room
             # that fits turned 0.23 rad and 0.12 m off, each within its axis's bound),
             # the one inside it (+-sqrt(chi^2 / 3) sigma)
-            near = None
             for reach in (math.sqrt(gate), math.sqrt(gate / 3.0)):
                 window = (reach * odo_sigma[0], reach * odo_sigma[2])
                 near = self._link_match(local, pts, prior, None, info, window)
