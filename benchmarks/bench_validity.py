@@ -4,7 +4,7 @@ their relation errors and their map-versus-floorplan scores (issue 17 section 4)
     .venv/bin/python benchmarks/bench_validity.py [--out out/validity] [--time-limit 90]
         [--seeds 1 2] [--worlds worlds/bormann/office_a.yaml worlds/bormann/lab_ipa.yaml]
         [--noises 0 0.1 0.3] [--limit N] [--report-only] [--plot docs/validity.png]
-        [--walls density|ridge|front|occupied]
+        [--walls density|ridge|front|occupied] [--trajectory final|online]
 
 Every run (rbpf with 40, 10, 3 and 1 particles and the odometry baseline; laser noise 0, 0.1
 and 0.3 m; each world and seed) is written to OUT/<key>.json as soon as it ends, and a run
@@ -17,6 +17,15 @@ the grid's geometry and the first estimated and true poses), and the report scor
 maps again with the map score of the current code (`--walls` picks the wall extraction), so a
 change to the score needs no new runs; a run without its map is run again (a summary alone
 cannot be scored again).
+
+Each run's relations are scored twice: on the online estimate (each step's pose as the SLAM
+gave it then, the one the robot drove on and summary.json scores) and on the SLAM's final
+trajectory (rbpf: the best particle's path at the end, GMapping's trajectory tree; the
+odometry baseline keeps none, its online estimate is its final one), kept in the run's JSON as
+`final_relations` (a run without them is run again). The final map is drawn along the final
+trajectory, so that is the trajectory whose error the map score should track;
+`--trajectory final` (the default) takes it for the plot, the medians and the rule of thumb,
+and the Spearman table has both (`Bfinal`, `SMfinal`).
 """
 
 from __future__ import annotations
@@ -44,6 +53,12 @@ SCORES = ("distance_m", "distance_map_m", "distance_floorplan_m", "precision", "
           "wall_coverage", "free_share")  # fmt: skip
 ERRORS = (("B", "translation"), ("B", "rotation"), ("A", "translation"), ("A", "rotation"),
           ("SM", "translation"), ("SM", "rotation"))  # fmt: skip
+# The same relations scored on the SLAM's final trajectory (rbpf: its best particle's path at
+# the end), the one the final map was drawn along; an algorithm that keeps none (odometry)
+# has only its online estimate, which is then its final one.
+FINAL_KINDS = ("B", "SM")
+ERRORS_FINAL = tuple((f"{kind}final", axis) for kind in FINAL_KINDS
+                     for axis in ("translation", "rotation"))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -96,7 +111,11 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
     worlds: dict[str, Any] = {}
     for i, spec in enumerate(todo):
         path = out / f"{spec.key}.json"
-        if path.exists() and path.with_suffix(".npz").exists():
+        if (
+            path.exists()
+            and path.with_suffix(".npz").exists()
+            and "final_relations" in json.loads(path.read_text())
+        ):
             continue
         world = worlds.setdefault(spec.world, load_world(ROOT / spec.world))
         t0 = time.perf_counter()
@@ -105,6 +124,7 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
         try:
             r = run_one(world, RunParams.from_json(run_params(spec, time_limit)), spec.seed)
             rec["summary"] = r.summary.to_dict()
+            rec["final_relations"] = final_errors(r)
             save_map(path.with_suffix(".npz"), r.exploration)
         except Exception as exc:  # a run that raises is recorded, the rest go on
             rec["error"] = f"{type(exc).__name__}: {exc}"
@@ -114,6 +134,28 @@ def run_all(todo: list[Spec], out: Path, time_limit: float) -> None:
         tmp.replace(path)
         utc = time.strftime("%H:%M:%S", time.gmtime())
         print(f"[{utc} UTC] {i + 1}/{len(todo)} {spec.key}: {rec['wall_s']:.0f} s", flush=True)
+
+
+def final_errors(r: Any) -> dict[str, dict[str, float]] | None:
+    """Mean errors of the run's final trajectory on the run's own B and SM relations ({kind:
+    {"translation": m, "rotation": rad}}), None where the SLAM keeps no final trajectory."""
+    from worker.evaluate.metric import evaluate_relations
+    from worker.evaluate.trajectory import Trajectory
+
+    ex = r.exploration
+    if ex.pose_final is None:
+        return None
+    final = Trajectory(ex.t, ex.pose_final)
+    out = {}
+    for kind in FINAL_KINDS:
+        if kind not in r.relations:
+            continue
+        err = evaluate_relations(r.relations[kind], final, r.params.eval.max_gap)
+        ok = err.evaluated
+        if ok.any():
+            out[kind] = {"translation": float(err.translation[ok].mean()),
+                         "rotation": float(err.rotation[ok].mean())}  # fmt: skip
+    return out
 
 
 def save_map(path: Path, ex: Any) -> None:
@@ -175,6 +217,15 @@ def load(out: Path, p: Any = None, world_paths: tuple[str, ...] = WORLDS) -> lis
         for kind, axis in ERRORS:
             rel = s["relations"].get(kind)
             row[f"{kind}_{axis}"] = rel[axis]["mean"] if rel else None
+        # "final_relations" absent: a run made before they were kept (its final trajectory is
+        # unknown); None: the SLAM keeps no final trajectory, its online estimate is its final
+        fin = rec.get("final_relations", {})
+        for kind, axis in ERRORS_FINAL:
+            base = kind.removesuffix("final")
+            if fin is None:
+                row[f"{kind}_{axis}"] = row[f"{base}_{axis}"]
+            else:
+                row[f"{kind}_{axis}"] = fin.get(base, {}).get(axis)
         row.update({k: s["map_score"][k] for k in SCORES})
         rows.append(row)
     return rows
@@ -189,7 +240,7 @@ def spearman_table(rows: list[dict[str, Any]]) -> list[tuple[str, dict[str, tupl
     from scipy.stats import spearmanr
 
     table = []
-    for kind, axis in ERRORS:
+    for kind, axis in ERRORS + ERRORS_FINAL:
         err = column(rows, f"{kind}_{axis}")
         cells = {}
         for score in SCORES:
@@ -201,10 +252,13 @@ def spearman_table(rows: list[dict[str, Any]]) -> list[tuple[str, dict[str, tupl
     return table
 
 
-def agreement(rows: list[dict[str, Any]], threshold: float) -> tuple[int, int, int, int]:
+def agreement(
+    rows: list[dict[str, Any]], threshold: float, b: str = "B"
+) -> tuple[int, int, int, int]:
     """(agree, n, bad by the thesis's rule, bad by the map score): the rule of thumb (mean B
-    above 1 m or 0.03 rad is bad) against the map score (distance above `threshold` is bad)."""
-    bt, br = column(rows, "B_translation"), column(rows, "B_rotation")
+    above 1 m or 0.03 rad is bad; `b` "B" the online estimate's, "Bfinal" the final
+    trajectory's) against the map score (distance above `threshold` is bad)."""
+    bt, br = column(rows, f"{b}_translation"), column(rows, f"{b}_rotation")
     dist = column(rows, "distance_m")
     ok = np.isfinite(bt) & np.isfinite(br) & np.isfinite(dist)
     bad_rule = (bt[ok] > BAD_T) | (br[ok] > BAD_R)
@@ -212,23 +266,24 @@ def agreement(rows: list[dict[str, Any]], threshold: float) -> tuple[int, int, i
     return int(np.sum(bad_rule == bad_map)), int(ok.sum()), int(bad_rule.sum()), int(bad_map.sum())
 
 
-def best_threshold(rows: list[dict[str, Any]]) -> float:
+def best_threshold(rows: list[dict[str, Any]], b: str = "B") -> float:
     """The distance threshold that agrees best with the rule of thumb (fitted on these runs)."""
     dist = np.sort(column(rows, "distance_m")[np.isfinite(column(rows, "distance_m"))])
     if len(dist) == 0:
         return math.nan
     cands = np.concatenate(([dist[0] - 1e-9], 0.5 * (dist[1:] + dist[:-1]), [dist[-1]]))
-    return float(max(cands, key=lambda t: (agreement(rows, t)[0], -t)))
+    return float(max(cands, key=lambda t: (agreement(rows, t, b)[0], -t)))
 
 
-def report(rows: list[dict[str, Any]], tolerance: float) -> str:
-    """The figures as text (what the README quotes)."""
+def report(rows: list[dict[str, Any]], tolerance: float, b: str = "B") -> str:
+    """The figures as text (what the README quotes); `b` the B error of the medians and the
+    rule of thumb ("B" online, "Bfinal" final trajectory)."""
     lines = [f"{len(rows)} runs with B errors and a map score"]
     by = {}
     for r in rows:
         by.setdefault(r["slam"], []).append(r)
     for slam, rs in by.items():
-        bt, d = column(rs, "B_translation"), column(rs, "distance_m")
+        bt, d = column(rs, f"{b}_translation"), column(rs, "distance_m")
         lines.append(f"  {slam:9s} {len(rs):3d} runs: median B {np.nanmedian(bt):.3f} m, "
                      f"median wall distance {np.nanmedian(d):.3f} m")  # fmt: skip
     lines.append("Spearman's rho, mean relation error against map score (n runs):")
@@ -244,18 +299,19 @@ def report(rows: list[dict[str, Any]], tolerance: float) -> str:
         parts = [
             f"{kind} {cells[f'{kind} translation']['distance_m'][0]:+.3f} / "
             f"{cells[f'{kind} translation']['precision'][0]:+.3f}"
-            for kind in ("B", "A", "SM")
+            for kind in ("B", "Bfinal", "A", "SM")
         ]
         lines.append(f"  noise {noise:g} m ({len(sub)} runs): " + ", ".join(parts))
-    for label, thr in (("a priori, the tolerance", tolerance), ("fitted", best_threshold(rows))):
-        agree, n, bad_rule, bad_map = agreement(rows, thr)
+    for label, thr in (("a priori, the tolerance", tolerance), ("fitted", best_threshold(rows, b))):
+        agree, n, bad_rule, bad_map = agreement(rows, thr, b)
         lines.append(f"rule of thumb vs wall distance > {thr:.3f} m ({label}): {agree}/{n} "
                      f"runs agree (bad: {bad_rule} by the rule, {bad_map} by the map)")  # fmt: skip
     return "\n".join(lines)
 
 
-def scatter(rows: list[dict[str, Any]], path: Path) -> None:
-    """B error against the wall distance and the precision, one colour per SLAM variant."""
+def scatter(rows: list[dict[str, Any]], path: Path, b: str = "B") -> None:
+    """B error (`b`: "B" online, "Bfinal" final trajectory) against the wall distance, the
+    precision and the free share, one colour per SLAM variant."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -271,18 +327,19 @@ def scatter(rows: list[dict[str, Any]], path: Path) -> None:
               ("free_share", "free share of the reachable floorplan"))  # fmt: skip
     for ax, (score, label) in zip(axes, panels, strict=True):
         for r in rows:
-            if r["B_translation"] is None or r[score] is None:
+            if r[f"{b}_translation"] is None or r[score] is None:
                 continue
-            ax.scatter(r["B_translation"], r[score], c=colours.get(r["slam"], "k"),
+            ax.scatter(r[f"{b}_translation"], r[score], c=colours.get(r["slam"], "k"),
                        marker=marks.get(r["noise"], "x"), s=30, alpha=0.8)  # fmt: skip
-        bt, sc = column(rows, "B_translation"), column(rows, score)
+        bt, sc = column(rows, f"{b}_translation"), column(rows, score)
         ok = np.isfinite(bt) & np.isfinite(sc)
         rho = spearmanr(bt[ok], sc[ok]).statistic if ok.sum() >= 3 else math.nan
         ax.set_xscale("log")
         if score == "distance_m":
             ax.set_yscale("log")
         ax.axvline(BAD_T, color="k", lw=0.8, ls="--")
-        ax.set_xlabel("mean B translational error [m]")
+        which = "final trajectory" if b == "Bfinal" else "online estimate"
+        ax.set_xlabel(f"mean B translational error [m], {which}")
         ax.set_ylabel(label)
         ax.set_title(f"Spearman rho = {rho:.2f} ({ok.sum()} runs)", fontsize=10)
         ax.grid(alpha=0.3, which="both")
@@ -309,6 +366,13 @@ def main() -> None:
                     choices=("density", "ridge", "front", "occupied"),
                     help="the map's walls, when stored maps are scored again")  # fmt: skip
     ap.add_argument("--plot", default=None, help="scatter plot PNG (default OUT/validity.png)")
+    ap.add_argument(
+        "--trajectory",
+        default="final",
+        choices=("final", "online"),
+        help="whose B error the plot, the medians and the rule of thumb take: the final "
+        "trajectory (the final map's own) or the online estimate",
+    )
     args = ap.parse_args()
     if args.time_limit <= 0 or (args.limit is not None and args.limit < 1):
         print("bench_validity: --time-limit and --limit must be positive", file=sys.stderr)
@@ -325,10 +389,11 @@ def main() -> None:
 
     p = MapScoreParams(walls=args.walls)
     rows = load(out, p, tuple(args.worlds))
-    print(report(rows, p.tolerance))
+    b = "Bfinal" if args.trajectory == "final" else "B"
+    print(report(rows, p.tolerance, b))
     if rows:
         plot = Path(args.plot) if args.plot else out / "validity.png"
-        scatter(rows, plot)
+        scatter(rows, plot, b)
         print(f"scatter plot: {plot}")
 
 

@@ -99,3 +99,28 @@ def test_bad_parameters_are_input_errors():
         RunParams.from_json({"algorithm": "ekf"})
     with pytest.raises(InputError, match="time_limit"):
         RunParams.from_json({"explore": {"time_limit": -5}})
+
+
+def test_a_run_keeps_the_slams_final_trajectory_beside_its_online_estimate():
+    # rbpf keeps its best particle's path (the final map's own): one pose per 10 Hz step, and
+    # at the last step the same pose as the online estimate (both are the best particle's pose
+    # at the last update, carried on by the same odometry); the odometry baseline keeps none
+    p = RunParams.from_json(
+        {
+            "algorithm": "rbpf",
+            "slam": {"particles": 5},
+            "sim": {"odom_error": [0.05, 0.05, 0.1]},
+            "explore": {"time_limit": 60.0},
+        }
+    )
+    ex = run_one(two_rooms(), p, seed=4).exploration
+    assert ex.pose_final is not None and ex.pose_final.shape == ex.pose_est.shape
+    np.testing.assert_allclose(ex.pose_final[-1], ex.pose_est[-1], atol=1e-9)
+    # resampling drops paths the online estimate followed: the two differ somewhere
+    assert np.abs(ex.pose_final[:, :2] - ex.pose_est[:, :2]).max() > 1e-3
+    odo = run_one(
+        two_rooms(),
+        RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 10.0}}),
+        seed=4,
+    )
+    assert odo.exploration.pose_final is None

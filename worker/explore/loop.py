@@ -77,6 +77,11 @@ class ExplorationResult:
     # (N,) [s] its CPU time (this thread): what it costs on one core, whatever else runs
     nav_cpu_s: np.ndarray
     wall_s: float  # [s] wall time of the whole run
+    # (N, 3) [x, y, theta] SLAM map frame, at t: the algorithm's final trajectory where it
+    # keeps one (rbpf: the best particle's path at the end, the one the final map was drawn
+    # along; graph: the final optimised graph), None where it does not (odometry, external
+    # programs). pose_est is the online estimate the robot drove on.
+    pose_final: np.ndarray | None = None
 
     @property
     def completed(self) -> bool:
@@ -247,6 +252,10 @@ class Exploration:
         n0 = self.n_collisions0
         col = sim.collisions[n0] if len(sim.collisions) > n0 else None
         goals = tuple(nav.stats.goals)
+        final = getattr(self.slam, "final_trajectory", None)
+        pose_final = None if final is None else np.asarray(final(), dtype=float)
+        if pose_final is not None and pose_final.shape != pose_est.shape:
+            pose_final = None  # a step without a scan processed (slam_failed): no 1:1 match
         return ExplorationResult(
             outcome=outcome,
             reason=stop.reason,
@@ -267,6 +276,7 @@ class Exploration:
             nav_wall_s=rec.nav[: rec.n].copy(),
             nav_cpu_s=rec.cpu[: rec.n].copy(),
             wall_s=time.perf_counter() - self.wall0,
+            pose_final=pose_final,
         )
 
 
