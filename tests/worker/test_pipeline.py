@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from worker.errors import InputError
+from worker.evaluate.trajio import read_trajectory
 from worker.pipeline import RunCancelled, run_one
+from worker.report.folder import write_report
 from worker.report.summary import RunSummary
 from worker.run_params import RunParams
 from worker.world.world import World
@@ -101,7 +103,7 @@ def test_bad_parameters_are_input_errors():
         RunParams.from_json({"explore": {"time_limit": -5}})
 
 
-def test_a_run_keeps_the_slams_final_trajectory_beside_its_online_estimate():
+def test_a_run_keeps_the_slams_final_trajectory_beside_its_online_estimate(tmp_path):
     # rbpf keeps its best particle's path (the final map's own): one pose per 10 Hz step, and
     # at the last step the same pose as the online estimate (both are the best particle's pose
     # at the last update, carried on by the same odometry); the odometry baseline keeps none
@@ -113,14 +115,22 @@ def test_a_run_keeps_the_slams_final_trajectory_beside_its_online_estimate():
             "explore": {"time_limit": 60.0},
         }
     )
-    ex = run_one(two_rooms(), p, seed=4).exploration
+    r = run_one(two_rooms(), p, seed=4)
+    ex = r.exploration
     assert ex.pose_final is not None and ex.pose_final.shape == ex.pose_est.shape
     np.testing.assert_allclose(ex.pose_final[-1], ex.pose_est[-1], atol=1e-9)
     # resampling drops paths the online estimate followed: the two differ somewhere
     assert np.abs(ex.pose_final[:, :2] - ex.pose_est[:, :2]).max() > 1e-3
+    # the report folder has it as est_final.tum beside est.tum
+    write_report(r, tmp_path / "rbpf")
+    final = read_trajectory(tmp_path / "rbpf" / "est_final.tum")
+    np.testing.assert_allclose(final.t, ex.t, atol=1e-6)
+    np.testing.assert_allclose(final.poses, ex.pose_final, atol=1e-6)
     odo = run_one(
         two_rooms(),
         RunParams.from_json({"algorithm": "odometry", "explore": {"time_limit": 10.0}}),
         seed=4,
     )
     assert odo.exploration.pose_final is None
+    write_report(odo, tmp_path / "odometry")
+    assert not (tmp_path / "odometry" / "est_final.tum").exists()

@@ -7,6 +7,7 @@ import secrets
 import zipfile
 from pathlib import Path
 
+from worker.evaluate.trajectory import Trajectory
 from worker.evaluate.trajio import write_carmen, write_errors, write_relations, write_tum
 from worker.report.plots import errors_png, map_png, overlay_png, trajectories_png
 from worker.report.summary import RunSummary
@@ -81,6 +82,8 @@ def write_report(result, out_dir: str | Path) -> Path:
     write_carmen(out / "est.log", result.est)
     write_tum(out / "gt.tum", result.gt)
     write_tum(out / "est.tum", result.est)
+    if getattr(ex, "pose_final", None) is not None:  # the SLAM's final trajectory, where it has one
+        write_tum(out / "est_final.tum", Trajectory(ex.t, ex.pose_final))
     return out
 
 
