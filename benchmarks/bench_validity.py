@@ -275,6 +275,28 @@ def best_threshold(rows: list[dict[str, Any]], b: str = "B") -> float:
     return float(max(cands, key=lambda t: (agreement(rows, t, b)[0], -t)))
 
 
+def bootstrap_rho(
+    x: np.ndarray, y: np.ndarray, resamples: int = 2000, seed: int = 0
+) -> tuple[float, float]:
+    """95 % percentile interval of Spearman's rho of (x, y) over the runs resampled with
+    replacement (nan where fewer than 3 finite pairs)."""
+    from scipy.stats import spearmanr
+
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if len(x) < 3:
+        return math.nan, math.nan
+    rng = np.random.default_rng(seed)
+    rhos = []
+    for _ in range(resamples):
+        i = rng.integers(0, len(x), len(x))
+        rho = spearmanr(x[i], y[i]).statistic
+        if np.isfinite(rho):  # a resample of one repeated run has no rank order
+            rhos.append(rho)
+    lo, hi = np.percentile(rhos, [2.5, 97.5])
+    return float(lo), float(hi)
+
+
 def report(rows: list[dict[str, Any]], tolerance: float, b: str = "B") -> str:
     """The figures as text (what the README quotes); `b` the B error of the medians and the
     rule of thumb ("B" online, "Bfinal" final trajectory)."""
@@ -291,6 +313,13 @@ def report(rows: list[dict[str, Any]], tolerance: float, b: str = "B") -> str:
     for name, cells in spearman_table(rows):
         cols = " ".join(f"{rho:>14.3f} ({n:3d})" for rho, n in cells.values())
         lines.append(f"  {name:>20s} {cols}")
+    dist = column(rows, "distance_m")
+    for kind, label in (("B", "online estimate"), ("Bfinal", "final trajectory")):
+        lo, hi = bootstrap_rho(column(rows, f"{kind}_translation"), dist)
+        lines.append(
+            f"  {kind} translation ({label}) against distance_m: 95 % bootstrap "
+            f"interval {lo:.3f} .. {hi:.3f} (2,000 resamples of the runs, seed 0)"
+        )
     lines.append("The same within each laser-noise level (noise blurs the map's walls, whatever")
     lines.append("the trajectory; B, A, SM translation against distance_m / precision):")
     for noise in sorted({r["noise"] for r in rows}):
