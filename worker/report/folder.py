@@ -82,7 +82,7 @@ def write_report(result, out_dir: str | Path) -> Path:
     write_carmen(out / "est.log", result.est)
     write_tum(out / "gt.tum", result.gt)
     write_tum(out / "est.tum", result.est)
-    if getattr(ex, "pose_final", None) is not None:  # the SLAM's final trajectory, where it has one
+    if ex.pose_final is not None:  # the SLAM's final trajectory, where it keeps one
         write_tum(out / "est_final.tum", Trajectory(ex.t, ex.pose_final))
     return out
 
