@@ -36,7 +36,7 @@ def update_frontier_region(lethal, unknown, frontier, y0, y1, x0, x1):
 def label_clusters(frontier, cells, labels_buf, stamp, run_id):
     """8-connected clusters of frontier cells.
 
-    cells: (K, 2) int64 [iy, ix] of every frontier cell. labels_buf, stamp: (H, W) int64 reusable
+    cells: (K, 2) int64 [iy, ix] of every frontier cell. labels_buf, stamp: (H, W) int32 reusable
     buffers (valid where stamp == run_id). Returns `(K,) int64` cluster label per cell, 0-based.
     """
     h, w = frontier.shape
@@ -88,7 +88,7 @@ def stamp_targets(
 
     cells: (K, 2) [iy, ix] frontier cells; cell_cluster: (K,) their cluster; cell_valid: (K,)
     bool (cluster big enough, not blacklisted); offsets: (M, 2) [dy, dx] of the goal disc.
-    target (H, W) bool and owner (H, W) int64 (cluster of each candidate) are written; returns
+    target (H, W) bool and owner (H, W) int32 (cluster of each candidate) are written; returns
     the (N, 2) [iy, ix] cells marked, so that the caller can unmark them afterwards without
     clearing the whole grid.
     """
@@ -203,7 +203,7 @@ def open_frontier_cells(cells, unknown, state, stamp, run_id, max_cells):
     (4-connected) of at most max_cells cells is enclosed by known cells: the inside of a
     table leg or a wall the laser never sees into, which no viewpoint can ever reveal, so
     the free cells next to it are no frontier. The grid's edge counts as open. state (H, W)
-    int8 and stamp (H, W) int64 are reusable buffers (valid where stamp == run_id): each
+    int8 and stamp (H, W) int32 are reusable buffers (valid where stamp == run_id): each
     region is flooded once, at most max_cells + 1 cells deep. Returns `(K,) bool`.
     """
     h, w = unknown.shape

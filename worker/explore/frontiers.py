@@ -41,7 +41,13 @@ class FrontierGoal:
 class FrontierSearch:
     """Keeps the frontier mask up to date and picks the nearest frontier cluster by travel cost."""
 
-    def __init__(self, params: ExploreParams, closed: ClosedGaps | None = None):
+    def __init__(
+        self,
+        params: ExploreParams,
+        closed: ClosedGaps | None = None,
+        search: DijkstraSearch | None = None,
+    ):
+        """search: the Dijkstra buffers of the goal search (see GlobalPlanner); new if None."""
         self.params = params
         self.closed = closed if closed is not None else ClosedGaps()  # the narrow search's
         # the look-through pass's goal search: goals up to look_through_radius from the
@@ -53,13 +59,13 @@ class FrontierSearch:
         self._look_params = look
         self.frontier = np.zeros((0, 0), dtype=np.bool_)
         self.n_frontier_cells = 0
-        self.search = DijkstraSearch()
+        self.search = search if search is not None else DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
-        self._owner = np.zeros((0, 0), dtype=np.int64)
-        self._labels = np.zeros((0, 0), dtype=np.int64)
-        self._stamp = np.zeros((0, 0), dtype=np.int64)
+        self._owner = np.zeros((0, 0), dtype=np.int32)
+        self._labels = np.zeros((0, 0), dtype=np.int32)
+        self._stamp = np.zeros((0, 0), dtype=np.int32)
         self._unk_state = np.zeros((0, 0), dtype=np.int8)
-        self._unk_stamp = np.zeros((0, 0), dtype=np.int64)
+        self._unk_stamp = np.zeros((0, 0), dtype=np.int32)
         self.seen = np.zeros((0, 0), dtype=np.uint8)  # close looks at each frontier cell
         self._seen_origin = np.zeros(2)
         self._run_id = 0
@@ -71,11 +77,11 @@ class FrontierSearch:
         if self.frontier.shape != (h, w) or costmap.frame_id != self._frame_id:
             self.frontier = np.zeros((h, w), dtype=np.bool_)
             self._target = np.zeros((h, w), dtype=np.bool_)
-            self._owner = np.zeros((h, w), dtype=np.int64)
-            self._labels = np.zeros((h, w), dtype=np.int64)
-            self._stamp = np.zeros((h, w), dtype=np.int64)
+            self._owner = np.zeros((h, w), dtype=np.int32)
+            self._labels = np.zeros((h, w), dtype=np.int32)
+            self._stamp = np.zeros((h, w), dtype=np.int32)
             self._unk_state = np.zeros((h, w), dtype=np.int8)
-            self._unk_stamp = np.zeros((h, w), dtype=np.int64)
+            self._unk_stamp = np.zeros((h, w), dtype=np.int32)
             self._carry_seen(costmap)
             self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0

@@ -18,7 +18,13 @@ from worker.explore.nav_state import (
     Retrace,
 )
 from worker.explore.params import ExploreParams
-from worker.explore.planner import ClosedGaps, GlobalPlanner, path_length, remaining_length
+from worker.explore.planner import (
+    ClosedGaps,
+    DijkstraSearch,
+    GlobalPlanner,
+    path_length,
+    remaining_length,
+)
 from worker.explore.recovery import Trail, back_out, safe_override, unwedge
 from worker.explore.safety import SafetyController
 from worker.explore.shim import HeadingShim
@@ -48,8 +54,11 @@ class Navigator:
         self.costmap = GlobalCostmap(params)
         # narrow gaps the robot failed to pass: closed to both narrow fallbacks
         self.closed = ClosedGaps()
-        self.frontiers = FrontierSearch(params, self.closed)
-        self.planner = GlobalPlanner(params, self.closed)
+        # one set of map-sized Dijkstra buffers for the goal search and the planner (each
+        # reads its results right after its own search): 16 bytes a cell less
+        search = DijkstraSearch()
+        self.frontiers = FrontierSearch(params, self.closed, search)
+        self.planner = GlobalPlanner(params, self.closed, search)
         self.dwa = DwaPlanner(params)
         self.shim = HeadingShim(params)
         self.door = DoorPass(params, range_noise)

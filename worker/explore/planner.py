@@ -108,10 +108,18 @@ class DijkstraSearch:
 class GlobalPlanner:
     """Plans on the global costmap with navfn's cost model, from the robot to one goal cell."""
 
-    def __init__(self, params: ExploreParams, closed: ClosedGaps | None = None):
+    def __init__(
+        self,
+        params: ExploreParams,
+        closed: ClosedGaps | None = None,
+        search: DijkstraSearch | None = None,
+    ):
+        """search: the Dijkstra buffers to plan in (shared with the frontier search, so a
+        run keeps one set of map-sized buffers; each reads its results right after its own
+        search); a new one when None."""
         self.params = params
         self.closed = closed if closed is not None else ClosedGaps()
-        self.search = DijkstraSearch()
+        self.search = search if search is not None else DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
 
     def plan(

@@ -99,13 +99,14 @@ class PatchMaps:
         old = self.capacity
         new = max(old + extra, int(old * 1.5), 256)
 
-        def grown(a: np.ndarray) -> np.ndarray:
+        # one plane at a time, each old one dropped before the next is copied: the peak is
+        # the old pool plus one new plane, not the old pool plus the new one
+        for name in ("visits", "hits", "mean", "bits", "counts"):
+            a = getattr(self, name)
             out = np.zeros((new, *a.shape[1:]), dtype=a.dtype)  # new patches are set on use
             out[:old] = a
-            return out
-
-        self.visits, self.hits, self.mean = grown(self.visits), grown(self.hits), grown(self.mean)
-        self.bits, self.counts = grown(self.bits), grown(self.counts)
+            del a
+            setattr(self, name, out)
 
     def register(
         self,

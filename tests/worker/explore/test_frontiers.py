@@ -8,7 +8,7 @@ from worker.explore.costmap import GlobalCostmap
 from worker.explore.frontiers import FrontierSearch
 from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
-from worker.explore.planner import planner_blocked_cost
+from worker.explore.planner import DijkstraSearch, GlobalPlanner, planner_blocked_cost
 
 RES = 0.05
 
@@ -309,3 +309,37 @@ def test_no_look_through_at_unknown_space_smaller_than_a_room():
     assert fs.open_cells(cm, cells).any()
     cm, fs = _setup(prob, ExploreParams(look_through_min_area=0.7))
     assert fs.choose(cm, (1.0, 1.5), [], look_through=True) is not None
+
+
+def test_goal_search_and_planner_sharing_buffers_give_what_separate_ones_give():
+    """The navigator's frontier search and planner share one set of map-sized Dijkstra
+    buffers (issue 21's memory): interleaved, each still gets the goal and plan it gets
+    with buffers of its own."""
+    p = ExploreParams()
+    nav = Navigator(p, np.linspace(-np.pi / 2, np.pi / 2, 5), 10.0)
+    assert nav.frontiers.search is nav.planner.search
+    prob = _corridor_world()
+    shared = DijkstraSearch()
+    pairs = [
+        (FrontierSearch(p, search=shared), GlobalPlanner(p, search=shared)),
+        (FrontierSearch(p), GlobalPlanner(p)),
+    ]
+    got = []
+    for fs, planner in pairs:
+        cm = GlobalCostmap(p)
+        cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
+        fs.update(cm, None)
+        first = fs.choose(cm, (1.0, 1.0), [])
+        path = planner.plan(cm, (1.0, 1.0), first.goal_xy)  # overwrites a shared search
+        # the goal's own path, read back after the planner searched the same buffers
+        second = fs.choose(cm, (1.0, 3.0), [first.frontier_xy])
+        back = planner.plan(cm, (1.0, 3.0), (1.0, 1.0))
+        got.append((first, path, second, back))
+    (f1, p1, s1, b1), (f2, p2, s2, b2) = got
+    assert p1 is not None and b1 is not None and f1.path_xy.shape[0] > 10
+    for a, b in ((f1, f2), (s1, s2)):
+        np.testing.assert_array_equal(a.goal_xy, b.goal_xy)
+        np.testing.assert_array_equal(a.path_xy, b.path_xy)
+        assert a.travel_cost == b.travel_cost
+    np.testing.assert_array_equal(p1, p2)
+    np.testing.assert_array_equal(b1, b2)
