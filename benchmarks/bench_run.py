@@ -1,7 +1,9 @@
 """Real-time factor of a whole run (simulate, explore with SLAM, evaluate, write the report) on
-office_a with the thesis settings, and the share of wall time per stage.
+office_a with the thesis settings, the share of wall time per stage, and the process's peak
+resident memory.
 
-Target (issue 6): >= 20x real time on one core.
+Target (issue 6): >= 20x real time on one core. Memory (issue 21): a run under 1 GB; the
+largest plans are the ones to check (`--world worlds/bormann/office_g.yaml`).
 
     .venv/bin/python benchmarks/bench_run.py [--world worlds/bormann/office_a.yaml]
         [--slam rbpf] [--seed 1] [--time-limit 7200] [--slam-threads 1]
@@ -28,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -101,6 +104,8 @@ def main() -> None:
     target = "  (target >= 20x on one core)" if args.slam_threads == 1 else ""
     print(f"real-time factor, with report files:  {t.sim_time_s / total:7.1f}x{target}")
     print("share of wall time per stage:")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak resident memory: {peak:.0f} MB (target < 1 GB, issue 21)")
     for name, v in (
         ("simulation + CARMEN log", sim),
         ("SLAM", slam),
@@ -160,7 +165,8 @@ def _side_by_side(args: argparse.Namespace) -> None:
             f"{os.getloadavg()[0]:.1f}): this x{rtf['this']:.1f} ({got['this']['threads']} "
             f"thread(s), {got['this']['outcome']}, {got['this']['sim_s']:.0f} s), other "
             f"x{rtf['other']:.1f} ({got['other']['threads']}, {got['other']['outcome']}, "
-            f"{got['other']['sim_s']:.0f} s); this / other {ratios[-1]:.3f}"
+            f"{got['other']['sim_s']:.0f} s); this / other {ratios[-1]:.3f}; peak memory "
+            f"{got['this']['peak_mb']:.0f} / {got['other']['peak_mb']:.0f} MB"
         )
     print(f"median real-time factor ratio this / other over {len(ratios)} rounds: "
           f"{statistics.median(ratios):.3f}")  # fmt: skip

@@ -1,5 +1,6 @@
 """One whole run in the checkout it is started in, for `bench_run.py --against`: prints one
-JSON line {sim_s, wall_s, cpu_s, outcome, threads}. Uses only what every checkout since
+JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb}
+(peak resident memory of the process, warm-up included). Uses only what every checkout since
 39ad88e has (load_world, RunParams.from_json, run_one), so the same driver times both trees:
 
     OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import time
 from pathlib import Path
@@ -56,6 +58,7 @@ def main() -> None:
     print(json.dumps({
         "sim_s": s["timings"]["sim_time_s"], "wall_s": wall, "cpu_s": cpu,
         "outcome": s["outcome"], "threads": params.slam.threads,
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }))  # fmt: skip
 
 
