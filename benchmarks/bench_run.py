@@ -103,9 +103,9 @@ def main() -> None:
     print(f"real-time factor, run_one:            {t.sim_time_s / (t1 - t0):7.1f}x")
     target = "  (target >= 20x on one core)" if args.slam_threads == 1 else ""
     print(f"real-time factor, with report files:  {t.sim_time_s / total:7.1f}x{target}")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+    print(f"peak resident memory:                 {peak:7.0f} MiB  (target under 1 GB)")
     print("share of wall time per stage:")
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"peak resident memory: {peak:.0f} MB (target < 1 GB, issue 21)")
     for name, v in (
         ("simulation + CARMEN log", sim),
         ("SLAM", slam),
@@ -166,7 +166,7 @@ def _side_by_side(args: argparse.Namespace) -> None:
             f"thread(s), {got['this']['outcome']}, {got['this']['sim_s']:.0f} s), other "
             f"x{rtf['other']:.1f} ({got['other']['threads']}, {got['other']['outcome']}, "
             f"{got['other']['sim_s']:.0f} s); this / other {ratios[-1]:.3f}; peak memory "
-            f"{got['this']['peak_mb']:.0f} / {got['other']['peak_mb']:.0f} MB"
+            f"{got['this']['peak_mb']:.0f} / {got['other']['peak_mb']:.0f} MiB"
         )
     print(f"median real-time factor ratio this / other over {len(ratios)} rounds: "
           f"{statistics.median(ratios):.3f}")  # fmt: skip

@@ -1,7 +1,7 @@
 """One whole run in the checkout it is started in, for `bench_run.py --against`: prints one
-JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb}
-(peak resident memory of the process, warm-up included). Uses only what every checkout since
-39ad88e has (load_world, RunParams.from_json, run_one), so the same driver times both trees:
+JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb} (peak_mb: the process's peak
+resident memory in MiB, warm-up included). Uses only what every checkout since 39ad88e has
+(load_world, RunParams.from_json, run_one), so the same driver times both trees:
 
     OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
         [--seed 1] [--time-limit S] [--threads N] [--slam-params JSON]
