@@ -150,11 +150,9 @@ def final_errors(r: Any) -> dict[str, dict[str, float]] | None:
     for kind in FINAL_KINDS:
         if kind not in r.relations:
             continue
-        err = evaluate_relations(r.relations[kind], final, r.params.eval.max_gap)
-        ok = err.evaluated
-        if ok.any():
-            out[kind] = {"translation": float(err.translation[ok].mean()),
-                         "rotation": float(err.rotation[ok].mean())}  # fmt: skip
+        s = evaluate_relations(r.relations[kind], final, r.params.eval.max_gap).summary()
+        if s["translation"]["n"]:
+            out[kind] = {axis: s[axis]["mean"] for axis in ("translation", "rotation")}
     return out
 
 
