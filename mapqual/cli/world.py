@@ -163,3 +163,23 @@ def list_worlds(
             f"{len(w.warnings)}"
         )
     print(f"{len(paths)} worlds in {folder}")
+
+
+@world_app.command("generate")
+def generate_cmd(
+    kind: Annotated[str, typer.Argument(help="warehouse (aisles of racks) or hospital (wards).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder for NAME.png and NAME.yaml.")],
+    width: Annotated[float, typer.Option(help="Outer width [m] (x).")] = 200.0,
+    height: Annotated[float, typer.Option(help="Outer height [m] (y).")] = 100.0,
+    seed: Annotated[int, typer.Option(help="Places racks, rooms, doors and pallets.")] = 1,
+    resolution: Annotated[float, typer.Option(help="Metres per pixel.")] = 0.05,
+    name: Annotated[str | None, typer.Option(help="File stem (default: KIND_WxH_sSEED).")] = None,
+) -> None:
+    """A seeded large building (warehouse or hospital wing) as a map_server world."""
+    from worker.world.generate import BuildingSpec, generate, write_world
+
+    spec = BuildingSpec(kind, width, height, seed, resolution)  # type: ignore[arg-type]
+    img = generate(spec)
+    stem = name or f"{kind}_{width:g}x{height:g}_s{seed}"
+    path = write_world(img, spec, out, stem)
+    print(f"{path}  ({img.shape[1]} x {img.shape[0]} px, {img.size:,} cells)")

@@ -126,3 +126,22 @@ def test_yaml_and_stage_errors_through_the_cli(run, plan, tmp_path, name, text, 
     (tmp_path / name).write_text(text)
     code, _, err = run("world", "info", tmp_path / name)
     assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_generate_writes_a_world_that_info_reads(run, tmp_path):
+    code, out, err = run(
+        "world", "generate", "warehouse", "-o", tmp_path, "--width", "60", "--height", "40"
+    )
+    assert code == 0, err
+    yaml_path = tmp_path / "warehouse_60x40_s1.yaml"
+    assert yaml_path.is_file() and (tmp_path / "warehouse_60x40_s1.png").is_file()
+    code, out, err = run("world", "info", yaml_path, "--json")
+    assert code == 0, err
+    facts = json.loads(out)
+    assert facts["width_m"] == pytest.approx(60.0) and facts["n_free_regions"] == 1
+
+
+def test_generate_refuses_an_unknown_kind_in_one_line(run, tmp_path):
+    code, out, err = run("world", "generate", "castle", "-o", tmp_path)
+    assert code == 2
+    assert "unknown building kind" in err and len(err.strip().splitlines()) == 1
