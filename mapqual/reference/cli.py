@@ -6,7 +6,7 @@ from typing import Any
 
 import typer.main
 
-from mapqual.reference.comments import cell
+from mapqual.reference.comments import cell, code_cell
 
 _HEAD = """# Command line
 
@@ -51,7 +51,7 @@ def _param_row(param: Any, ctx: Any) -> str:
     record = param.get_help_record(ctx)
     names, help_text = record if record else (param.metavar or param.name, "")
     kind = "argument" if param.param_type_name == "argument" else "option"
-    return f"| `{cell(names)}` | {kind} | {cell(help_text)} |"
+    return f"| {code_cell(names)} | {kind} | {cell(help_text)} |"
 
 
 def _command_section(name: str, cmd: Command) -> str:

@@ -7,6 +7,7 @@ and, for longer reasons, by a block of comment lines directly above it; this rea
 from __future__ import annotations
 
 import ast
+import html
 import inspect
 import io
 import re
@@ -103,3 +104,9 @@ def split_unit(comment: str) -> tuple[str, str]:
 def cell(text: object) -> str:
     """Text fit for one Markdown table cell."""
     return str(text).replace("|", "\\|").replace("\n", " ").strip()
+
+
+def code_cell(text: object) -> str:
+    """Text as code in one Markdown table cell: an HTML code element, its pipes as entities
+    (a backslash-escaped pipe inside backquotes would show its backslash)."""
+    return f"<code>{html.escape(str(text), quote=False).replace('|', '&#124;')}</code>"

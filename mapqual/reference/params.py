@@ -11,7 +11,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from mapqual.reference.comments import cell, field_comments, split_unit
+from mapqual.reference.comments import cell, code_cell, field_comments, split_unit
 
 _WORKER = Path(__file__).resolve().parents[2] / "worker"
 
@@ -104,7 +104,7 @@ def _default(f: dataclasses.Field, hint: Any) -> str:
         value = f.default_factory()
     else:
         return "(required)"
-    return f"`{value!r}`"
+    return code_cell(repr(value))
 
 
 def class_table(cls: type, prefix: str = "") -> str:
