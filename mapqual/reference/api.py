@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from mapqual.reference.comments import cell
+from mapqual.reference.comments import cell, prose
 
 _HEAD = """# REST API
 
@@ -71,9 +71,9 @@ def _body(op: dict[str, Any]) -> str:
 
 def _operation(method: str, path: str, op: dict[str, Any]) -> str:
     title = op.get("summary") or op.get("operationId", "")
-    parts = [f"### `{method} {path}`\n", f"**{title}**\n"]
+    parts = [f"### `{method} {path}`\n", f"**{prose(title)}**\n"]
     if op.get("description"):
-        parts.append(op["description"].strip() + "\n")
+        parts.append(prose(op["description"].strip()) + "\n")
     for extra in (_parameters(op), _body(op)):
         if extra:
             parts.append(extra + "\n")

@@ -6,7 +6,7 @@ from typing import Any
 
 import typer.main
 
-from mapqual.reference.comments import cell, code_cell
+from mapqual.reference.comments import cell, code_cell, prose
 
 _HEAD = """# Command line
 
@@ -58,7 +58,8 @@ def _command_section(name: str, cmd: Command) -> str:
     ctx = cmd.context_class(cmd, info_name=name)
     usage = " ".join(cmd.collect_usage_pieces(ctx))
     level = "#" * min(name.count(" ") + 1, 4)
-    parts = [f"#{level} `{name}`\n", (cmd.help or "").strip() + "\n", f"```\n{name} {usage}\n```\n"]
+    help_text = prose((cmd.help or "").strip())
+    parts = [f"#{level} `{name}`\n", help_text + "\n", f"```\n{name} {usage}\n```\n"]
     params = [p for p in cmd.params if not getattr(p, "hidden", False)]
     if params:
         rows = ["| name | kind | meaning |", "| --- | --- | --- |"]

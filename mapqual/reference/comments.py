@@ -101,9 +101,15 @@ def split_unit(comment: str) -> tuple[str, str]:
     return unit, comment
 
 
+def prose(text: object) -> str:
+    """Text from the code as Markdown: `<id>` outside backquotes is text, not an HTML tag."""
+    parts = re.split(r"(`[^`]*`)", str(text))
+    return "".join(p if p.startswith("`") else html.escape(p, quote=False) for p in parts)
+
+
 def cell(text: object) -> str:
     """Text fit for one Markdown table cell."""
-    return str(text).replace("|", "\\|").replace("\n", " ").strip()
+    return prose(text).replace("|", "\\|").replace("\n", " ").strip()
 
 
 def code_cell(text: object) -> str:

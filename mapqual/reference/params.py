@@ -11,7 +11,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from mapqual.reference.comments import cell, code_cell, field_comments, split_unit
+from mapqual.reference.comments import cell, code_cell, field_comments, prose, split_unit
 
 _WORKER = Path(__file__).resolve().parents[2] / "worker"
 
@@ -117,14 +117,14 @@ def class_table(cls: type, prefix: str = "") -> str:
         key = f"{prefix}.{f.name}" if prefix else f.name
         hint = hints.get(f.name)
         rows.append(
-            f"| `{key}` | {cell(_type_name(hint))} | {cell(_default(f, hint))} "
+            f"| `{key}` | {cell(_type_name(hint))} | {_default(f, hint)} "
             f"| {cell(unit)} | {cell(meaning)} |"
         )
     return "\n".join(rows)
 
 
 def _section(title: str, cls: type, prefix: str) -> str:
-    doc = inspect.cleandoc(cls.__doc__ or "")
+    doc = prose(inspect.cleandoc(cls.__doc__ or ""))
     where = f"`{cls.__module__}.{cls.__name__}`"
     return f"### {title}\n\n{where}. {doc}\n\n{class_table(cls, prefix)}\n"
 

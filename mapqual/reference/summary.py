@@ -8,7 +8,7 @@ import typing
 
 from pydantic import BaseModel
 
-from mapqual.reference.comments import cell, field_comments, split_unit
+from mapqual.reference.comments import cell, field_comments, prose, split_unit
 
 _HEAD = """# `summary.json`
 
@@ -64,7 +64,7 @@ def summary_page() -> str:
 
     parts = [_HEAD]
     for model in models():
-        doc = inspect.cleandoc(model.__doc__ or "")
+        doc = prose(inspect.cleandoc(model.__doc__ or ""))
         parts.append(f"## {model.__name__}\n\n{doc}\n\n{_table(model)}\n")
     schema = json.dumps(RunSummary.model_json_schema(), indent=2)
     parts.append(f"## JSON Schema\n\n```json\n{schema}\n```\n")

@@ -56,7 +56,7 @@ def test_every_cli_command_and_option_is_in_the_reference(generated):
                     )
             else:
                 # an argument is shown with its help text (or its name when it has none)
-                shown = (param.help or param.name).split(".")[0]
+                shown = html.escape((param.help or param.name).split(".")[0], quote=False)
                 assert shown in section, (name, param.name)
 
 
@@ -166,3 +166,37 @@ def test_the_nav_lists_every_generated_page():
     nav = (ROOT / "mkdocs.yml").read_text()
     for path in GENERATORS:
         assert f": {path}" in nav, path
+
+
+@dataclasses.dataclass(frozen=True)
+class _Sample:
+    """A hand-made parameter class: each field's expected comment is written out below."""
+
+    # --- a section header, no field's comment ---
+    a: float = 1.0  # [m] trailing only
+    # a block above
+    # on two lines
+    b: int = 2
+    # shared by the run of fields below, none of which has its own
+    c: int = 3
+    d: int = 4
+
+    e: str = "x"  # [rad/s] unit and meaning
+    f: int = 5
+
+
+def test_field_comments_by_a_hand_made_class():
+    from mapqual.reference.comments import field_comments, prose, split_unit
+
+    got = field_comments(_Sample)
+    assert got == {
+        "a": "[m] trailing only",
+        "b": "a block above on two lines",
+        "c": "shared by the run of fields below, none of which has its own",
+        "d": "shared by the run of fields below, none of which has its own",
+        "e": "[rad/s] unit and meaning",
+        "f": "",
+    }
+    assert split_unit(got["e"]) == ("rad/s", "unit and meaning")
+    assert split_unit("Stage E for x [-]") == ("-", "Stage E for x [-]")
+    assert prose("runs/<id>/ and `a<b>`") == "runs/&lt;id&gt;/ and `a<b>`"
