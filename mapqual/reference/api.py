@@ -84,6 +84,29 @@ def _operation(method: str, path: str, op: dict[str, Any]) -> str:
     return "\n".join(parts)
 
 
+def _schemas(doc: dict[str, Any]) -> list[str]:
+    """The bodies' and answers' schemas: each object's properties as a table."""
+    parts = ["## Schemas\n", "The objects the routes above take and answer, by name.\n"]
+    for name, schema in doc.get("components", {}).get("schemas", {}).items():
+        parts.append(f"### {name}\n")
+        if schema.get("description"):
+            parts.append(prose(schema["description"].strip()) + "\n")
+        props = schema.get("properties", {})
+        if not props:
+            parts.append(f"Type: {cell(_type(schema))}.\n")
+            continue
+        required = set(schema.get("required", []))
+        rows = ["| field | type | required | meaning |", "| --- | --- | --- | --- |"]
+        for prop, sub in props.items():
+            default = f" (default `{sub['default']!r}`)" if "default" in sub else ""
+            rows.append(
+                f"| `{prop}` | {cell(_type(sub))} | {'yes' if prop in required else 'no'} "
+                f"| {cell(sub.get('description', '') + default)} |"
+            )
+        parts.append("\n".join(rows) + "\n")
+    return parts
+
+
 def api_page() -> str:
     """The whole REST API page, routes grouped by their first path segment after the prefix."""
     parts = [_HEAD]
@@ -94,4 +117,5 @@ def api_page() -> str:
             group = head
             parts.append(f"## {group}\n")
         parts.append(_operation(method, path, op))
+    parts += _schemas(openapi())
     return "\n".join(parts)
