@@ -15,6 +15,8 @@ from starlette.concurrency import run_in_threadpool
 from backend.api.limits import BodyLimit
 from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
+from backend.manual import MOUNT as MANUAL_MOUNT
+from backend.manual import Manual
 from backend.schemas import API_PREFIX
 from backend.world_analysis import recover_pending, world_pool
 from frontend.dashboard import install as install_dashboard
@@ -77,6 +79,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # paths (each route tried before them costs every such request a match)
     for module in (jobs, worlds, datasets, runs, bags, stats):
         app.include_router(module.router, prefix=API_PREFIX)
+    # the manual at /manual/, before the dashboard's catch-all pages
+    app.mount(MANUAL_MOUNT, Manual(), name="manual")
     install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them
     app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes)

@@ -12,7 +12,9 @@ from worker.errors import InputError, InputWarning, SlamFailed
 app = typer.Typer(
     rich_markup_mode=None,
     name="mapqual",
-    help="Score how good a map a SLAM algorithm builds of a building.",
+    help="Score how good a map a SLAM algorithm builds of a building.\n\n"
+    "The manual: docs/ in the repository (docs/index.md; build it with `mkdocs build`), "
+    "served at /manual/ by `mapqual serve`. `mapqual COMMAND --help` for one command.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,

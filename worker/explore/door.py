@@ -26,7 +26,7 @@ legal it hands back to the DWA and the recoveries.
 
 On with a noisy laser (`explore.noisy_door_align`, `ExploreParams.for_range_noise`), off on
 a noise-free one (`explore.door_align`), where it makes explorations 20 % longer for no
-gain (README, "Laser noise"). Only a door in a wall counts: the two jambs' obstacle
+gain (docs/results/laser-noise.md). Only a door in a wall counts: the two jambs' obstacle
 regions must each be at least door_wall_min long, and the path must cross the line between
 them; every gap between furniture stays the DWA's, since the map alone (the passage's judge)
 may not hold a thin chair leg the laser sees. A passage the robot makes no progress in for

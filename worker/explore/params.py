@@ -44,7 +44,7 @@ class ExploreParams:
     # takes the door passage (door_align) and counts the obstacle layer's marks only where
     # the SLAM map is not firmly free (obstacle_min_prob at least this): one scan's noisy
     # hits at a door's jambs close it to the planner and the DWA, where the map, made of
-    # many scans, holds it open (README, "Laser noise"). A noise-free laser's runs do not
+    # many scans, holds it open (docs/results/laser-noise.md). A noise-free laser's runs do not
     # change.
     noisy_door_align: bool = True
     noisy_obstacle_min_prob: float = 0.1
@@ -158,7 +158,7 @@ class ExploreParams:
     shim_release: float = 0.5  # [rad] the DWA takes over again below this
     shim_lookahead: float = 0.5  # [m]
     # door passage (door.DoorPass), off on a noise-free laser (it makes explorations 20 %
-    # longer there, README "Laser noise") and on with range noise (noisy_door_align): when
+    # longer there, docs/results/laser-noise.md) and on with range noise (noisy_door_align): when
     # the path enters a door narrower than door_width (the SLAM map's walls on both sides)
     # within door_lookahead, the robot goes to a point on the door's axis, faces along it
     # (turning on the spot past door_angle) and drives through at door_speed
@@ -201,7 +201,8 @@ class ExploreParams:
     # [m] > 0: the back-out steers at the trail point this far back along the trail (pure
     # pursuit of the rear), round the bends of the way the robot came; 0: in a straight line
     # to its target. Off: on Liselotte1 (oracle) the robot, failing goal after goal at a
-    # 0.5 m door, moved less with it and ended `stuck` at 512 s (README, "trap check")
+    # 0.5 m door, moved less with it and ended `stuck` at 512 s (the manual's
+    # docs/results/exploration.md)
     retrace_lookahead: float = 0.0
     # [rad] the back-out reverses only while the rear points within this of its target
     retrace_max_heading_error: float = 0.6
@@ -238,7 +239,8 @@ class ExploreParams:
     # beyond snapshot_tolerance cells; "mse", the thesis's rule, when the pixel MSE of the
     # map_saver images is below snapshot_mse (e). The thesis's e = 5 never fires on a
     # particle filter's map, whose walls move by a cell as particles take over; the share
-    # 0.01 with 1 cell fires at the end of a finished exploration and not before (README)
+    # 0.01 with 1 cell fires at the end of a finished exploration and not before (the manual's
+    # docs/results/exploration.md)
     snapshot_measure: SnapshotMeasure = "changed_share"
     snapshot_change: float = 0.01  # [-] share of the known map
     snapshot_tolerance: int = 1  # [cells]
@@ -247,8 +249,8 @@ class ExploreParams:
     # to a frontier it chose since the earlier snapshot (stop_rules.MapUnchangedRule): a
     # robot crossing a large building to its last rooms changes little of its map in 300 s.
     # Off until the trap check (trap_reach): without it the wait kept office_g_furnitures
-    # going until the robot was stuck in a pocket at 3,513 s (README, "The end of an
-    # exploration")
+    # going until the robot was stuck in a pocket at 3,513 s (the manual's
+    # docs/results/exploration.md, "the end of an exploration")
     snapshot_holds: int = 1
     time_limit: float = 7200.0  # [s] m: simulated-time limit
     # [s] no reachable frontier for this long -> completed (`no_frontier`): a transient gap in

@@ -38,7 +38,7 @@ def front_clearance(
     sideways, so the distance ahead is unchanged. With `min_points` > 1 the distance is the
     min_points-th nearest hit in the way (nav2 collision monitor's `min_points`). The
     controller uses neither: both are alternatives `benchmarks/bench_safety.py` scores, and
-    both let real obstacles pass on a noisy laser (README, "Laser noise"). Returns (inf, 0)
+    both let real obstacles pass on a noisy laser (docs/results/laser-noise.md). Returns (inf, 0)
     when nothing is in the way; side is +1 for an obstacle on the left (y > 0), -1 on the
     right.
     """

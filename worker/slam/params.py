@@ -27,7 +27,7 @@ class SampledProposal:
     Freiburg 079 0.199 / 0.216 / 0.205 -> 0.218 / 0.222 / 0.207 m, for 36-49 % more CPU. In a
     particle's own map the raw likelihood (beams independent, lsigma 0.075) varies by tens of
     log units between poses 0.1 m apart along a corridor, so the fitted Gaussian mostly sits
-    on one grid pose, the match (README "Real laser logs").
+    on one grid pose, the match (docs/results/real-logs.md).
     """
 
     llsamplerange: float = 0.1  # [m] grid half-width in x and y (GMapping: 0.01)
@@ -84,7 +84,8 @@ class SlamParams:
     # coarse_levels step sizes use every (coarse_skip + 1)-th used beam, the rest all of them;
     # the final pose, score and likelihood are all-beam ones (match_kernels.optimize). Off by
     # default: 1 / 3 ran 1.14x faster on one core but made the A errors of 30 closed-loop runs
-    # 5 % worse, significantly (README "Coarse-to-fine scan matching")
+    # 5 % worse, significantly (docs/results/speed.md,
+    # "Coarse-to-fine scan matching")
     coarse_skip: int = 0
     coarse_levels: int = 0
     minimum_score: float = 0.0  # below this match score, keep the odometry guess
@@ -108,7 +109,7 @@ class SlamParams:
     # no step of a 10 Hz log under 1.5 m/s and 1.5 rad/s reaches it. 0 = off (one draw, as
     # GMapping); such a scan is always an update, the matcher also climbs from the noise-free
     # prediction and from a wide climb (rbpf.WideSearch), and the odometry's per-axis scale
-    # is learnt and applied to such steps (worker.slam.odomcal); README "Real laser logs"
+    # is learnt and applied to such steps (worker.slam.odomcal); docs/results/real-logs.md
     motion_substep: float = 0.15  # [m]
     motion_substep_angle: float = 0.15  # [rad]
     # on such a sparse step, the sampled improved proposal (SampledProposal); None = off (the

@@ -249,7 +249,7 @@ class RbpfSlam:
         of scan likelihood x motion model fitted on the sampling grid around its optimum
         `modes`, and the log of its normaliser (Grisetti et al. 2007, eqs. (9)-(11)). Keeping
         the optimum alone puts every copy of a parent at one place along a featureless
-        corridor, where only the odometry knows the distance (README "Real laser logs"); the
+        corridor, where only the odometry knows the distance (docs/results/real-logs.md); the
         draw is meant to keep the motion model's spread there and the match's precision across
         (what it did on the real logs: SampledProposal)."""
         m = self.maps

@@ -264,7 +264,7 @@ def test_a_door_the_plan_crosses_diagonally_is_passed_on_its_own_axis():
     # the robot, starting on the plan 0.5 m off that axis, passes along it without touching
     # the jambs with its footprint grown by 0.02 m. Lined up with the plan's chord instead,
     # a 0.4 m square 0.6 rad off needs 0.4 (cos 0.6 + sin 0.6) + 0.4 tan 0.6 = 0.83 m
-    # (README, "Laser noise": rbpf's pose error did the rest)
+    # (docs/results/laser-noise.md: rbpf's pose error did the rest)
     p = _params()
     cm = GlobalCostmap(p)
     cm.update(_thick_wall_map(16), RES, (0.0, 0.0))  # x in [3.0, 3.4), y in [1.6, 2.4)
