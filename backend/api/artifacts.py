@@ -79,17 +79,31 @@ def serve(files: RunFiles, name: str, media: str, run_id: int, filename: str | N
     return StreamingResponse(_chunks(src), media_type=media, headers=headers)
 
 
+def _current(files: RunFiles, name: str, source: str | None) -> bool:
+    """`name` is there, and (a folder on this disk, where a file may be rewritten in place)
+    not older than the file `source` it was built from. Object storage keeps each run's
+    files under its attempt's key, never rewritten: there it is enough that it exists."""
+    if not files.has(name):
+        return False
+    path, src = files.local_path(name), source and files.local_path(source)
+    if path is None or not src or not src.is_file():
+        return True
+    return path.stat().st_mtime_ns >= src.stat().st_mtime_ns
+
+
 def built(files: RunFiles, name: str, database_url: str, build: Callable[[Path], Path],
-          media: str, run_id: int, filename: str) -> Response:  # fmt: skip
-    """The file `name` of the folder, built by `build(work folder) -> file` when missing:
-    once, by one request at a time per run and name (the others wait, then serve the kept
-    file), kept in the storage. Where the folder cannot be written (a read-only disk), built
-    for this response only and deleted afterwards."""
-    if files.has(name):
+          media: str, run_id: int, filename: str,
+          source: str | None = None) -> Response:  # fmt: skip
+    """The file `name` of the folder, built by `build(work folder) -> file` when missing (or
+    older than its `source` file, on a local disk): once, by one request at a time per run
+    and name (the others wait, then serve the kept file), kept in the storage. Where the
+    folder cannot be written (a read-only disk), built for this response only and deleted
+    afterwards."""
+    if _current(files, name, source):
         return serve(files, name, media, run_id, filename)
     with single_flight(database_url, f"{files.location}::{name}"):
         fresh = RunFiles(files.storage, files.prefix)  # listed again: another may have built it
-        if fresh.has(name):
+        if _current(fresh, name, source):
             return serve(fresh, name, media, run_id, filename)
         work = Path(tempfile.mkdtemp(prefix="mapqual-build-"))
         path: Path | None = None

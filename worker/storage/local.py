@@ -70,6 +70,8 @@ class LocalStorage(Storage):
         shutil.rmtree(path, ignore_errors=True)
 
     def check(self) -> None:
+        if self.root.exists() and not self.root.is_dir():
+            raise StorageError(f"runs folder {self.root} is not a folder")
         if self.root.exists() and not os.access(self.root, os.W_OK | os.X_OK):
             raise StorageError(f"runs folder {self.root} is not writable")
         if not self.root.exists() and not os.access(_existing(self.root), os.W_OK):

@@ -132,7 +132,10 @@ class S3Storage(Storage):
             self._call("delete", self.s3.delete_objects, Delete={"Objects": objs, "Quiet": True})
 
     def check(self) -> None:
-        self._call("head bucket", self.s3.head_bucket)
+        try:
+            self._call("head bucket", self.s3.head_bucket)
+        except FileNotFoundError:
+            raise StorageError(f"S3 storage {self.url}: no bucket {self.bucket!r}") from None
 
 
 class _Body:

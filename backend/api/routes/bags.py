@@ -63,9 +63,8 @@ def get_bag(
         log = files.local_path(log_name) or files.fetch([log_name], work / "log") / log_name
         return _build_bag(log, work, name, format)
 
-    return built(
-        files, f"export/{file_name}", settings.database_url, build, media, run_id, file_name
-    )
+    key, url = f"export/{file_name}", settings.database_url
+    return built(files, key, url, build, media, run_id, file_name, source=log_name)
 
 
 def _build_bag(log: Path, work: Path, name: str, format: str) -> Path:
