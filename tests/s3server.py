@@ -10,7 +10,7 @@ import sys
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 import pytest
 
@@ -71,3 +71,46 @@ def raw_client(env: dict[str, str]):
 
 
 __all__ = ["make_bucket", "os", "raw_client", "s3_server"]
+
+
+@contextmanager
+def slow_proxy(target_port: int, bytes_per_s: int) -> Iterator[int]:
+    """A TCP proxy on a free loopback port to `target_port` that passes what clients send at
+    `bytes_per_s` per connection (responses at full speed): uploads through it take seconds,
+    long enough to kill an uploader midway. Yields its port."""
+    import threading
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(64)
+    stop = threading.Event()
+
+    def pump(src: socket.socket, dst: socket.socket, rate: int | None) -> None:
+        try:
+            while not stop.is_set() and (data := src.recv(4096)):
+                dst.sendall(data)
+                if rate:
+                    time.sleep(len(data) / rate)
+        except OSError:
+            pass
+        finally:
+            for s in (src, dst):
+                with suppress(OSError):
+                    s.shutdown(socket.SHUT_RDWR)
+
+    def accept() -> None:
+        while not stop.is_set():
+            try:
+                client, _ = listener.accept()
+            except OSError:
+                return
+            upstream = socket.create_connection(("127.0.0.1", target_port))
+            for a, b, rate in ((client, upstream, bytes_per_s), (upstream, client, None)):
+                threading.Thread(target=pump, args=(a, b, rate), daemon=True).start()
+
+    threading.Thread(target=accept, daemon=True).start()
+    try:
+        yield listener.getsockname()[1]
+    finally:
+        stop.set()
+        listener.close()

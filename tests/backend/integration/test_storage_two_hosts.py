@@ -27,7 +27,7 @@ from backend.db.session import session_scope
 from backend.lifecycle import history, history_faults
 from backend.main import create_app
 from tests.backend.integration.test_exactly_once import Service, _rooms_png, db_url  # noqa: F401
-from tests.s3server import make_bucket, raw_client, s3_server
+from tests.s3server import make_bucket, raw_client, s3_server, slow_proxy
 from tests.services import ensure_redis
 
 REDIS_DB = 10
@@ -58,12 +58,12 @@ class TwoHosts(Service):
                                  headers=dict(self.client.headers))  # fmt: skip
         self.s3 = raw_client(s3env)
 
-    def start_worker(self) -> subprocess.Popen:
+    def start_worker(self, **env: str) -> subprocess.Popen:
         argv = [sys.executable, "-m", "mapqual", "worker", "--concurrency", "1"]
         if _unshare_works():  # its own mount namespace: a tmpfs over its runs folder
             script = 'mount -t tmpfs tmpfs "$MAPQUAL_RUNS_DIR" && exec "$@"'
             argv = ["unshare", "-m", "sh", "-c", script, "sh", *argv]
-        proc = subprocess.Popen(argv, env=self.env, stdout=self.log, stderr=self.log,
+        proc = subprocess.Popen(argv, env={**self.env, **env}, stdout=self.log, stderr=self.log,
                                 start_new_session=True)  # fmt: skip
         self.workers.append(proc)
         return proc
@@ -160,13 +160,17 @@ def test_api_serves_everything_a_worker_on_another_disk_stored(hosts):
         assert r.status_code == 200, (url, r.status_code, r.text[:200])
 
 
-def test_a_worker_killed_during_its_upload_leaves_no_half_report(hosts):
+def test_a_worker_killed_during_its_upload_leaves_no_half_report(hosts, s3env):
     svc = hosts
     (run_id,) = svc.job(_rooms_png(2, 1), [3], "rbpf", 15.0)
-    first = svc.start_worker()
-    svc.wait("the first attempt's upload", lambda: svc.attempt_keys(run_id), 900)
-    svc.signal_worker(first, signal.SIGKILL)
+    moto_port = int(s3env["AWS_ENDPOINT_URL"].rsplit(":", 1)[1])
+    with slow_proxy(moto_port, 32_000) as port:  # its upload takes seconds: killed midway
+        first = svc.start_worker(AWS_ENDPOINT_URL=f"http://127.0.0.1:{port}")
+        svc.wait("the first attempt's upload", lambda: svc.attempt_keys(run_id), 900)
+        svc.signal_worker(first, signal.SIGKILL)
     (killed,) = svc.attempt_keys(run_id)
+    half = svc.objects(f"{PREFIX}/runs/{run_id}/{killed}/")
+    assert not {"report.zip", "sim.log"} <= {k.rsplit("/", 1)[1] for k in half}  # midway
     run = svc.runs([run_id])[run_id]
     assert run.status == "running" and run.report_dir is None  # nothing points at the upload
     r = svc.client.get(f"/api/v1/runs/{run_id}/report.zip")
