@@ -15,21 +15,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from backend.attempt_files import AttemptFiles
 from backend.core.config import Settings
 from backend.db.models import Run, World
 from backend.db.session import session_scope
-from backend.lifecycle import (
-    TransitionRefused,
-    attempt_dir,
-    claim_run,
-    new_attempt,
-    remove_attempt_dirs,
-)
+from backend.lifecycle import TransitionRefused, claim_run, new_attempt
 from backend.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
 from worker.report.folder import SIM_LOG
 from worker.report.summary import RunSummary
 from worker.status import RunStatus
+from worker.storage import StorageError
 
 log = logging.getLogger("mapqual.execute")
 # besides the run's status when the delivery ended it: done | cancelled | failed
@@ -95,10 +91,10 @@ def execute_run(
         world = world if world is not None else world_model(s.get_one(World, run.world_id))
         params, seed = RunParams.from_json(run.params), run.seed
     final = (place.report_dir or settings.runs_dir / str(run_id)).resolve()
-    folder = final if place.own_folder else attempt_dir(final, attempt)
+    files = AttemptFiles.of(settings.open_storage(), final, run_id, attempt, place.own_folder)
     if on_progress is None:
         on_progress = ProgressReporter(url, run_id, redis_client, attempt=attempt)
-    job = _Job(url, run_id, attempt, folder, final, place)
+    job = _Job(url, run_id, attempt, files, place)
     try:
         result = job.run_and_store((world, params, seed), on_progress)
     except RunSuperseded as exc:
@@ -119,9 +115,12 @@ def execute_run(
         if place.fail_on_interrupt:
             job.failed(f"{type(exc).__name__}: {exc}")
         raise
-    remove_attempt_dirs(final)  # whatever attempts that lost earlier (killed ones) left
+    try:  # whatever attempts that lost earlier (killed ones) left
+        files.sweep()
+    except StorageError as exc:  # the result is stored: leftovers wait for the next sweep
+        log.warning("run %s: leftovers of earlier attempts not removed (%s)", run_id, exc)
     summary = result.summary
-    return Outcome(RunStatus.DONE, f"run {run_id}: {summary.outcome}", summary, str(final))
+    return Outcome(RunStatus.DONE, f"run {run_id}: {summary.outcome}", summary, files.location)
 
 
 def signalled(exc: BaseException) -> BaseException:
@@ -146,34 +145,32 @@ class _Job:
     url: str
     run_id: int
     attempt: str
-    folder: Path  # where the attempt writes its report
-    final: Path  # the run's report folder
+    files: AttemptFiles  # where the attempt writes its report, and where it is kept
     place: Placement
 
     def run_and_store(self, job: tuple[Any, Any, int], on_progress: Callable[[Any], None]) -> Any:
         """Run the pipeline on `job` = (world, RunParams, seed) writing into the folder, write
-        the report there, and store the result as this attempt's in one transaction, the
-        folder renamed into place inside it. The `RunResult`; TransitionRefused when the
-        attempt no longer holds the run."""
+        the report there (and upload it, S3), and store the result as this attempt's in one
+        transaction, the local folder renamed into place inside it. The `RunResult`;
+        TransitionRefused when the attempt no longer holds the run."""
         from worker.pipeline import run_one
-        from worker.report.folder import write_report, write_report_zip
+        from worker.report.folder import write_report
         from worker.slam.threads import with_process_threads
 
         world, params, seed = job
         params = with_process_threads(params)  # the cores a lone run was given; same result
-        log_path = self.folder / self.place.sim_log if self.place.sim_log else None
+        folder = self.files.folder
+        log_path = folder / self.place.sim_log if self.place.sim_log else None
         result = run_one(world, params, seed, on_progress, sim_log=log_path)
-        write_report(result, self.folder)
-        if not self.place.own_folder:  # renamed into place with the rest, served as it is
-            write_report_zip(self.folder, f"run{self.run_id}")
+        write_report(result, folder)
+        self.files.finish_folder()  # its zip; with S3 the upload, before the commit below
         ex = result.exploration
-        rename = None if self.place.own_folder else self.folder
         with session_scope(self.url) as s:
             store_run_result(
                 s, self.run_id, summary=result.summary, t=ex.t, pose_gt=ex.pose_gt,
                 pose_est=ex.pose_est, map_ros=ex.final_map.to_ros(),
                 map_resolution=ex.final_map.resolution, map_origin=ex.final_map.origin,
-                report_dir=str(self.final), attempt=self.attempt, folder=rename,
+                report_dir=self.files.location, attempt=self.attempt, folder=self.files.rename,
             )  # fmt: skip
         return result
 
@@ -193,10 +190,12 @@ class _Job:
                     "lost", f"run {run_id}: failed, but no longer this attempt's ({error})"
                 )
             # a run folder there now is the leftover of an interrupted rename-and-commit
-            if not self.place.own_folder and s.get_one(Run, run_id).status != RunStatus.DONE:
-                shutil.rmtree(self.final, ignore_errors=True)
+            if self.files.rename and s.get_one(Run, run_id).status != RunStatus.DONE:
+                shutil.rmtree(self.files.final, ignore_errors=True)
         return Outcome(RunStatus.FAILED, f"run {run_id}: failed ({error})", error=error)
 
     def _discard(self) -> None:
-        if not self.place.own_folder:
-            shutil.rmtree(self.folder, ignore_errors=True)
+        try:
+            self.files.discard()
+        except StorageError as exc:  # never referenced by the row: swept by the next winner
+            log.warning("run %s: attempt %s not removed (%s)", self.run_id, self.attempt, exc)

@@ -6,10 +6,11 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from worker.celery_conf import TaskLimits
+from worker.storage import Storage
 
 
 class Settings(BaseSettings):
@@ -22,6 +23,10 @@ class Settings(BaseSettings):
     database_url: str = Field(default="sqlite:///mapqual.db", alias="DATABASE_URL")
     # Report folders of runs (`runs/<id>/`).
     runs_dir: Path = Field(default=Path("runs"), alias="MAPQUAL_RUNS_DIR")
+    # Where run artifacts go: "local" (the folder MAPQUAL_RUNS_DIR; the default) or S3-compatible
+    # object storage, s3://bucket[/prefix], reached with AWS_ENDPOINT_URL, AWS_ACCESS_KEY_ID,
+    # AWS_SECRET_ACCESS_KEY, AWS_REGION. Workers on other machines need S3 (docs: storage).
+    storage: str = Field(default="local", alias="MAPQUAL_STORAGE")
     # The Celery broker and the live-view pub/sub.
     redis_url: str = Field(default="redis://127.0.0.1:6379/0", alias="REDIS_URL")
     # API keys are required unless this is set to "off" explicitly (embedded, single-user use);
@@ -62,6 +67,19 @@ class Settings(BaseSettings):
     # a JSON object name -> argv, e.g. {"cartographer": ["/opt/slam/bridge", "--cfg", "c.lua"]}.
     # Only these run on the workers; a request that gives a command of its own is refused.
     external_slam: dict[str, list[str]] = Field(default_factory=dict, alias="MAPQUAL_EXTERNAL_SLAM")
+
+    @field_validator("storage")
+    @classmethod
+    def _storage(cls, value: str) -> str:
+        from worker.storage import check_setting
+
+        return check_setting(value.strip())
+
+    def open_storage(self) -> Storage:
+        """The run artifact storage this setting names (S3 clients are made once a process)."""
+        from worker.storage import open_storage
+
+        return open_storage(self.storage, self.runs_dir)
 
     def task_limits(self) -> TaskLimits:
         """The run task's time limits and visibility timeout."""

@@ -14,6 +14,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from fastapi.templating import Jinja2Templates
 from pydantic import ValidationError
 
+from backend.api.artifacts import maybe_files, serve
 from backend.api.deps import (
     CSRF_FIELD,
     CSRF_HEADER,
@@ -241,14 +242,17 @@ def job_page(
 def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
     summary = RunSummary.load(run.summary)
     b = summary.relations.get("B") if summary else None
-    report = bool(run.report_dir) and Path(run.report_dir).is_dir()
+    files = maybe_files(run)  # only links to files that can be served now
+    names = set(files.names()) if files is not None else set()
     return {
         "run": run,
         "b": b,
-        "report": report,
-        "errors_plot": report and (Path(run.report_dir) / "errors.png").is_file(),
+        "report": files is not None,
+        "relations": {k for k in ("A", "B", "SM") if f"relations_{k}.txt" in names},
+        "names": names,
+        "errors_plot": "errors.png" in names,
         "map_score": summary.map_score if summary else None,  # issue 17: map vs floorplan
-        "overlay_plot": report and (Path(run.report_dir) / "map_overlay.png").is_file(),
+        "overlay_plot": "map_overlay.png" in names,
         "viewer": viewer_link,
         "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),
     }
@@ -269,9 +273,7 @@ def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
         row["algorithms"] = [(f"{run.slam} (this run)", own)] + [
             (e.name, (e.metrics or {}).get("relations") or {}) for e in by_run.get(run.id, [])
         ]
-        row["bag"] = row["report"] and any(
-            (Path(run.report_dir) / n).is_file() for n in SIM_LOG_NAMES
-        )
+        row["bag"] = any(n in row["names"] for n in SIM_LOG_NAMES)
 
 
 @router.get("/runs/{run_id}/plot/{name}.png")
@@ -286,8 +288,9 @@ def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> 
     run = owned(user, session.get(Run, run_id), "run", run_id)
     if run.status != RunStatus.DONE:
         raise HTTPException(404, f"run {run_id} is {run.status}: no results yet")
-    if run.report_dir and (Path(run.report_dir) / f"{name}.png").is_file():
-        return Response((Path(run.report_dir) / f"{name}.png").read_bytes(), media_type="image/png")
+    files = maybe_files(run)
+    if files is not None and files.has(f"{name}.png"):
+        return serve(files, f"{name}.png", "image/png", run_id, inline=True)
     if name in ("errors", "map_overlay"):
         raise HTTPException(404, f"run {run_id} has no report folder with its {name} plot")
     w = session.get_one(World, run.world_id)

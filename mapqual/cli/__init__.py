@@ -6,6 +6,7 @@ import sys
 import warnings
 
 import typer
+from pydantic import ValidationError
 
 from worker.errors import InputError, InputWarning, SlamFailed
 
@@ -45,6 +46,11 @@ def main() -> None:
         app()
     except InputError as exc:
         print(f"mapqual: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    except ValidationError as exc:  # a setting from the environment (.env) that is invalid
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first.get("loc", ())) or exc.title
+        print(f"mapqual: error: setting {where}: {first['msg']}", file=sys.stderr)
         sys.exit(2)
     except SlamFailed as exc:  # an external SLAM program failed outside a run (mapqual slam)
         print(f"mapqual: error: {exc}", file=sys.stderr)

@@ -144,11 +144,12 @@ def run(
 
 def _execute(
     world: Any, suffix: str, params: Any, seed: int, out: Path | None, quiet: bool
-) -> tuple[int, Path, RunSummary]:
+) -> tuple[int, Path | str, RunSummary]:
     """Store the world and a job of one run, and execute it with the run service: the default
     runs/<id>/ is filled like a worker's (in the attempt's folder, renamed into place with the
     commit of the result); a folder the user named (-o) is written directly. (run id, report
-    folder as shown, summary); a failed run is one line on stderr and exit code 1."""
+    folder as shown (an s3:// location with S3 storage), summary); a failed run is one line
+    on stderr and exit code 1."""
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
     from backend.execute import Placement, execute_run
@@ -162,7 +163,11 @@ def _execute(
     if outcome.summary is None:
         print(f"mapqual: error: {outcome.message}", file=sys.stderr)
         raise typer.Exit(1)
-    return run_id, out if out is not None else settings.runs_dir / str(run_id), outcome.summary
+    if out is not None:
+        return run_id, out, outcome.summary
+    if outcome.report_dir and outcome.report_dir.startswith("s3://"):  # kept in object storage
+        return run_id, outcome.report_dir, outcome.summary
+    return run_id, settings.runs_dir / str(run_id), outcome.summary
 
 
 def _store_job(url: str, world: Any, suffix: str, params: Any, seed: int) -> int:

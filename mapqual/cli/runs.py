@@ -133,6 +133,7 @@ def runs_show(
             "status": run.status,
             "error": run.error,
             "report_dir": run.report_dir,
+            "report_files": _report_listing(run.report_dir),
             "summary": run.summary,
         }
     if as_json:
@@ -159,3 +160,18 @@ def _redact(url: str) -> str:
     from sqlalchemy.engine import make_url
 
     return make_url(url).render_as_string(hide_password=True)
+
+
+def _report_listing(location: str | None) -> list[str] | str | None:
+    """The files of a run's report, read through the storage layer (local folder or S3), or
+    one line saying why they cannot be reached; None for a run with no report."""
+    from worker.storage import StorageError, run_files
+
+    if not location:
+        return None
+    try:
+        files = run_files(location)
+        files.check()
+        return files.names()
+    except (StorageError, OSError) as exc:
+        return f"unreachable: {exc}"

@@ -20,7 +20,19 @@ class EstFmt(StrEnum):
     bag = "bag"
 
 
-def _resolve_run(run: str) -> tuple[Path, int | None]:
+def _reachable(location: str) -> bool:
+    from worker.storage import StorageError, run_files
+
+    try:
+        run_files(location).check()
+    except (StorageError, OSError) as exc:
+        if location.startswith("s3://"):
+            raise InputError(f"the run's report cannot be reached ({exc})") from None
+        return False
+    return True
+
+
+def _resolve_run(run: str) -> tuple[Path | str, int | None]:
     """(report folder, database run id or None) of RUN: a stored run's id, or a run folder
     (then the database run whose report folder it is, if there is one)."""
     from backend.db.models import Run
@@ -32,9 +44,9 @@ def _resolve_run(run: str) -> tuple[Path, int | None]:
             row = s.get(Run, int(run))
             if row is None:
                 raise InputError(f"no run {run} in the database")
-            if not row.report_dir or not Path(row.report_dir).is_dir():
+            if not row.report_dir or not _reachable(row.report_dir):
                 raise InputError(f"run {run} has no report folder (yet)")
-            return Path(row.report_dir), row.id
+            return row.report_dir, row.id
     folder = Path(run)
     if not folder.is_dir():
         raise InputError("no such run folder (or run id)", path=folder)
@@ -45,11 +57,28 @@ def _resolve_run(run: str) -> tuple[Path, int | None]:
         return folder, None
     with session_scope(url) as s:
         rows = s.query(Run.id, Run.report_dir).filter(Run.report_dir.is_not(None)).all()
-    found = [rid for rid, d in rows if Path(d).resolve() == want]
+    found = [rid for rid, d in rows if not d.startswith("s3://") and Path(d).resolve() == want]
     return folder, (found[-1] if found else None)
 
 
-def _store(run_id: int, score, est) -> None:
+def _score_stored(location: str, traj, name: str, source: str, **kw) -> tuple[object, str]:
+    """Score on a run kept in object storage: its parts fetched, the estimate's folder
+    written back beside them. (the score, that folder's location)"""
+    import tempfile
+
+    from worker.export.score import ESTIMATES_DIR, RUN_PARTS, score_estimate
+    from worker.storage import run_files
+
+    files = run_files(location)
+    with tempfile.TemporaryDirectory(prefix="mapqual-score-") as tmp:
+        run_dir = files.fetch(RUN_PARTS, Path(tmp) / "run")
+        score = score_estimate(run_dir, traj, name, source, out_dir=Path(tmp) / "est", **kw)
+        target = files.sub(f"{ESTIMATES_DIR}/{name}")
+        target.put_tree("", Path(tmp) / "est")
+    return score, target.location
+
+
+def _store(run_id: int, score, est, location: str) -> None:
     from backend.db.models import Run
     from backend.db.session import session_scope
     from backend.store_estimates import save_estimate
@@ -57,7 +86,7 @@ def _store(run_id: int, score, est) -> None:
 
     with session_scope(_database_url()) as s:
         save_estimate(s, s.get_one(Run, run_id), summary=score.summary, t=est.t, poses=est.poses,
-                      report_dir=str(score.folder.resolve()))  # fmt: skip
+                      report_dir=location)  # fmt: skip
 
 
 @app.command("score")
@@ -92,10 +121,15 @@ def score_cmd(
     folder, run_id = _resolve_run(run)
     traj = read_estimate(est, fmt.value, topic)
     checks = CheckParams(frame=not allow_frame_offset)
-    score = score_estimate(folder, traj, name, est.name, max_gap=max_gap, checks=checks)
+    if isinstance(folder, str) and folder.startswith("s3://"):
+        score, where = _score_stored(folder, traj, name, est.name, max_gap=max_gap, checks=checks)
+        shown = where
+    else:
+        score = score_estimate(folder, traj, name, est.name, max_gap=max_gap, checks=checks)
+        where, shown = str(score.folder.resolve()), str(score.folder)
     if run_id is not None:
-        _store(run_id, score, traj)
-    doc = dict(score.summary, report_dir=str(score.folder), run_id=run_id)
+        _store(run_id, score, traj, where)
+    doc = dict(score.summary, report_dir=shown, run_id=run_id)
     if as_json:
         print(json.dumps(doc))
         return
@@ -104,4 +138,4 @@ def score_cmd(
             f"{kind} relations: {name} on run {run}", summary, ["mean", "std", "min", "max", "n"]
         )
     stored = f", stored as algorithm {name!r} of run {run_id}" if run_id is not None else ""
-    print(f"wrote {score.folder}{stored}")
+    print(f"wrote {shown}{stored}")

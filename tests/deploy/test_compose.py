@@ -45,7 +45,7 @@ def test_compose_has_the_services_with_health_checks_and_volumes():
     assert {"redis", "postgres", "api", "worker", "viewer"} <= set(services)
     for name in ("redis", "postgres", "api", "viewer"):
         assert "healthcheck" in services[name], name
-    assert set(COMPOSE["volumes"]) >= {"pgdata", "runs"}
+    assert set(COMPOSE["volumes"]) >= {"pgdata", "objects"}
     assert "ports" not in services["worker"]  # workers scale with --scale worker=N
     assert services["api"]["environment"]["DATABASE_URL"].startswith("postgresql+psycopg://")
     # the viewer reads the same database and Redis, and the dashboard links to its port
@@ -62,6 +62,22 @@ def test_service_commands_are_valid_mapqual_invocations(service):
     argv = COMPOSE["services"][service]["command"]
     assert argv[0] == "mapqual"
     assert _parse_mapqual(argv[1:]) == argv[1]
+
+
+def test_api_and_worker_share_no_disk_but_one_object_store():
+    """Issue 50: workers may run on other machines, so no volume is mounted by both api and
+    worker; both reach the same S3 bucket (the minio service) with the same settings."""
+    services = COMPOSE["services"]
+    mounts = {s: {v.split(":")[0] for v in services[s].get("volumes", [])} for s in services}
+    assert not mounts["api"] & mounts["worker"]
+    env = {s: services[s]["environment"] for s in ("api", "worker")}
+    for key in ("MAPQUAL_STORAGE", "AWS_ENDPOINT_URL", "AWS_ACCESS_KEY_ID", "AWS_REGION"):
+        assert env["api"][key] == env["worker"][key], key
+    assert env["api"]["MAPQUAL_STORAGE"].startswith("s3://")
+    assert env["api"]["AWS_ENDPOINT_URL"] == "http://minio:9000"
+    assert "minio" in services and "healthcheck" in services["minio"]
+    bucket = env["api"]["MAPQUAL_STORAGE"].removeprefix("s3://").split("/")[0]
+    assert f"m/{bucket}" in " ".join(services["minio-bucket"]["entrypoint"])
 
 
 def test_a_wrong_invocation_is_caught_by_the_same_check():

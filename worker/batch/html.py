@@ -85,10 +85,7 @@ def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
     outcome, reason = outcome_of(r)
     s = summary_of(r)
     b = s.relations.get("B") if s else None
-    map_png = Path(r["report_dir"] or "") / "map.png"
-    link = None
-    if r["report_dir"] and map_png.is_file():
-        link = os.path.relpath(map_png, out)
+    link = _map_link(r, out)
     what = outcome + (f" ({reason})" if reason else "")
     if r.get("error"):
         what += f": {r['error']}"
@@ -100,6 +97,24 @@ def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
         "b_ci_t": b and b.translation.ci95, "b_ci_r": b and b.rotation.ci95,
         "sim_time_s": s and s.timings.sim_time_s,
     }  # fmt: skip
+
+
+def _map_link(r: dict[str, Any], out: Path) -> str | None:
+    """The run's map.png relative to the batch's folder: its report's file on this disk, or
+    (object storage) a copy fetched into OUT/maps/; None when it cannot be had."""
+    from worker.storage import StorageError, run_files
+
+    if not r.get("report_dir"):
+        return None
+    try:
+        files = run_files(r["report_dir"])
+        path = files.local_path("map.png")
+        if path is None:
+            name = f"{r.get('key') or r.get('run_id')}.png".replace("/", "_")
+            path = files.storage.get_file(files.key("map.png"), out / "maps" / name)
+    except (StorageError, OSError):
+        return None
+    return os.path.relpath(path, out) if path.is_file() else None
 
 
 def _figure(name: str, path: Path | None) -> dict[str, Any]:

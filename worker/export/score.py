@@ -33,6 +33,9 @@ from worker.report.summary import RunSummary
 
 ESTIMATES_DIR = "estimates"
 KINDS = ("B", "A", "SM")
+# the files of a run's report folder scoring reads (fetched alone from object storage)
+RUN_PARTS = ("summary.json", "gt.tum", *(f"relations_{k}.txt" for k in KINDS), "map.yaml",
+             "map.pgm")  # fmt: skip
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,39}$")
 
 

@@ -87,21 +87,22 @@ def write_report(result, out_dir: str | Path) -> Path:
     return out
 
 
-def write_report_zip(folder: str | Path, arc_root: str) -> Path:
+def write_report_zip(folder: str | Path, arc_root: str, dest: Path | None = None) -> Path:
     """Zip every file of the report `folder` (but the zip itself) as `arc_root/<path>` into
-    `folder/report.zip`: written under a temporary name and renamed, so that a reader (or a
-    racing writer) sees a whole zip or none."""
+    `dest` (default `folder/report.zip`): written under a temporary name and renamed, so that
+    a reader (or a racing writer) sees a whole zip or none."""
     folder = Path(folder)
+    dest = folder / REPORT_ZIP if dest is None else Path(dest)
     files = [p for p in sorted(folder.rglob("*")) if p.is_file() and not _zip_own(p, folder)]
-    tmp = folder / f".{REPORT_ZIP}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    tmp = dest.with_name(f".{REPORT_ZIP}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
             for path in files:
                 zf.write(path, f"{arc_root}/{path.relative_to(folder).as_posix()}")
-        os.replace(tmp, folder / REPORT_ZIP)
+        os.replace(tmp, dest)
     finally:
         tmp.unlink(missing_ok=True)
-    return folder / REPORT_ZIP
+    return dest
 
 
 def _zip_own(path: Path, folder: Path) -> bool:

@@ -3,9 +3,7 @@ run's own relations (POST / GET /runs/{id}/estimates)."""
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
 import tempfile
 import zipfile
 import zlib
@@ -13,13 +11,15 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile, status
-from fastapi.responses import FileResponse
-from starlette.background import BackgroundTask
+from fastapi.responses import Response
 
-from backend.api.deps import CurrentUser, IdPath, SessionDep
-from backend.api.routes.runs import _report_dir, _run
+from backend.api.artifacts import built, report_files, unavailable
+from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
+from backend.api.routes.runs import _run
 from backend.store_estimates import list_estimates, save_estimate
 from worker.errors import InputError
+from worker.export.score import ESTIMATES_DIR
+from worker.storage import RunFiles, StorageError
 
 router = APIRouter(tags=["runs"])
 
@@ -42,39 +42,29 @@ def get_bag(
     run_id: IdPath,
     session: SessionDep,
     user: CurrentUser,
+    settings: SettingsDep,
     format: Literal["rosbag2", "rosbag1"] = Query("rosbag2", description="bag format"),
-) -> FileResponse:
+) -> Response:
     """The run's sim.log as a bag: rosbag1 (one .bag) or rosbag2 (MCAP; its directory as a
-    zip). Built once into the run's folder (`export/`), then served from there until the log
-    changes (a 2 h run's bag takes a minute to build); where that folder cannot be written,
-    built in a temporary folder for this response and deleted afterwards."""
-    from worker.export.bag import find_sim_log
+    zip). Built once (a 2 h run's bag takes a minute), by one request at a time per run and
+    format (the others wait for it), kept in the run's storage as `export/<file>` and
+    streamed from there; where the run's folder cannot be written, built for this response."""
+    from worker.export.bag import SIM_LOG_NAMES
 
-    folder = _report_dir(_run(session, user, run_id))
-    try:
-        log = find_sim_log(folder)
-    except InputError:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no sim.log") from None
+    files = report_files(_run(session, user, run_id))
+    log_name = next((n for n in SIM_LOG_NAMES if files.has(n)), None)
+    if log_name is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no sim.log")
     name = f"run{run_id}"
     file_name = f"{name}.bag" if format == "rosbag1" else f"{name}_rosbag2.zip"
     media = "application/octet-stream" if format == "rosbag1" else "application/zip"
-    cached = folder / "export" / file_name
-    if cached.is_file() and cached.stat().st_mtime_ns >= log.stat().st_mtime_ns:
-        return FileResponse(cached, media_type=media, filename=file_name)
-    try:
-        cached.parent.mkdir(exist_ok=True)
-        work = Path(tempfile.mkdtemp(prefix=".building-", dir=cached.parent))
-    except OSError:  # a read-only report folder
-        work = Path(tempfile.mkdtemp(prefix="mapqual-bag-"))
-        built = _build_bag(log, work, name, format)
-        cleanup = BackgroundTask(shutil.rmtree, work, ignore_errors=True)
-        return FileResponse(built, media_type=media, filename=file_name, background=cleanup)
-    try:
-        # built aside, then renamed into place: a request served meanwhile gets a whole file
-        os.replace(_build_bag(log, work, name, format), cached)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return FileResponse(cached, media_type=media, filename=file_name)
+
+    def build(work: Path) -> Path:
+        log = files.local_path(log_name) or files.fetch([log_name], work / "log") / log_name
+        return _build_bag(log, work, name, format)
+
+    key, url = f"export/{file_name}", settings.database_url
+    return built(files, key, url, build, media, run_id, file_name, source=log_name)
 
 
 def _build_bag(log: Path, work: Path, name: str, format: str) -> Path:
@@ -149,14 +139,14 @@ def post_estimate(
     it as an algorithm of the run (a name again replaces the earlier one). 400 with one line
     for an estimate that does not cover the run, is in another frame, or mixes units."""
     from worker.export.estimate import read_estimate
-    from worker.export.score import check_name, score_estimate
+    from worker.export.score import check_name
 
     check_name(name)
     upload_name = Path(file.filename or "").name
     if not _FILE_NAME.match(upload_name):
         raise HTTPException(status.HTTP_400_BAD_REQUEST, f"unsafe file name {file.filename!r}")
     run = _run(session, user, run_id)
-    folder = _report_dir(run)
+    files = report_files(run)
     data = file.file.read()  # the body limit (BodyLimit) bounds it
     with tempfile.TemporaryDirectory(prefix="mapqual-est-") as tmp:
         path = _estimate_file(upload_name, data, Path(tmp))
@@ -164,16 +154,29 @@ def post_estimate(
             est = read_estimate(path, "auto", topic)
         except InputError as exc:
             raise InputError(str(exc).replace(f"{tmp}/", "")) from None
-    try:
-        score = score_estimate(folder, est, name, upload_name)
-    except InputError as exc:
-        if "cannot create directory" in str(exc):
-            unavailable = status.HTTP_503_SERVICE_UNAVAILABLE
-            raise HTTPException(unavailable, f"run {run_id}: {exc}") from None
-        raise
-    row = save_estimate(session, run, summary=score.summary, t=est.t, poses=est.poses,
-                        report_dir=str(score.folder))  # fmt: skip
+    summary, location = _score_into_storage(files, est, name, upload_name, run_id)
+    row = save_estimate(session, run, summary=summary, t=est.t, poses=est.poses,
+                        report_dir=location)  # fmt: skip
     return _estimate_out(row)
+
+
+def _score_into_storage(
+    files: RunFiles, est: Any, name: str, upload_name: str, run_id: int
+) -> tuple[dict[str, Any], str]:
+    """Score `est` on the run's parts fetched from its storage, write the estimate's report
+    folder back there as `estimates/<name>/`: (its summary, that folder's location)."""
+    from worker.export.score import RUN_PARTS, score_estimate
+
+    with tempfile.TemporaryDirectory(prefix="mapqual-score-") as tmp:
+        run_dir = files.local_path("") or files.fetch(RUN_PARTS, Path(tmp) / "run")
+        out = Path(tmp) / "estimate"
+        score = score_estimate(run_dir, est, name, upload_name, out_dir=out)
+        target = files.sub(f"{ESTIMATES_DIR}/{name}")
+        try:
+            target.put_tree("", out)  # the same file names: a name again replaces its files
+        except (StorageError, OSError) as exc:
+            raise unavailable(run_id, exc) from None
+        return score.summary, target.location
 
 
 @router.get("/runs/{run_id}/estimates")

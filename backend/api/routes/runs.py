@@ -8,9 +8,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query, status
-from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
-from backend.api.deps import CurrentUser, IdPath, SessionDep, owned
+from backend.api.artifacts import built, maybe_files, report_files, serve
+from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep, owned
 from backend.db.models import Run
 from backend.schemas import RunOut
 from backend.store import load_map, load_trajectory
@@ -22,12 +23,6 @@ router = APIRouter(tags=["runs"])
 
 def _run(session, user, run_id: int) -> Run:
     return owned(user, session.get(Run, run_id), "run", run_id)
-
-
-def _report_dir(run: Run) -> Path:
-    if run.status != RunStatus.DONE or not run.report_dir or not Path(run.report_dir).is_dir():
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run.id} has no report (yet)")
-    return Path(run.report_dir)
 
 
 def _require_done(run: Run) -> None:
@@ -97,8 +92,9 @@ def get_map(
     on it when the report folder is there)."""
     run = _run(session, user, run_id)
     _require_done(run)
-    if run.report_dir and (Path(run.report_dir) / f"map.{ext}").is_file():
-        return FileResponse(Path(run.report_dir) / f"map.{ext}", media_type=_MEDIA[ext])
+    files = maybe_files(run)
+    if files is not None and files.has(f"map.{ext}"):
+        return serve(files, f"map.{ext}", _MEDIA[ext], run.id, inline=True)
     return Response(_map_files(run, session)[ext], media_type=_MEDIA[ext])
 
 
@@ -111,27 +107,28 @@ def get_relations(
     session: SessionDep,
     user: CurrentUser,
     kind: Literal["A", "B", "SM"] = Query("B"),
-) -> FileResponse:
+) -> Response:
     """The run's relations file of that kind (`t1 t2 x y z roll pitch yaw`)."""
-    path = _report_dir(_run(session, user, run_id)) / f"relations_{kind}.txt"
-    if not path.is_file():
+    files, name = report_files(_run(session, user, run_id)), f"relations_{kind}.txt"
+    if not files.has(name):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {kind} relations")
-    return FileResponse(path, media_type="text/plain", filename=path.name)
+    return serve(files, name, "text/plain; charset=utf-8", run_id, name)
 
 
 @router.get("/runs/{run_id}/report.zip")
-def get_report(run_id: IdPath, session: SessionDep, user: CurrentUser) -> FileResponse:
-    """The whole report folder as one zip: the one written with the run's result, or (a run
-    stored before runs had one, or a folder of `mapqual run -o` or a batch) made once now."""
+def get_report(
+    run_id: IdPath, session: SessionDep, user: CurrentUser, settings: SettingsDep
+) -> Response:
+    """The whole report folder as one zip, streamed: the one written with the run's result,
+    or (a run stored before runs had one, or a folder of `mapqual run -o` or a batch) made
+    once now and kept beside the report."""
     from worker.report.folder import REPORT_ZIP, write_report_zip
 
-    folder = _report_dir(_run(session, user, run_id))
-    path = folder / REPORT_ZIP
-    if not path.is_file():
-        try:
-            path = write_report_zip(folder, f"run{run_id}")
-        except OSError as exc:  # a folder this process may not write: nothing to serve
-            raise HTTPException(
-                status.HTTP_503_SERVICE_UNAVAILABLE, f"run {run_id}: report.zip not made ({exc})"
-            ) from exc
-    return FileResponse(path, media_type="application/zip", filename=f"run{run_id}.zip")
+    files = report_files(_run(session, user, run_id))
+
+    def build(work: Path) -> Path:
+        folder = files.local_path("") or files.fetch(files.names(), work / "report")
+        return write_report_zip(folder, f"run{run_id}", work / REPORT_ZIP)
+
+    media, name = "application/zip", f"run{run_id}.zip"
+    return built(files, REPORT_ZIP, settings.database_url, build, media, run_id, name)

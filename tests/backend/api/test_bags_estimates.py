@@ -67,8 +67,8 @@ def test_the_bag_of_a_run_in_both_formats(api, run_id, run_folder, tmp_path):
         ]
         zf.extractall(tmp_path / "b")
     assert _counts(tmp_path / "b" / f"run{run_id}")["/scan"] == n
-    left = [p for p in Path(tempfile.gettempdir()).glob("mapqual-bag-*")]
-    assert left == []  # built in the run's folder, no temporary folder left behind
+    left = [p for p in Path(tempfile.gettempdir()).glob("mapqual-build-*")]
+    assert left == []  # kept in the run's folder, no temporary folder left behind
     assert api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag3"}).status_code == 422
 
 
@@ -100,7 +100,34 @@ def test_a_run_folder_that_cannot_be_written_still_gets_its_bag(api, run_id, tmp
     finally:
         folder.chmod(0o755)
     assert r.status_code == 200 and len(r.content) > 1000
-    assert list(Path(tempfile.gettempdir()).glob("mapqual-bag-*")) == []
+    assert list(Path(tempfile.gettempdir()).glob("mapqual-build-*")) == []
+
+
+def test_four_first_requests_at_once_build_the_bag_once(api, run_id, monkeypatch):
+    """Issue 48 item 6 / issue 50: simultaneous first GETs wait for one build, all served."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from backend.api.routes import bags
+
+    builds, real = [], bags._build_bag
+    gate = threading.Barrier(4)
+
+    def counted(*args, **kw):
+        builds.append(args[-1])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(bags, "_build_bag", counted)
+
+    def fetch(_):
+        gate.wait(timeout=30)
+        return api.get(f"/api/v1/runs/{run_id}/bag", params={"format": "rosbag1"})
+
+    with ThreadPoolExecutor(4) as pool:
+        answers = list(pool.map(fetch, range(4)))
+    assert [r.status_code for r in answers] == [200] * 4
+    assert len({r.content for r in answers}) == 1 and len(answers[0].content) > 1000
+    assert builds == ["rosbag1"]
 
 
 def test_an_estimate_is_scored_on_the_runs_relations_and_listed(api, run_id, run_folder):

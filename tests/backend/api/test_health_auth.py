@@ -21,7 +21,17 @@ def test_healthz_and_readyz_report_database_and_broker(api):
     assert api.client.get("/healthz").json() == {"status": "ok"}
     ready = api.client.get("/readyz")
     assert ready.status_code == 200
-    assert ready.json() == {"ready": True, "database": "ok", "broker": "ok"}
+    assert ready.json() == {"ready": True, "database": "ok", "broker": "ok", "storage": "ok"}
+
+
+def test_readyz_is_503_and_names_the_storage_when_it_cannot_be_used(db_url, tmp_path):
+    (tmp_path / "runs").write_text("a file where the runs folder should be")
+    settings = Settings(DATABASE_URL=db_url, MAPQUAL_RUNS_DIR=str(tmp_path / "runs"))
+    with TestClient(create_app(settings)) as client:
+        ready = client.get("/readyz")
+    assert ready.status_code == 503
+    assert ready.json()["storage"].startswith("unreachable: runs folder")
+    assert "is not a folder" in ready.json()["storage"]
 
 
 def test_readyz_is_503_and_names_the_broker_when_it_is_down(db_url):
