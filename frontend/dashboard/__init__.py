@@ -8,14 +8,14 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
-from frontend.dashboard import compare, pages, worlds
+from frontend.dashboard import compare, explore, pages, worlds
 
 STATIC = Path(__file__).resolve().parent / "static"
 
 
 def install(app: FastAPI) -> None:
     """Add the pages, their static files and the sign-in redirect to `app`."""
-    for module in (pages, worlds, compare):
+    for module in (pages, worlds, compare, explore):
         app.include_router(module.router)
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     app.add_exception_handler(pages.SignInRequired, pages.sign_in_redirect)
