@@ -99,12 +99,18 @@ class MapTiles:
     def _tile(self, codes, resolution, origin, ty: int, tx: int) -> None:
         part = codes[ty * TILE : (ty + 1) * TILE, tx * TILE : (tx + 1) * TILE]
         old = self.tiles.pop((ty, tx), None)
+        h, w = part.shape
+        x0, y0 = origin[0] + tx * TILE * resolution, origin[1] + ty * TILE * resolution
+        if old is not None and (part != 0).any() and old.image.shape[:2] == (h, w):
+            # new pixels for the same node: the browser keeps showing the old texture until
+            # the new one is decoded (a new node is drawn blank white until then)
+            old.image = self._rgb(part, resolution, x0, y0)
+            self.tiles[(ty, tx)] = old
+            return
         if old is not None:
             old.remove()
         if not (part != 0).any():
             return
-        h, w = part.shape
-        x0, y0 = origin[0] + tx * TILE * resolution, origin[1] + ty * TILE * resolution
         self.tiles[(ty, tx)] = self.scene.add_image(
             f"{self.name}/t{ty}_{tx}", self._rgb(part, resolution, x0, y0),
             w * resolution, h * resolution, format="png",

@@ -38,21 +38,24 @@ Names = Annotated[list[Annotated[str, Query(max_length=300)]], Query(max_length=
 
 
 def _filters(world: list[str], slam: list[str], setting: list[str], kind: list[str],
-             by: list[str], applied: bool) -> Filters:  # fmt: skip
+             by: list[str], applied: bool, job: list[str] = ()) -> Filters:  # fmt: skip
     bad = [k for k in kind if k not in KINDS] + [b for b in by if b not in GROUP_KEYS]
+    bad += [j for j in job if not (j.isdigit() and len(j) < 19)]
     if bad:
         raise HTTPException(400, f"unknown filter value(s): {', '.join(sorted(set(bad)))[:200]}")
     kinds = tuple(kind) if applied else DEFAULT_KINDS  # a submitted form may leave all out
     group_by = tuple(k for k in GROUP_KEYS if k in by) if applied else GROUP_KEYS
-    return Filters(tuple(world), tuple(slam), tuple(setting), kinds, group_by)
+    jobs = tuple(int(j) for j in job)
+    return Filters(tuple(world), tuple(slam), tuple(setting), kinds, group_by, jobs)
 
 
 class View:
     """The runs, filters, groups and selection of one request."""
 
-    def __init__(self, session, user, world, slam, setting, kind, by, g, applied: bool):
+    def __init__(self, session, user, world, slam, setting, kind, by, g, applied: bool,
+                 job: list[str]):  # fmt: skip
         self.all = load_runs(session, user)
-        self.filters = _filters(world, slam, setting, kind, by, applied)
+        self.filters = _filters(world, slam, setting, kind, by, applied, job)
         self.rows = self.filters.apply(self.all)
         self.groups = group(self.rows, self.filters.group_by)
         wanted = set(g)
@@ -74,7 +77,8 @@ class View:
 
 def _view(request: Request, session, user, world, slam, setting, kind, by, g) -> View:
     applied = request.query_params.get("applied") == "1"
-    return View(session, user, world, slam, setting, kind, by, g, applied)
+    job = request.query_params.getlist("job")[:200]
+    return View(session, user, world, slam, setting, kind, by, g, applied, job)
 
 
 @router.get("/explore", response_class=HTMLResponse)

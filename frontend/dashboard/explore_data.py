@@ -111,8 +111,9 @@ def _mean_of(metrics: dict | None, kind: str, axis: str = "translation") -> floa
     return float(v) if v is not None else None
 
 
-def load_runs(session, user: Principal) -> list[RunRow]:
-    """Every done run `user` may see (an administrator: all), oldest first."""
+def load_runs(session, user: Principal, job_id: int | None = None) -> list[RunRow]:
+    """Every done run `user` may see (an administrator: all), oldest first; of one job only
+    with `job_id`."""
     stmt = (
         select(Run.id, Run.job_id, World.name, Run.slam, Run.seed, Run.outcome, Run.reason,
                Run.coverage, Run.b_mean_t, Run.b_mean_r, Run.metrics, Run.params)
@@ -122,6 +123,8 @@ def load_runs(session, user: Principal) -> list[RunRow]:
     )  # fmt: skip
     if not user.is_admin:
         stmt = stmt.where(Run.owner_id == user.id)
+    if job_id is not None:
+        stmt = stmt.where(Run.job_id == job_id)
     rows = []
     for row in session.execute(stmt):
         rid, job, world, slam, seed, outcome, reason, cov, bt, br, metrics, params = row
@@ -143,10 +146,12 @@ class Filters:
     settings: tuple[str, ...] = ()
     kinds: tuple[str, ...] = DEFAULT_KINDS
     group_by: tuple[str, ...] = GROUP_KEYS
+    jobs: tuple[int, ...] = ()
 
     def keep(self, r: RunRow) -> bool:
         return (
-            (not self.worlds or r.world in self.worlds)
+            (not self.jobs or r.job_id in self.jobs)
+            and (not self.worlds or r.world in self.worlds)
             and (not self.slams or r.slam in self.slams)
             and (not self.settings or r.setting in self.settings)
             and r.kind in self.kinds
@@ -238,3 +243,32 @@ def group(rows: Sequence[RunRow], by: Sequence[str]) -> list[Group]:
 def param_columns(rows: Iterable[RunRow]) -> list[str]:
     """Every parameter some shown run changed from its defaults: the runs table's columns."""
     return sorted({k for r in rows for k in r.changed})
+
+
+def job_result(slam: str, runs: Iterable[Any]) -> dict[str, Any]:
+    """What a job's finished runs came to: outcomes by kind (in KINDS order), how many have B
+    scores, and the algorithm's mean B translational error over them."""
+    kinds: dict[str, int] = {}
+    scored = []
+    for r in runs:
+        if r.status != RunStatus.DONE:
+            continue
+        k = outcome_kind(r.outcome, r.reason)
+        kinds[k] = kinds.get(k, 0) + 1
+        if r.b_mean_t is not None:
+            scored.append(float(r.b_mean_t))
+    ordered = [(k, kinds[k]) for k in KINDS if k in kinds]
+    b = describe(scored)
+    return {"kinds": ordered, "slam": slam, "scored": b.n, "b_mean": b.mean,
+            "none_completed": bool(kinds) and "completed" not in kinds}  # fmt: skip
+
+
+def settings_used(params: dict[str, Any] | None) -> dict[str, Any]:
+    """The settings a run used, for its job's page: the time limit (and whether it is the
+    default), the laser and odometry noise, and every parameter changed from the defaults."""
+    flat = _flatten(params or {})
+    base = _defaults(str(flat.get("algorithm", "rbpf")))
+    key = "explore.time_limit"
+    noise = {k: v for k, v in flat.items() if k.startswith("sim.") and "noise" in k}
+    return {"time_limit": flat.get(key), "time_limit_default": flat.get(key) == base.get(key),
+            "noise": noise, "changed": changed_params(params)}  # fmt: skip

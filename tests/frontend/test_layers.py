@@ -56,11 +56,12 @@ def test_a_patch_resends_only_the_tiles_it_touches(scene):
     codes = np.full((2 * TILE, 3 * TILE), FREE, np.uint8)
     tiles.show(codes, 0.05, (0.0, 0.0))
     assert tiles.n_tiles() == 6
-    before = dict(tiles.tiles)
+    before = {k: (n, n._data) for k, n in tiles.tiles.items()}
     codes[TILE + 3, 2 * TILE + 5] = OCCUPIED
     tiles.show(codes, 0.05, (0.0, 0.0), (TILE + 3, 2 * TILE + 5, 1, 1))
-    changed = [k for k in before if tiles.tiles[k] is not before[k]]
-    assert changed == [(1, 2)]
+    # the touched tile gets new pixels in its node (kept: no blank frame while they decode)
+    changed = [k for k, (n, data) in before.items() if tiles.tiles[k]._data is not data]
+    assert changed == [(1, 2)] and all(tiles.tiles[k] is n for k, (n, _) in before.items())
     tiles.show(np.zeros((10, 10), np.uint8), 0.05, (1.0, 0.0))  # a new map: all replaced
     assert tiles.n_tiles() == 0
 
