@@ -15,6 +15,7 @@ MAX_CHUNKS = 40  # path chunks before they are merged into one node
 FLOOR_MAX_PX = 2048  # the floorplan image is shown at most this wide or high
 Z_FLOOR, Z_MAP, Z_PATH, Z_ROBOT = 0.0, 0.01, 0.03, 0.05  # [m] layer heights
 GT_RGB, EST_RGB = (20, 170, 20), (220, 30, 30)
+SCAN_RGB, NAV_GOAL_RGB, NAV_PLAN_RGB = (255, 140, 0), (200, 0, 200), (255, 120, 0)
 
 
 def _quat_z(theta: float) -> tuple[float, float, float, float]:
@@ -41,7 +42,9 @@ class Floorplan:
         self.occ, self.resolution = occ, float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
         step = max(1, int(math.ceil(max(h, w) / FLOOR_MAX_PX)))
-        shown = occ[::-1][::step, ::step]  # top row first, as images are
+        # bottom row first, as the grid is: viser lays an image's row 0 along the plane's -y
+        # edge (its client turns the image plane by pi about x, the camera-image convention)
+        shown = occ[::step, ::step]
         img = np.where(shown, FLOOR_WALL, FLOOR_FREE).astype(np.uint8)
         width, height = w * resolution, h * resolution
         centre = (origin[0] + width / 2, origin[1] + height / 2, Z_FLOOR)
@@ -96,12 +99,18 @@ class MapTiles:
     def _tile(self, codes, resolution, origin, ty: int, tx: int) -> None:
         part = codes[ty * TILE : (ty + 1) * TILE, tx * TILE : (tx + 1) * TILE]
         old = self.tiles.pop((ty, tx), None)
+        h, w = part.shape
+        x0, y0 = origin[0] + tx * TILE * resolution, origin[1] + ty * TILE * resolution
+        if old is not None and (part != 0).any() and old.image.shape[:2] == (h, w):
+            # new pixels for the same node: the browser keeps showing the old texture until
+            # the new one is decoded (a new node is drawn blank white until then)
+            old.image = self._rgb(part, resolution, x0, y0)
+            self.tiles[(ty, tx)] = old
+            return
         if old is not None:
             old.remove()
         if not (part != 0).any():
             return
-        h, w = part.shape
-        x0, y0 = origin[0] + tx * TILE * resolution, origin[1] + ty * TILE * resolution
         self.tiles[(ty, tx)] = self.scene.add_image(
             f"{self.name}/t{ty}_{tx}", self._rgb(part, resolution, x0, y0),
             w * resolution, h * resolution, format="png",
@@ -110,7 +119,8 @@ class MapTiles:
         )  # fmt: skip
 
     def _rgb(self, part: np.ndarray, resolution: float, x0: float, y0: float) -> np.ndarray:
-        """(h, w, 3) uint8, top row first, of one tile of codes whose corner is (x0, y0)."""
+        """(h, w, 3) uint8, bottom row first (viser's image convention, as the floorplan's),
+        of one tile of codes whose lower-left corner is (x0, y0)."""
         h, w = part.shape
         xs = x0 + (np.arange(w) + 0.5) * resolution
         ys = y0 + (np.arange(h) + 0.5) * resolution
@@ -122,7 +132,7 @@ class MapTiles:
         free, occ = part == FREE, part == OCCUPIED
         rgb[free] = (rgb[free] + MAP_FREE_RGB) // 2
         rgb[occ] = MAP_OCC_RGB
-        return np.ascontiguousarray(rgb[::-1].astype(np.uint8))
+        return np.ascontiguousarray(rgb.astype(np.uint8))
 
     def set_floor(self, floor: Floorplan | None, on: bool) -> None:
         """The floorplan under unknown cells (redraws every tile when that changes)."""
@@ -227,11 +237,11 @@ class Markers:
     def __init__(self, scene: Any, name: str, scan_on: bool = True, nav_on: bool = True):
         self.scene, self.name = scene, name
         self.scan = scene.add_point_cloud(
-            f"{name}/scan", np.zeros((1, 3), np.float32), (255, 140, 0), point_size=0.08,
+            f"{name}/scan", np.zeros((1, 3), np.float32), SCAN_RGB, point_size=0.08,
             visible=False, point_shape="circle",
         )  # fmt: skip
         self.goal = scene.add_point_cloud(
-            f"{name}/goal", np.zeros((1, 3), np.float32), (200, 0, 200), point_size=0.45,
+            f"{name}/goal", np.zeros((1, 3), np.float32), NAV_GOAL_RGB, point_size=0.45,
             visible=False, point_shape="diamond",
         )  # fmt: skip
         self.plan: Any = None
@@ -256,7 +266,7 @@ class Markers:
             self.plan = None
         if plan is not None and len(plan) >= 2:
             self.plan = self.scene.add_line_segments(
-                f"{self.name}/plan", _segments(plan, Z_PATH + 0.005), (255, 120, 0),
+                f"{self.name}/plan", _segments(plan, Z_PATH + 0.005), NAV_PLAN_RGB,
                 thickness=0.05, visible=self.nav_on,
             )  # fmt: skip
 

@@ -3,6 +3,7 @@ one run its link names, live or replayed once finished; or, without a valid link
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 from typing import TYPE_CHECKING, Any, Literal
@@ -11,10 +12,17 @@ import numpy as np
 
 from frontend.layers import EST_RGB, GT_RGB, Floorplan, MapTiles, Markers, PathLayer, Robot
 from frontend.live import Delta, FinishedRun, LiveRun, RunInfo
+from frontend.panel import (
+    follow,
+    legend_html,
+    metrics_markdown,
+    run_title,
+    title_html,
+    top_down,
+)
 
 if TYPE_CHECKING:
     from frontend.viewer import ViewerApp
-    from worker.report.summary import RunSummary
 
 NEED_LINK = (
     "**No run to show.** This viewer opens a run only through the *open viewer* link on the "
@@ -50,21 +58,30 @@ class RunView:
     # --- GUI ------------------------------------------------------------------------------
     def _build_gui(self, gui: Any) -> None:
         # no run chooser: a link opens one run, and that is all this client may see
+        self.title = gui.add_html(title_html(run_title(None)))
         self._folders = [gui.add_folder("Metrics")]
         with self._folders[-1]:
             self.metrics = gui.add_markdown("Loading the run...")
-        self._folders.append(gui.add_folder("Layers"))
-        with self._folders[-1]:
-            self.toggles = {name: gui.add_checkbox(name, True) for name in LAYERS}
-        for name, box in self.toggles.items():
-            box.on_update(lambda _, n=name: self._apply_toggle(n))
-        self._folders.append(gui.add_folder("Replay"))
+        self._folders.append(gui.add_folder("Timeline"))
         with self._folders[-1]:
             self.play = gui.add_button("Play", disabled=True)
             self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="10x")
             self.slider = gui.add_slider("time [s]", 0.0, 1.0, 0.1, 0.0, disabled=True)
         self.play.on_click(lambda _: self._toggle_play())
         self.slider.on_update(lambda _: self._on_slider())
+        self._folders.append(gui.add_folder("View"))
+        with self._folders[-1]:
+            self.follow = gui.add_checkbox("follow robot", False)
+            self.top_down = gui.add_button("top-down view of the whole world")
+        self.top_down.on_click(lambda _: self._reframe())
+        self._folders.append(gui.add_folder("Layers"))
+        with self._folders[-1]:
+            self.toggles = {name: gui.add_checkbox(name, True) for name in LAYERS}
+        for name, box in self.toggles.items():
+            box.on_update(lambda _, n=name: self._apply_toggle(n))
+        self._folders.append(gui.add_folder("Legend", expand_by_default=True))
+        with self._folders[-1]:
+            gui.add_html(legend_html())
 
     def close(self) -> None:
         """Access ended while watching: the scene and the panel are emptied, a note says why."""
@@ -116,7 +133,7 @@ class RunView:
                 L["floor"] = Floorplan(sc, "/floor", floor.occ, floor.resolution, floor.origin)
                 L["floor"].node.visible = on["floorplan"]
                 if reframe:
-                    self._frame_camera(L["floor"])
+                    top_down(self.client.camera, L["floor"].centre, L["floor"].size)
             L["map"] = MapTiles(sc, "/slam", on["SLAM map"])
             L["map"].floor, L["map"].floor_on = L["floor"], on["floorplan"]
             L["gt"] = PathLayer(sc, "/gt", GT_RGB, 0.08, on["ground truth"])
@@ -126,6 +143,7 @@ class RunView:
             L["markers"] = Markers(sc, "/nav", on["scan"], on["goal & plan"])
             self._layers = L
             self._sync_replay_gui()
+            self.title.content = title_html(run_title(self.info))
             self.metrics.content = metrics_markdown(self.info, {}, None)
 
     def _clear(self) -> None:
@@ -145,14 +163,13 @@ class RunView:
                 m.plan.remove()
         self._layers = {}
 
-    def _frame_camera(self, floor: Floorplan) -> None:
-        cx, cy = floor.centre
-        span = max(floor.size) * 0.5
-        height = span / math.tan(math.radians(35)) + 1.0
-        cx += 0.2 * span  # the plan sits left of centre, clear of the control panel
-        cam = self.client.camera
-        cam.position = (cx, cy - 0.05 * height, height)
-        cam.look_at = (cx, cy, 0.0)
+    def _reframe(self) -> None:
+        """The top-down view of the whole floorplan (follow-robot is switched off)."""
+        with self.lock:
+            floor = self._layers.get("floor")
+            if floor is not None:
+                self.follow.value = False
+                top_down(self.client.camera, floor.centre, floor.size)
 
     def show_live(self, live: LiveRun) -> None:
         """Start showing a running run from what has arrived so far."""
@@ -192,7 +209,18 @@ class RunView:
         if "pose_gt" in p:
             L["robot_gt"].pose(*p["pose_gt"])
             L["robot_est"].pose(*p["pose_est"])
+            self._follow(p["pose_gt"])
+        if p.get("t") is not None:  # the timeline's live edge
+            t = round(float(p["t"]), 1)
+            self.slider.max = max(t, 0.1)
+            self.slider.value = t
         self.metrics.content = metrics_markdown(self.info, p, None)
+
+    def _follow(self, pose) -> None:
+        if self.follow.value:
+            # until the browser has told its camera, there is none to move: the next pose will
+            with contextlib.suppress(AssertionError, ValueError):
+                follow(self.client.camera, float(pose[0]), float(pose[1]))
 
     # --- replay ---------------------------------------------------------------------------
     def show_finished(self, fin: FinishedRun) -> None:
@@ -217,10 +245,16 @@ class RunView:
                 self.slider.value = end  # renders (the slider's callback)
 
     def _sync_replay_gui(self) -> None:
+        """One timeline: it follows the simulated time while the run is live (the live edge,
+        not draggable: the past of a live run is not kept here), and plays and seeks once it
+        is done."""
         replay = self.mode == "replay"
         self.play.disabled = not replay
         self.slider.disabled = not replay
-        self.play.label = "Pause" if self.playing else "Play"
+        if self.mode == "live":
+            self.play.label = "Live (replay once done)"
+        else:
+            self.play.label = "Pause" if self.playing else "Play"
 
     def _toggle_play(self) -> None:
         with self.lock:
@@ -265,7 +299,9 @@ class RunView:
         self.shown_i = i
         L["robot_gt"].pose(*fin.gt[i])
         L["robot_est"].pose(*fin.est[i])
-        p = {"t": float(fin.t[i]), "coverage": fin.summary.coverage if fin.summary else None}
+        self._follow(fin.gt[i])
+        p = {"t": float(fin.t[i]), "pose_gt": fin.gt[i], "pose_est": fin.est[i],
+             "final_coverage": fin.summary.coverage if fin.summary else None}  # fmt: skip
         self.metrics.content = metrics_markdown(self.info, p, fin.summary)
 
     def describe(self) -> dict[str, Any]:
@@ -291,31 +327,3 @@ class RunView:
 def refuse(client: Any, note: Note) -> None:
     """A client without a valid link: a note on its panel, and nothing of any run."""
     client.gui.add_markdown(NOTES[note])
-
-
-def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: RunSummary | None) -> str:
-    """The metrics panel: run, simulated time, coverage, real-time factor, B errors when done."""
-    lines = []
-    if info is not None:
-        lines.append(f"**Run #{info.id}** · {info.world} · seed {info.seed} · {info.slam}")
-    t, cov = p.get("t"), p.get("coverage")
-    row = []
-    if t is not None:
-        row.append(f"sim time **{t:.1f} s**")
-    if cov is not None:
-        row.append(f"coverage **{100 * cov:.0f} %**")
-    if p.get("rtf"):
-        row.append(f"RTF **{p['rtf']:.1f}x**")
-    if p.get("status"):
-        row.append(f"{p['status']}, {p.get('goals_reached', 0)} goals")
-    lines.append(" · ".join(row))
-    if summary:
-        lines.append(f"outcome **{summary.outcome}** ({summary.stop})")
-        b = summary.relation("B")
-        if b is not None:
-            tr, rot = b.translation, b.rotation
-            lines.append(
-                f"B error: trans **{tr.mean:.3f} ± {tr.std:.3f} m**, "
-                f"rot **{rot.mean:.4f} ± {rot.std:.4f} rad** ({tr.n} relations)"
-            )
-    return "\n\n".join(lines)

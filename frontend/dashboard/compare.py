@@ -13,6 +13,7 @@ from sqlalchemy import select
 from backend.api.deps import Principal, SessionDep
 from backend.api.routes import stats as stats_api
 from backend.db.models import Run, World
+from frontend.dashboard.explore_data import DEFAULT_KINDS, outcome_kind
 from frontend.dashboard.pages import PageUser, render
 from worker.batch.paired import Sample, paired_diffs
 from worker.report.summary import RunSummary
@@ -36,10 +37,12 @@ def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLR
 
 
 def _per_algorithm(session, user: Principal) -> tuple[list[dict], list[Sample]]:
-    """Per world and algorithm: runs done, completed, mean of the runs' mean B translational
-    error [m]; and each completed run's score for the paired comparison."""
+    """Per world and algorithm: runs done, completed, and the mean of the scored runs' mean B
+    translational error; and each scored run's score for the paired comparison. A run counts
+    with its scores when it completed, gave up frontiers (incomplete) or hit its time limit
+    (the explorer's default; it can leave any kind out): outcome and scores are separate."""
     stmt = (
-        select(World.name, Run.slam, Run.seed, Run.outcome, Run.b_mean_t)
+        select(World.name, Run.slam, Run.seed, Run.outcome, Run.reason, Run.b_mean_t)
         .join(World, Run.world_id == World.id)
         .where(Run.status == RunStatus.DONE)
     )
@@ -47,18 +50,23 @@ def _per_algorithm(session, user: Principal) -> tuple[list[dict], list[Sample]]:
         stmt = stmt.where(Run.owner_id == user.id)
     cells: dict[tuple[str, str], dict] = {}
     samples: list[Sample] = []
-    for name, slam, seed, outcome, b_t in session.execute(stmt):
-        cell = cells.setdefault((name, slam), {"world": name, "slam": slam, "runs": 0, "b": []})
+    for name, slam, seed, outcome, reason, b_t in session.execute(stmt):
+        cell = cells.setdefault((name, slam), {"world": name, "slam": slam, "runs": 0, "b": [],
+                                               "completed": 0, "time_limit": 0})  # fmt: skip
         cell["runs"] += 1
-        if outcome == RunOutcome.COMPLETED and b_t is not None:
+        kind = outcome_kind(outcome, reason)
+        cell["completed"] += kind == "completed"
+        if kind in DEFAULT_KINDS and b_t is not None:
             cell["b"].append(b_t)
+            cell["time_limit"] += kind == "time limit"
             samples.append(Sample(name, slam, seed, b_t))
     rows = []
     for key in sorted(cells):
         c = cells[key]
         mean = sum(c["b"]) / len(c["b"]) if c["b"] else None
         rows.append({"world": c["world"], "slam": c["slam"], "runs": c["runs"],
-                     "completed": len(c["b"]), "b_mean_t": mean})  # fmt: skip
+                     "completed": c["completed"], "scored": len(c["b"]),
+                     "time_limited": c["time_limit"], "b_mean_t": mean})  # fmt: skip
     return rows, samples
 
 

@@ -32,7 +32,9 @@ from backend.api.routes import worlds as worlds_api
 from backend.db.models import Job, Run, World
 from backend.schemas import JobIn, WorldOut
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
+from frontend.dashboard.explore_data import group, job_result, load_runs, settings_used
 from worker.errors import InputError
+from worker.explore.params import ExploreParams
 from worker.report.summary import RunSummary
 from worker.slam import registry
 from worker.status import ACTIVE_JOB, FINISHED_RUN, RunStatus, WorldStatus
@@ -44,6 +46,7 @@ templates.env.globals.update(
     RunStatus=RunStatus, WorldStatus=WorldStatus, FINISHED_RUN=FINISHED_RUN
 )
 templates.env.globals["slam_algorithms"] = registry.entries  # the job form's choices
+templates.env.globals["job_result"] = job_result  # the jobs list's result column
 router = APIRouter(include_in_schema=False)
 # Where the API key lived in the cookie before sessions: no longer read, deleted on sign-in.
 OLD_KEY_COOKIE = "mapqual_key"
@@ -174,6 +177,7 @@ def _jobs_page(request, session, user, settings, error: str | None = None, statu
         request, "jobs.html", status_code, user=user, jobs=page.items, total=page.total,
         worlds=worlds, world_names=names, refresh=refresh, error=error,
         external_programs=sorted(settings.external_slam),  # the form's external:NAME choices
+        default_time_limit=ExploreParams().time_limit,  # what an empty field means
     )  # fmt: skip
 
 
@@ -233,9 +237,11 @@ def job_page(
         token = issue(key, r.id, user.id, settings.viewer_token_ttl_s)
         runs.append(_run_row(r, run_link(settings.viewer_url, r.id, token)))
     _add_estimates(session, runs)
+    done = load_runs(session, user, job_id)
     return render(
         request, "job.html", user=user, job=job, world=session.get(World, job.world_id),
-        runs=runs, refresh=job.status in ACTIVE_JOB,
+        runs=runs, refresh=job.status in ACTIVE_JOB, groups=group(done, ("slam", "setting")),
+        used=settings_used(job.runs[0].params if job.runs else None), n_done=len(done),
     )  # fmt: skip
 
 

@@ -197,8 +197,9 @@ def test_a_valid_link_shows_that_run_only(env):
         assert d["gt_points"] == 100 and d["map_tiles"] > 0
         assert any(n.startswith("/gt") for n in _run_nodes(app, cid))
         assert f"Run #{run_a}" in view.metrics.content
-        # a panel without a run chooser: 7 layer boxes, Play, speed and the time slider
-        assert _gui_inputs(app, cid) == 10
+        # a panel without a run chooser: 7 layer boxes, Play, speed, the time slider, follow
+        # robot and the top-down view
+        assert _gui_inputs(app, cid) == 12
 
 
 def test_a_user_revoked_while_watching_loses_the_view(env):
