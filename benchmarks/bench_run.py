@@ -22,7 +22,9 @@ driver (benchmarks/run_once.py) and prints each round's real-time factors and th
 then the median. --this-threads defaults to the cores `mapqual run` gives a lone run
 (worker.slam.threads), --other-threads to the other tree's default; give both 1 for the
 one-core comparison. --this-slam '{"coarse_skip": 0}' runs this tree with those SLAM settings
-(against itself: a setting's own speed-up, side by side).
+(against itself: a setting's own speed-up, side by side). --this-realtime SPEED runs this
+tree's runs under real-time SLAM emulation (issue 51: updates take simulated time, scans
+meanwhile dropped).
 """
 
 from __future__ import annotations
@@ -59,6 +61,13 @@ def main() -> None:
         type=json.loads,
         default=None,
         help="--against: SLAM settings of this tree's runs, JSON (e.g. '{\"coarse_skip\": 1}')",
+    )
+    ap.add_argument(
+        "--this-realtime",
+        type=float,
+        default=None,
+        metavar="SPEED",
+        help="--against: this tree's runs under real-time SLAM emulation at SPEED",
     )
     args = ap.parse_args()
     if args.this_slam is not None and not isinstance(args.this_slam, dict):
@@ -138,6 +147,8 @@ def _side_by_side(args: argparse.Namespace) -> None:
     print(f"side by side: this = {ROOT}, other = {other}; {args.slam}, seed {args.seed}, {world}")
     if args.this_slam:
         print(f"this tree's runs with slam settings {json.dumps(args.this_slam)}")
+    if args.this_realtime is not None:
+        print(f"this tree's runs under real-time SLAM emulation, speed {args.this_realtime}")
     ratios = []
     for r in range(args.rounds):
         order = list(trees) if r % 2 == 0 else list(reversed(trees))
@@ -154,6 +165,8 @@ def _side_by_side(args: argparse.Namespace) -> None:
                 cmd += ["--threads", str(threads)]
             if slam:
                 cmd += ["--slam-params", json.dumps(slam)]
+            if name == "this" and args.this_realtime is not None:
+                cmd += ["--realtime", str(args.this_realtime)]
             out = subprocess.run(cmd, capture_output=True, text=True, cwd=tree)
             if out.returncode != 0:
                 sys.exit(f"{name} ({tree}) failed ({out.returncode}):\n{out.stderr[-2000:]}")

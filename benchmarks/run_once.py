@@ -29,6 +29,7 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
     ap.add_argument("--threads", type=int, default=None, help="slam.threads")
     ap.add_argument("--slam-params", type=json.loads, default={}, help="more slam settings, JSON")
+    ap.add_argument("--realtime", type=float, default=None, help="real-time SLAM at this speed")
     args = ap.parse_args()
     sys.path.insert(0, str(args.tree.resolve()))
     from worker.pipeline import run_one
@@ -49,6 +50,8 @@ def main() -> None:
     run_one(world, RunParams.from_json({**data, "explore": {"time_limit": 5.0}}), args.seed)
     if args.time_limit is not None:
         data["explore"] = {"time_limit": args.time_limit}
+    if args.realtime is not None:  # issue 51's option (absent from older trees)
+        data["realtime"] = {"speed": args.realtime}
     params = RunParams.from_json(data)
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_one(world, params, args.seed)

@@ -161,7 +161,8 @@ def run_one(
     wall0 = time.perf_counter()
     rng_sim, rng_slam, rng_eval = np.random.default_rng(seed).spawn(3)
     entry = registry.get(params.algorithm)
-    slam = _TimedSlam(entry.factory(params.sim.laser, params.slam, rng_slam))
+    inner, rt = _make_slam(entry, params, rng_slam)
+    slam = _TimedSlam(inner)
     callback = None if on_progress is None else _progress_relay(on_progress, params, wall0)
     with _open_log(sim_log) as stream, closed_after(slam):
         writer = None
@@ -176,7 +177,8 @@ def run_one(
     stage_wall = {"simulation_wall_s": sim.wall_s, "slam_wall_s": slam.wall_s}
     # the SLAM's particle maps and the simulator are done with: their memory is let go before
     # the evaluation's map-sized work (the map score), not after it (issue 21: a run < 1 GB)
-    del sim, slam
+    rt_doc = None if rt is None else rt.stats.summary(rt.params.speed, rt.params.fixed_latency_s)
+    del sim, slam, inner, rt
     wall_explore = time.perf_counter() - wall0
     gt = Trajectory(exploration.t, exploration.pose_gt)
     est = Trajectory(exploration.t, exploration.pose_est)
@@ -190,9 +192,23 @@ def run_one(
     if map_score is not None:  # an additive section (issue 17), after the rest
         doc = {**summary.to_dict(), "map_score": map_score.summary()}
         summary = RunSummary.model_validate(doc)
+    if rt_doc is not None:  # another (issue 51): what the real-time SLAM kept up with
+        summary = RunSummary.model_validate({**summary.to_dict(), "realtime": rt_doc})
     return RunResult(
         world, seed, params, exploration, gt, est, relations, errors, ate, summary, map_score
     )
+
+
+def _make_slam(entry: registry.SlamEntry, params: RunParams, rng: np.random.Generator):
+    """(the run's SLAM, its real-time wrapper or None): under `params.realtime` the algorithm
+    runs inside a RealtimeSlam (updates take simulated time, scans meanwhile dropped)."""
+    inner = entry.factory(params.sim.laser, params.slam, rng)
+    if params.realtime is None:
+        return inner, None
+    from worker.slam.realtime import RealtimeSlam
+
+    rt = RealtimeSlam(inner, params.realtime, params.sim.laser.n_beams)
+    return rt, rt
 
 
 def _map_score(world: World, params: RunParams, ex: ExplorationResult) -> MapScore | None:

@@ -19,6 +19,7 @@ from worker.params import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
 from worker.slam import registry
 from worker.slam.params import SlamParams, with_defaults_for
+from worker.slam.realtime_params import MODELLED, RealtimeParams
 
 # A registered SLAM algorithm's name: checked against the registry when it is read, listed as
 # an enum in the JSON Schema.
@@ -50,12 +51,23 @@ class RunParams:
     slam: SlamParams = field(default_factory=SlamParams)
     explore: ExploreParams = field(default_factory=ExploreParams)
     eval: EvalParams = field(default_factory=EvalParams)
+    # None: every SLAM update is instant (the default); set: it takes simulated time and
+    # scans that arrive meanwhile are dropped (worker.slam.realtime)
+    realtime: RealtimeParams | None = None
 
     def __post_init__(self) -> None:
         if not self.sim.footprint > 0:  # SimParams refuses it too; RunParams relies on it
             raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
         if self.explore.footprint_half_m != 0.5 * self.sim.footprint:
             object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
+        rt = self.realtime
+        if rt is not None and rt.fixed_latency_s is None and self.algorithm not in MODELLED:
+            raise InputError(
+                f"realtime: no cost model for SLAM algorithm {self.algorithm!r} (models: "
+                f"{', '.join(MODELLED)}); give realtime.fixed_latency_s instead"
+            )
+        if rt is not None and self.algorithm in ("oracle", "external"):
+            raise InputError(f"realtime does not apply to SLAM algorithm {self.algorithm!r}")
         # a graph run stores the graph SLAM settings it ran with (defaults filled in)
         object.__setattr__(self, "slam", with_defaults_for(self.slam, self.algorithm))
 

@@ -31,6 +31,7 @@ def build_params(
     slam: str | None,
     laser_noise: float | None,
     time_limit: float | None,
+    realtime: float | None = None,
 ):
     """RunParams from SPEC defaults, then the --params file, then the options."""
     from worker.params import load_params_file
@@ -44,6 +45,8 @@ def build_params(
         over["sim"] = {"laser_noise_sigma": laser_noise}
     if time_limit is not None:
         over["explore"] = {"time_limit": time_limit}
+    if realtime is not None:
+        over["realtime"] = {"speed": realtime}
     return RunParams.from_json(_merge(data, over))
 
 
@@ -108,6 +111,15 @@ OutOpt = Annotated[
     Path | None, typer.Option("-o", "--out", help="Report folder (default runs/<id>/).")
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")]
+RealtimeOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--realtime",
+        metavar="SPEED",
+        help="Emulate real-time SLAM: each update takes simulated time (cost model / SPEED, "
+        "the robot computer's speed against the calibration machine); scans meanwhile dropped.",
+    ),
+]
 
 
 @app.command("run")
@@ -122,6 +134,7 @@ def run(
     out: OutOpt = None,
     as_json: JsonOpt = False,
     allow_outside: AllowOutsideOpt = False,
+    realtime: RealtimeOpt = None,
 ) -> None:
     """Simulate, explore with SLAM, evaluate, and store one run of WORLD. The run's scan
     matcher uses every core this process may run on (MAPQUAL_SLAM_THREADS=1 keeps it to one;
@@ -133,7 +146,7 @@ def run(
 
     if slam is not None and slam not in registry.names():
         raise InputError(f"--slam must be one of {', '.join(registry.names())}, not {slam!r}")
-    params = build_params(params_file, slam, laser_noise, time_limit)
+    params = build_params(params_file, slam, laser_noise, time_limit, realtime)
     world = load_world(world_path, resolution, allow_outside=allow_outside)
     run_id, shown, summary = _execute(world, world_path.suffix, params, seed, out, as_json)
     if as_json:
@@ -215,4 +228,11 @@ def _print_summary(s: RunSummary, run_id: int, report_dir: str) -> None:
         f"path {s.path_length_m:.0f} m; {t.sim_time_s:.0f} s simulated in "
         f"{t.wall_time_s:.1f} s (x{t.real_time_factor:.0f} real time)"
     )
+    rt = s.realtime
+    if rt is not None:
+        console.print(
+            f"real-time SLAM (speed {rt.speed:g}): {rt.updates} updates, {rt.scans_dropped} of "
+            f"{rt.scans} scans dropped, latency mean {rt.latency_mean_s:.3f} s, max "
+            f"{rt.latency_max_s:.3f} s"
+        )
     console.print(f"report: {report_dir}")

@@ -165,6 +165,8 @@ def test_rerun_makes_a_new_run_and_runs_show_reads_it(finished_run):
         (["run", "rooms.png"], "resolution"),
         (["run", "rooms.png", "--resolution", "0.05", "--slam", "ekf"], "--slam"),
         (["run", "rooms.png", "--resolution", "0.05", "--params", "bad.yaml"], "unknown parameter"),
+        (["run", "rooms.png", "--resolution", "0.05", "--realtime", "0"], "realtime.speed"),
+        (["run", "rooms.png", "--resolution", "0.05", "--slam", "mrpt_icp"], "--slam"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path, args, needle):

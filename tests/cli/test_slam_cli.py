@@ -135,3 +135,14 @@ def test_classic_flaser_log_with_180_beams(run, tmp_path):
     assert np.abs(est.poses[:, 0] - x).max() < 0.05
     img = np.array(Image.open(out / "map.pgm"))
     assert (img == 0).sum() > 100  # the room's walls are mapped
+
+
+def test_third_party_algorithm_without_its_package_is_one_line_exit_2(
+    run, sim_log, tmp_path, monkeypatch
+):
+    # MRPT's programs looked for on a PATH that has none of them: refused before any work
+    monkeypatch.setenv("PATH", str(tmp_path))
+    code, _, err = run("slam", sim_log, "-o", tmp_path / "x", "--algorithm", "mrpt_rbpf")
+    assert code == 2
+    assert "apt-get install mrpt-apps" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x" / "trajectory.tum").exists()

@@ -104,7 +104,9 @@ def test_stored_params_of_the_old_code_round_trip_byte_for_byte():
     # and as summary.json holds them, one level down
     assert '"params": ' + json.dumps(kept, indent=2).replace("\n", "\n  ") in text
     defaults = RunParams().to_json()
-    assert list(defaults) == ["algorithm", "sim", "slam", "explore", "eval"]
+    # issue 51's real-time emulation: a section of its own, null (instant SLAM) by default
+    assert list(defaults) == ["algorithm", "sim", "slam", "explore", "eval", "realtime"]
+    assert defaults["realtime"] is None
     assert list(defaults["explore"])[:2] == ["footprint_half_m", "footprint_padding"]
     assert json.dumps(defaults["sim"]["laser"]) == (
         '{"n_beams": 541, "angle_min": -2.356194490192345, '

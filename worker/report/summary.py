@@ -166,6 +166,18 @@ class Versions(_Part):
     numba: str
 
 
+class RealtimeSummary(_Part):
+    """A run under real-time emulation (worker.slam.realtime): what the SLAM kept up with."""
+
+    speed: float  # the robot computer's speed against the cost model's calibration machine
+    fixed_latency_s: float | None  # [s] every update's latency, when fixed instead of modelled
+    scans: int  # scans the laser gave
+    updates: int  # SLAM updates made
+    scans_dropped: int  # scans that arrived while the SLAM was busy
+    latency_mean_s: float  # [s] an update's compute time, scan to published pose and map
+    latency_max_s: float  # [s]
+
+
 class RunSummary(_Part):
     """summary.json: outcome and coverage at the top level, each relation kind's errors, ATE,
     timings, the run's parameters and the versions of the code."""
@@ -194,6 +206,8 @@ class RunSummary(_Part):
     # absent from summaries stored before 2026-12-02 (issue 17): such a summary is shown (API,
     # files, database) as it was stored, without the key rather than with a null
     map_score: MapScoreSummary | None = Field(default=None, exclude_if=lambda v: v is None)
+    # only under real-time emulation (issue 51); absent otherwise, as from older summaries
+    realtime: RealtimeSummary | None = Field(default=None, exclude_if=lambda v: v is None)
 
     @classmethod
     def load(cls, data: Mapping[str, Any] | None) -> RunSummary | None:

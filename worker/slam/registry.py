@@ -41,6 +41,9 @@ class SlamEntry:
     # whether the run maps and localises with the ground-truth pose (the exploration then
     # ignores the estimate); an oracle has no log to replay, so `mapqual slam` leaves it out
     ground_truth: bool = False
+    # an offline algorithm (a third-party program run once over the whole log): `mapqual
+    # slam` replays a log with it, a run (closed loop) cannot drive on it
+    replay_only: bool = False
 
 
 _REGISTRY: dict[str, SlamEntry] = {}
@@ -53,13 +56,14 @@ def register(
     kind: SlamKind = "slam",
     *,
     ground_truth: bool = False,
+    replay_only: bool = False,
 ) -> SlamEntry:
     """Add an algorithm under `name` (unique); returns its entry."""
     if not name or not name.isidentifier():
         raise ValueError(f"SLAM algorithm name {name!r} must be a Python identifier")
     if name in _REGISTRY:
         raise ValueError(f"SLAM algorithm {name!r} is already registered")
-    entry = SlamEntry(name, factory, description, kind, ground_truth)
+    entry = SlamEntry(name, factory, description, kind, ground_truth, replay_only)
     _REGISTRY[name] = entry
     return entry
 
@@ -70,8 +74,11 @@ def entries() -> tuple[SlamEntry, ...]:
 
 
 def names(*, offline: bool = False) -> tuple[str, ...]:
-    """Registered names; `offline`: only those that can replay a recorded log (no oracle)."""
-    return tuple(e.name for e in _REGISTRY.values() if not (offline and e.ground_truth))
+    """Registered names a run can use; `offline`: those that can replay a recorded log
+    instead (no oracle; the replay-only third-party programs included)."""
+    if offline:
+        return tuple(e.name for e in _REGISTRY.values() if not e.ground_truth)
+    return tuple(e.name for e in _REGISTRY.values() if not e.replay_only)
 
 
 def get(name: str) -> SlamEntry:
@@ -84,7 +91,10 @@ def get(name: str) -> SlamEntry:
 
 def check_name(name: str) -> str:
     """`name` if it is registered (for validators: raises ValueError, one line, otherwise)."""
-    if name not in _REGISTRY:
+    entry = _REGISTRY.get(name)
+    if entry is not None and entry.replay_only:
+        raise ValueError(f"{name!r} replays recorded logs only (mapqual slam LOG), not a run")
+    if entry is None:
         choices = ", ".join(map(repr, names()))
         raise ValueError(f"must be one of {choices}, not {name!r}")
     return name
@@ -129,6 +139,23 @@ def _external(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator
 
 
 register("external", _external, "an external SLAM program (slam.external)", "slam")
+
+
+def _mrpt_rbpf(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.mrpt.slam import rbpf_factory
+
+    return rbpf_factory(laser, params, rng)
+
+
+def _mrpt_icp(laser: LaserGeometry, params: SlamParams, rng: np.random.Generator) -> SlamAlgorithm:
+    from worker.slam.mrpt.slam import icp_factory
+
+    return icp_factory(laser, params, rng)
+
+
+# third-party programs (Debian's mrpt-apps), offline: available when installed
+register("mrpt_rbpf", _mrpt_rbpf, "MRPT rbpf-slam (third party, offline)", replay_only=True)
+register("mrpt_icp", _mrpt_icp, "MRPT icp-slam (third party, offline)", replay_only=True)
 EXTERNAL_PREFIX = "external:"  # an external program's label: external:NAME
 
 

@@ -83,6 +83,8 @@ def run_slam(
         # the map of that trajectory where the algorithm draws one (graph SLAM's final
         # optimisation), else its current map
         grid = getattr(slam, "final_occupancy", slam.occupancy)()
+        # an offline program counts its own (it ran once, over the whole log, at the end)
+        updates = max(updates, int(getattr(slam, "updates", 0)))
     wall = time.perf_counter() - wall0
     return SlamRunResult(
         algorithm=algorithm,

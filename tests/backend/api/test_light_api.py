@@ -97,7 +97,7 @@ def test_openapi_job_body_has_the_run_params_schema_and_the_registry_enum(api):
     )
     params = job_in["params"]
     assert params["additionalProperties"] is False
-    assert set(params["properties"]) == {"algorithm", "sim", "slam", "explore", "eval"}
+    assert set(params["properties"]) == {"algorithm", "sim", "slam", "explore", "eval", "realtime"}
     particles = params["properties"]["slam"]["properties"]["particles"]
     assert particles == {"default": 40, "title": "Particles", "type": "integer"}
     # the derived half footprint is stored with a run but is no parameter of its own

@@ -18,7 +18,12 @@ def scratch_registry(monkeypatch):
 
 def test_the_built_in_algorithms_and_their_kinds():
     assert registry.names() == ("rbpf", "odometry", "oracle", "graph", "external")
-    assert registry.names(offline=True) == ("rbpf", "odometry", "graph", "external")
+    # MRPT's programs (issue 51) replay logs only: `mapqual slam` offers them, a run does not
+    assert registry.names(offline=True) == (
+        "rbpf", "odometry", "graph", "external", "mrpt_rbpf", "mrpt_icp",
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="replays recorded logs only"):
+        registry.check_name("mrpt_rbpf")
     kinds = {e.name: (e.kind, e.ground_truth) for e in registry.entries()}
     assert kinds == {
         "rbpf": ("slam", False),
@@ -26,6 +31,8 @@ def test_the_built_in_algorithms_and_their_kinds():
         "oracle": ("oracle", True),
         "graph": ("slam", False),
         "external": ("slam", False),
+        "mrpt_rbpf": ("slam", False),
+        "mrpt_icp": ("slam", False),
     }
     with pytest.raises(InputError, match="unknown SLAM algorithm 'ekf'; choose one of: rbpf"):
         registry.get("ekf")

@@ -1,0 +1,1 @@
+"""MRPT (mrpt-apps) as offline SLAM algorithms: the rawlog writer and the programs' runner."""
