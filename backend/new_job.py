@@ -21,6 +21,7 @@ class NewRun:
 
     id: int
     seed: int
+    slam: str | None = None
     status: RunStatus = RunStatus.QUEUED
     outcome: str | None = None
     reason: str | None = None
@@ -61,9 +62,12 @@ def insert_job(
     seeds: Sequence[int],
     idempotency_key: str | None = None,
     broker_epoch: str | None = None,
+    variants: Sequence[tuple[str, dict[str, Any]]] | None = None,
 ) -> NewJob:
     """A queued job with one queued run per seed, inserted by two Core statements (the job,
-    then all its runs in one INSERT ... RETURNING); the caller checked `idempotency_key`."""
+    then all its runs in one INSERT ... RETURNING); the caller checked `idempotency_key`.
+    `variants`: (algorithm label, params) pairs, each run on every seed (a job comparing
+    algorithms); without, `slam` and `params` alone."""
     if not seeds:
         raise ValueError("a job needs at least one seed")
     conn, now = session.connection(), utcnow()
@@ -75,12 +79,14 @@ def insert_job(
     ).scalar_one()  # fmt: skip
     rows = [
         {"owner_id": owner_id, "job_id": job_id, "world_id": world_id, "seed": int(seed),
-         "slam": slam, "params": params, "broker_epoch": broker_epoch, "created_at": now}
+         "slam": v_slam, "params": v_params, "broker_epoch": broker_epoch, "created_at": now}
+        for v_slam, v_params in (variants or [(slam, params)])
         for seed in seeds
     ]  # fmt: skip
     run_ids = conn.execute(_INSERT_RUNS, rows).scalars().all()
     return NewJob(
         id=job_id, owner_id=owner_id, world_id=world_id, slam=slam, params=params,
         created_at=now, updated_at=now,
-        runs=tuple(NewRun(id=i, seed=r["seed"]) for i, r in zip(run_ids, rows, strict=True)),
+        runs=tuple(NewRun(id=i, seed=r["seed"], slam=r["slam"])
+                   for i, r in zip(run_ids, rows, strict=True)),
     )  # fmt: skip

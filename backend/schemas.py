@@ -17,6 +17,7 @@ from worker.status import JobStatus, RunOutcome, RunStatus, WorldStatus
 from worker.world.datasets import BundledWorld, Dataset
 
 MAX_RUNS_PER_JOB = 1000
+MAX_ALGORITHMS_PER_JOB = 8  # a comparison of more is unreadable, and a job's label must fit
 # Ids and seeds are stored as the database's 32-bit integers (PostgreSQL `integer`): larger
 # values cannot name a row or be stored, so the schema bounds them (422) instead of letting
 # the database fail the query (500).
@@ -160,6 +161,11 @@ class JobIn(BaseModel):
         default=None, min_length=1, max_length=MAX_RUNS_PER_JOB
     )
     slam: SlamName | None = None
+    algorithms: list[SlamName] | None = Field(
+        default=None, min_length=2, max_length=MAX_ALGORITHMS_PER_JOB,
+        description="Several SLAM algorithms, each run on every seed with the same overrides: "
+        "a job that compares them (give `slam` or `algorithms`, not both).",
+    )  # fmt: skip
     params: RunParamsOverrides = Field(
         default_factory=dict,
         description="Overrides by section: sim, slam, explore, eval (see RunParams); keys left "
@@ -172,7 +178,18 @@ class JobIn(BaseModel):
             raise ValueError("give exactly one of `runs` (a count) and `seeds` (a list)")
         if self.seeds is not None and len(set(self.seeds)) != len(self.seeds):
             raise ValueError("`seeds` has duplicates")
+        if self.algorithms is not None:
+            if self.slam is not None:
+                raise ValueError("give `slam` (one algorithm) or `algorithms`, not both")
+            if len(set(self.algorithms)) != len(self.algorithms):
+                raise ValueError("`algorithms` has duplicates")
+            if len(self.algorithms) * len(self.seed_list()) > MAX_RUNS_PER_JOB:
+                raise ValueError(f"a job has at most {MAX_RUNS_PER_JOB} runs (algorithms x seeds)")
         return self
+
+    def algorithm_list(self) -> list[str | None]:
+        """The algorithms the job runs: `algorithms`, or `slam` (None: the overrides' own)."""
+        return list(self.algorithms) if self.algorithms is not None else [self.slam]
 
     def seed_list(self) -> list[int]:
         return list(self.seeds) if self.seeds is not None else list(range(1, self.runs + 1))
@@ -183,6 +200,7 @@ class RunBrief(BaseModel):
 
     id: int
     seed: int
+    slam: str | None = Field(default=None, description="its algorithm (a job may compare several)")
     status: RunStatus
     outcome: RunOutcome | None
     reason: str | None
@@ -196,6 +214,7 @@ class RunBrief(BaseModel):
         return cls(
             id=r.id,
             seed=r.seed,
+            slam=getattr(r, "slam", None),
             status=r.status,
             outcome=r.outcome,
             reason=r.reason,
@@ -260,7 +279,7 @@ class RunOut(RunBrief):
 
     @classmethod
     def of(cls, r: Run) -> RunOut:
-        brief = RunBrief.of(r).model_dump()
+        brief = RunBrief.of(r).model_dump(exclude={"slam"})
         return cls(
             **brief,
             job_id=r.job_id,

@@ -104,7 +104,7 @@ def explore_page(request: Request, session: SessionDep, user: PageUser, world: N
     )  # fmt: skip
 
 
-RUNS_SHOWN = 1000  # rows of the runs table in the page (the CSV has all)
+RUNS_SHOWN = 500  # rows of the runs table in the page (sorted by id; the CSV has all)
 
 
 @router.get("/explore/runs.csv")

@@ -9,6 +9,7 @@ of outcome out.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
-from sqlalchemy import select
+from sqlalchemy import Text, cast, select
 
 from backend.api.deps import Principal
 from backend.db.models import Run, World
@@ -105,10 +106,37 @@ class RunRow:
         return tuple(str(getattr(self, k)) for k in by)
 
 
-def _mean_of(metrics: dict | None, kind: str, axis: str = "translation") -> float | None:
-    rel = ((metrics or {}).get("relations") or {}).get(kind) or {}
-    v = (rel.get(axis) or {}).get("mean")
-    return float(v) if v is not None else None
+def _mean_of(kind: str):
+    """The SQL of a run's mean translational error of relation `kind` (from its metrics JSON,
+    read by the database: parsing every run's JSON in Python was most of the page's time)."""
+    return Run.metrics["relations"][kind]["translation"]["mean"].as_float()
+
+
+@lru_cache(maxsize=4096)
+def _setting_of(params_text: str | None) -> tuple[dict[str, Any], str]:
+    """(changed parameters, setting label) of a run's stored parameters as JSON text: runs of
+    one job share their text, so each is parsed and compared with the defaults once."""
+    changed = changed_params(json.loads(params_text) if params_text else None)
+    return changed, setting_label(changed)
+
+
+# run id -> (A, SM) mean errors: a done run's scores never change, and reading them out of
+# the metrics JSON is most of the database's work for the page (json, not jsonb, is parsed per
+# row); bounded, so a server's memory does not grow with the database
+_AUX: dict[int, tuple[float | None, float | None]] = {}
+AUX_MAX = 200_000
+
+
+def _aux_scores(session, ids: list[int]) -> dict[int, tuple[float | None, float | None]]:
+    missing = [i for i in ids if i not in _AUX]
+    for k in range(0, len(missing), 5000):
+        chunk = missing[k : k + 5000]
+        stmt = select(Run.id, _mean_of("A"), _mean_of("SM")).where(Run.id.in_(chunk))
+        if len(_AUX) + len(chunk) > AUX_MAX:
+            _AUX.clear()
+        for rid, a, sm in session.execute(stmt):
+            _AUX[rid] = (a, sm)
+    return {i: _AUX.get(i, (None, None)) for i in ids}
 
 
 def load_runs(session, user: Principal, job_id: int | None = None) -> list[RunRow]:
@@ -116,7 +144,7 @@ def load_runs(session, user: Principal, job_id: int | None = None) -> list[RunRo
     with `job_id`."""
     stmt = (
         select(Run.id, Run.job_id, World.name, Run.slam, Run.seed, Run.outcome, Run.reason,
-               Run.coverage, Run.b_mean_t, Run.b_mean_r, Run.metrics, Run.params)
+               Run.coverage, Run.b_mean_t, Run.b_mean_r, cast(Run.params, Text))
         .join(World, World.id == Run.world_id)
         .where(Run.status == RunStatus.DONE)
         .order_by(Run.id)
@@ -125,14 +153,14 @@ def load_runs(session, user: Principal, job_id: int | None = None) -> list[RunRo
         stmt = stmt.where(Run.owner_id == user.id)
     if job_id is not None:
         stmt = stmt.where(Run.job_id == job_id)
+    found = session.execute(stmt).all()
+    aux = _aux_scores(session, [r[0] for r in found])
     rows = []
-    for row in session.execute(stmt):
-        rid, job, world, slam, seed, outcome, reason, cov, bt, br, metrics, params = row
-        changed = changed_params(params)
+    for rid, job, world, slam, seed, outcome, reason, cov, bt, br, params in found:
+        changed, setting = _setting_of(params)
         rows.append(RunRow(
             rid, job, world, slam, seed, str(outcome), reason, outcome_kind(outcome, reason), cov,
-            bt, br, _mean_of(metrics, "A"), _mean_of(metrics, "SM"), changed,
-            setting_label(changed),
+            bt, br, *aux[rid], changed, setting,
         ))  # fmt: skip
     return rows
 

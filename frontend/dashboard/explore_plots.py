@@ -50,14 +50,14 @@ def scores_png(out, groups: list[Group], _session: Any = None) -> None:
         if any(data):
             ax.boxplot([d if d else [np.nan] for d in data], positions=range(len(groups)),
                        widths=0.5, showfliers=False)  # fmt: skip
-        for i, g in enumerate(groups):
-            for kind, (marker, colour) in MARKERS.items():
-                ys = [getattr(r, score) for r in g.runs
-                      if r.kind == kind and getattr(r, score) is not None]  # fmt: skip
-                if ys:
-                    xs = i + rng.uniform(-0.15, 0.15, len(ys))
-                    ax.scatter(xs, ys, marker=marker, c=colour, s=30, alpha=0.8, label=kind,
-                               zorder=3)  # fmt: skip
+        for kind, (marker, colour) in MARKERS.items():  # one call per kind: fast with many
+            pts = [(i, getattr(r, score)) for i, g in enumerate(groups) for r in g.runs
+                   if r.kind == kind and getattr(r, score) is not None]  # fmt: skip
+            if pts:
+                xs, ys = np.array(pts, dtype=float).T
+                xs += rng.uniform(-0.15, 0.15, len(xs))
+                ax.scatter(xs, ys, marker=marker, c=colour, s=30, alpha=0.8, label=kind,
+                           zorder=3)  # fmt: skip
         ax.set_ylabel(SCORE_NAMES[score])
         ax.grid(axis="y", alpha=0.3)
         ax.set_ylim(bottom=0.0)

@@ -197,18 +197,27 @@ def submit_job_form(
     settings: SettingsDep,
     world_id: Annotated[int, Form()],
     runs: Annotated[int, Form()] = 1,
-    slam: Annotated[str, Form()] = "rbpf",
+    slam: Annotated[list[str], Form(max_length=8)] = ["rbpf"],  # noqa: B006
     time_limit: Annotated[float | None, Form()] = None,
+    seeds: Annotated[str, Form(max_length=2000)] = "",
 ) -> Response:
-    """Submit through the API's own handler; errors come back on the page."""
+    """Submit through the API's own handler; errors come back on the page. Several
+    algorithms make one job that runs each on every seed (the seeds field, else 1..runs)."""
     params: dict[str, Any] = {}
     if time_limit is not None:
         params["explore"] = {"time_limit": time_limit}
-    slam, program = registry.parse_label(slam)  # external:NAME: an administrator's program
-    if program is not None:
-        params["slam"] = {"external": {"name": program}}
     try:
-        body = JobIn(world_id=world_id, runs=runs, slam=slam, params=params)
+        names = []
+        for label in slam:
+            name, program = registry.parse_label(label)  # external:NAME: an admin's program
+            if program is not None:
+                if len(slam) > 1:
+                    raise InputError("an external program runs alone: pick it without others")
+                params["slam"] = {"external": {"name": program}}
+            names.append(name)
+        chosen = {"slam": names[0]} if len(names) == 1 else {"algorithms": names}
+        count = {"seeds": parse_seeds(seeds)} if seeds.strip() else {"runs": runs}
+        body = JobIn(world_id=world_id, params=params, **chosen, **count)
         job = jobs_api.submit(session, user, settings, body, None)
     except ValidationError as exc:
         msg = "; ".join(e["msg"] for e in exc.errors())
@@ -219,6 +228,23 @@ def submit_job_form(
         detail = str(getattr(exc, "detail", exc))
         return _jobs_page(request, session, user, settings, detail, code)
     return RedirectResponse(f"/jobs/{job.id}", status_code=303)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """ "1-5, 8 10" -> [1, 2, 3, 4, 5, 8, 10]; InputError (a 400 on the page) for anything else,
+    a range of more than 1000 seeds or a seed above 2^31 - 1."""
+    out: list[int] = []
+    for token in text.replace(",", " ").split():
+        lo, sep, hi = token.partition("-")
+        if not lo.isdigit() or (sep and not hi.isdigit()) or len(token) > 21:
+            raise InputError(f"seeds: {token[:30]!r} is not a seed or a range like 1-5")
+        a, b = int(lo), int(hi) if sep else int(lo)
+        if b < a or b - a >= 1000 or b > 2**31 - 1:
+            raise InputError(f"seeds: the range {token[:30]!r} is empty or too long")
+        out.extend(range(a, b + 1))
+        if len(out) > 1000:
+            raise InputError("seeds: at most 1000 per job")
+    return out
 
 
 @router.get("/jobs/{job_id}", response_class=HTMLResponse)
@@ -242,7 +268,19 @@ def job_page(
         request, "job.html", user=user, job=job, world=session.get(World, job.world_id),
         runs=runs, refresh=job.status in ACTIVE_JOB, groups=group(done, ("slam", "setting")),
         used=settings_used(job.runs[0].params if job.runs else None), n_done=len(done),
+        algorithms=sorted({r.slam for r in job.runs}), paired=_job_paired(done),
     )  # fmt: skip
+
+
+def _job_paired(done: list) -> list[dict]:
+    """The job's algorithms against each other on its seeds, per setting (scored runs that
+    completed, gave up frontiers or hit their time limit)."""
+    from frontend.dashboard.explore_data import DEFAULT_KINDS
+    from worker.batch.paired import Sample, paired_diffs
+
+    samples = [Sample(r.setting, r.slam, r.seed, r.b_t) for r in done
+               if r.b_t is not None and r.kind in DEFAULT_KINDS]  # fmt: skip
+    return [d.as_row() for d in paired_diffs(samples)]
 
 
 def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:

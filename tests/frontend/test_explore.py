@@ -5,6 +5,7 @@ here, independently, from the runs' own scores."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import re
@@ -68,18 +69,15 @@ def _store(s, owner: int, world: int, slam: str, setting: str) -> None:
         )  # fmt: skip
 
 
-@pytest.fixture(scope="module")
-def dashboard(tmp_path_factory):
+@contextlib.contextmanager
+def serve(url: str, fill):
+    """The dashboard on a real uvicorn server over a fresh database that `fill(session)`
+    stocked; yields (base URL, what fill returned)."""
     import uvicorn
 
-    url = f"sqlite:///{tmp_path_factory.mktemp('explore') / 'explore.db'}"
     upgrade(url)
     with session_scope(url) as s:
-        a, key = add_user(s, "a")
-        w = save_world(s, owner_id=a.id, world=World.from_array(rooms(), 0.05, name="rooms"),
-                       sha256="rooms", source_format="image")  # fmt: skip
-        for slam, setting in RUNS:
-            _store(s, a.id, w.id, slam, setting)
+        made = fill(s)
     redis_url = ensure_redis().rsplit("/", 1)[0] + "/15"
     port = free_port()
     app = create_app(Settings(DATABASE_URL=url, REDIS_URL=redis_url))
@@ -88,9 +86,28 @@ def dashboard(tmp_path_factory):
     th.start()
     while not server.started:
         time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}", key
-    server.should_exit = True
-    th.join(timeout=10)
+    try:
+        yield f"http://127.0.0.1:{port}", made
+    finally:
+        server.should_exit = True
+        th.join(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def dashboard(tmp_path_factory):
+    def fill(s):
+        a, key = add_user(s, "a")
+        w = save_world(s, owner_id=a.id, world=World.from_array(rooms(), 0.05, name="rooms"),
+                       sha256="rooms", source_format="image")  # fmt: skip
+        for slam, setting in RUNS:
+            _store(s, a.id, w.id, slam, setting)
+        return key
+
+    with serve(f"sqlite:///{tmp_path_factory.mktemp('explore') / 'explore.db'}", fill) as (
+        base,
+        key,
+    ):
+        yield base, key
 
 
 def expected(slam: str, setting: str | None, kinds: set[str]) -> dict:

@@ -51,7 +51,7 @@ def _signed_in(site, app="with") -> TestClient:
 
 
 def _choices(html: str) -> list[str]:
-    form = html[html.index('<select name="slam">') :]
+    form = html[html.index('<select name="slam"') :]
     return re.findall(r'<option value="([^"]+)"', form[: form.index("</select>")])
 
 

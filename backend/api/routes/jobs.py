@@ -87,10 +87,16 @@ def submit(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
         )
-    data = resolve_external(dict(body.params), settings, body.slam)  # no command of the user's
-    if body.slam is not None:
-        data["algorithm"] = body.slam
-    algorithm, params_json = _run_params(json.dumps(data, sort_keys=True))
+    variants = []  # (label, params JSON) per algorithm: each runs on every seed
+    for name in body.algorithm_list():
+        data = resolve_external(dict(body.params), settings, name)  # no command of the user's
+        if name is not None:
+            data["algorithm"] = name
+        variants.append(_run_params(json.dumps(data, sort_keys=True)))
+    algorithm, params_json = variants[0]
+    if len(variants) > 1:  # the job's label (a column of 40 characters); each run has its own
+        algorithm = "+".join(label for label, _ in variants)
+        algorithm = algorithm if len(algorithm) <= 40 else f"{len(variants)} algorithms"
     if idempotency_key is not None:
         found = session.scalars(
             select(Job).where(Job.owner_id == user.id, Job.idempotency_key == idempotency_key)
@@ -102,7 +108,7 @@ def submit(
         epoch = broker_epoch(settings.redis_url, max_age_s=EPOCH_MAX_AGE_S)
     except Exception:
         raise _queue_down() from None
-    n_new, run_params = len(body.seed_list()), json.loads(params_json)
+    n_new, run_params = len(body.seed_list()) * len(variants), json.loads(params_json)
     quotas.check_runs(session, user.id, settings, n_new, run_params, locked=locked)
     job = insert_job(
         session,
@@ -113,6 +119,7 @@ def submit(
         seeds=body.seed_list(),
         idempotency_key=idempotency_key,
         broker_epoch=epoch,
+        variants=[(label, json.loads(p)) for label, p in variants] if len(variants) > 1 else None,
     )
     session.commit()  # the runs must exist before a worker can pick them up
     try:
@@ -175,7 +182,7 @@ _JOB_BY_ID = select(
     Job.updated_at,
 ).where(Job.id == bindparam("job_id"))  # fmt: skip
 _RUNS_OF_JOB = select(
-    Run.id, Run.seed, Run.status, Run.outcome, Run.reason, Run.coverage, Run.b_mean_t,
+    Run.id, Run.seed, Run.slam, Run.status, Run.outcome, Run.reason, Run.coverage, Run.b_mean_t,
     Run.b_mean_r, Run.progress,
 ).where(Run.job_id == bindparam("job_id")).order_by(Run.id)  # fmt: skip
 

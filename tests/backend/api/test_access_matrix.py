@@ -67,7 +67,8 @@ ROUTES: dict[tuple[str, str], str] = {
 }
 # Dashboard pages (not in the schema) that read one owner's object.
 OWNED_PAGES = ("/jobs/{job_id}", "/runs/{run_id}/plot/trajectories.png")
-LIST_PAGES = ("/", "/worlds", "/compare", "/compare/translation.png")
+LIST_PAGES = ("/", "/worlds", "/compare", "/compare/translation.png", "/explore",
+              "/explore/runs.csv", "/explore/groups.csv", "/explore/plot/scores.png")  # fmt: skip
 
 
 def _rooms() -> np.ndarray:
@@ -184,6 +185,8 @@ def test_the_matrix_covers_every_route_of_the_schema(site):
         ("POST", "/jobs"), ("GET", "/jobs/{job_id}"), ("GET", "/runs/{run_id}/plot/{name}.png"),
         ("GET", "/worlds"), ("POST", "/worlds"), ("GET", "/compare"),
         ("GET", "/compare/{kind}.png"), ("POST", "/worlds/bundled/{dataset}/{name:path}"),
+        ("GET", "/explore"), ("GET", "/explore/runs.csv"), ("GET", "/explore/groups.csv"),
+        ("GET", "/explore/plot/{name}.png"),
     }  # fmt: skip
     assert pages == known, f"pages the matrix does not know: {pages - known}"
 
@@ -347,6 +350,17 @@ def test_dashboard_lists_show_your_own_objects(site, page):
     home = site.call("GET", "/", "alice").text
     assert f'href="/jobs/{site.owned["alice"].job}"' in home
     assert f'href="/jobs/{site.owned["bob"].job}"' not in home
+
+
+def test_the_explorer_lists_your_own_runs_only(site):
+    """Every run row of the explorer's CSV is the caller's (an administrator's: everyone's)."""
+    ids = {o: site.owned[o].run for o in ("alice", "bob")}
+    for caller, want in (("alice", {"alice"}), ("bob", {"bob"}), ("admin", {"alice", "bob"})):
+        text = site.call("GET", "/explore/runs.csv?applied=1&kind=completed&kind=incomplete"
+                         "&kind=time+limit&kind=failed", caller).text  # fmt: skip
+        listed = {int(line.split(",", 1)[0]) for line in text.splitlines()[1:]}
+        for owner, run in ids.items():
+            assert (run in listed) == (owner in want), (caller, owner)
 
 
 def test_no_run_row_was_changed_by_reading(site):
