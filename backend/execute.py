@@ -91,7 +91,13 @@ def execute_run(
         world = world if world is not None else world_model(s.get_one(World, run.world_id))
         params, seed = RunParams.from_json(run.params), run.seed
     final = (place.report_dir or settings.runs_dir / str(run_id)).resolve()
-    files = AttemptFiles.of(settings.open_storage(), final, run_id, attempt, place.own_folder)
+    try:
+        storage = settings.open_storage()
+    except StorageError as exc:  # e.g. a malformed AWS_ENDPOINT_URL: the run fails, saying so
+        with session_scope(url) as s:
+            mark_run_failed(s, run_id, str(exc), attempt)
+        return Outcome(RunStatus.FAILED, f"run {run_id}: failed ({exc})", error=str(exc))
+    files = AttemptFiles.of(storage, final, run_id, attempt, place.own_folder)
     if on_progress is None:
         on_progress = ProgressReporter(url, run_id, redis_client, attempt=attempt)
     job = _Job(url, run_id, attempt, files, place)

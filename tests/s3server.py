@@ -3,7 +3,6 @@ loopback port, reached by the product's own boto3 client through AWS_ENDPOINT_UR
 
 from __future__ import annotations
 
-import os
 import socket
 import subprocess
 import sys
@@ -70,9 +69,6 @@ def raw_client(env: dict[str, str]):
     )  # fmt: skip
 
 
-__all__ = ["make_bucket", "os", "raw_client", "s3_server"]
-
-
 @contextmanager
 def slow_proxy(target_port: int, bytes_per_s: int) -> Iterator[int]:
     """A TCP proxy on a free loopback port to `target_port` that passes what clients send at
@@ -114,3 +110,6 @@ def slow_proxy(target_port: int, bytes_per_s: int) -> Iterator[int]:
     finally:
         stop.set()
         listener.close()
+
+
+__all__ = ["make_bucket", "raw_client", "s3_server", "slow_proxy"]
