@@ -239,7 +239,8 @@ def prediction_cache(app) -> Any:
 
     cache = getattr(app.state, "prediction_cache", None)
     if cache is None:
-        cache = app.state.prediction_cache = PredictionCache()
+        workers = app.state.settings.world_workers  # as many as analyse uploads
+        cache = app.state.prediction_cache = PredictionCache(workers=workers)
     return cache
 
 
