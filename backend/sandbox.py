@@ -38,6 +38,7 @@ from worker.errors import InputError
 MiB = 1 << 20
 OPEN_FILES = 64  # descriptors a sandbox may hold: the upload, a bag's few files, Python's own
 POLL_S = 0.05  # [s] between looks at the process, its deadline and its folder's size
+QUEUE_WAITS = 3  # an upload waits for a free parser up to this many wall times, then 503
 STARTUP_S = 60.0  # [s] a parser process may take to load (and a fork to be reported)
 RESULT_MAX = 64 * MiB  # [bytes] a result file may hold (a trajectory of 2 M poses)
 # What the parser's process may know of the server's environment: nothing but the locale and
@@ -103,14 +104,22 @@ class Sandbox:
 
     def __init__(self, settings: Settings):
         self.settings = settings
-        self._free: queue.Queue[Zygote | None] = queue.Queue()
+        self._free: queue.LifoQueue[Zygote | None] = queue.LifoQueue()  # the warmest first
         for _ in range(settings.sandbox_workers):
             self._free.put(None)  # started on first use (or by `start`)
 
     def start(self) -> None:
-        """Start the parser processes now (an API's start-up), not at the first upload."""
-        held = [self._take(0.0) for _ in range(self.settings.sandbox_workers)]
+        """Start the idle parser processes now (an API's start-up), not at the first upload."""
+        held = []
+        while True:
+            try:
+                held.append(self._free.get_nowait())
+            except queue.Empty:
+                break
         for z in held:
+            if z is None or z.proc.poll() is not None:
+                with contextlib.suppress(OSError):
+                    z = Zygote(self.settings.sandbox_dir)
             self._free.put(z)
 
     def _take(self, timeout: float) -> Zygote | None:
@@ -132,14 +141,18 @@ class Sandbox:
         return z
 
     def shutdown(self) -> None:
-        """Stop the idle parser processes (those at work stop when their upload is done)."""
+        """Stop the idle parser processes (those at work stop when their upload is done);
+        the next upload starts new ones."""
+        held = []
         while True:
             try:
-                z = self._free.get_nowait()
+                held.append(self._free.get_nowait())
             except queue.Empty:
-                return
+                break
+        for z in held:
             if z is not None:
                 z.stop()
+            self._free.put(None)
 
     def limits(self) -> dict[str, int]:
         s = self.settings
@@ -152,7 +165,7 @@ class Sandbox:
         """Parse `files` (name -> bytes; names already checked as plain file names) with
         `task` (estimate: file, topic; floorplan: file, resolution, max_pixels). InputError
         (a 400) or ImageTooLarge (413) with one line; 503 when every parser stays busy."""
-        z = self._take(self.settings.sandbox_wall_s)
+        z = self._take(QUEUE_WAITS * self.settings.sandbox_wall_s)
         healthy = False
         try:
             parsed, healthy = self._run(z, task, files, args)
