@@ -17,6 +17,7 @@ from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from backend.manual import MOUNT as MANUAL_MOUNT
 from backend.manual import Manual
+from backend.sandbox import sandbox, scrub_paths, server_folders
 from backend.schemas import API_PREFIX
 from backend.world_analysis import recover_pending, world_pool
 from frontend.dashboard import install as install_dashboard
@@ -48,10 +49,12 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
             log.info("analysing %d world(s) left pending: %s", len(recovered), recovered)
     except SQLAlchemyError as exc:  # no database yet: the API still starts (health says so)
         log.warning("could not look for pending worlds: %s", exc.__class__.__name__)
+    sandbox(app).start()  # the upload parsers load while the API starts serving
     try:
         yield
     finally:
         await run_in_threadpool(world_pool(app).shutdown)
+        await run_in_threadpool(sandbox(app).shutdown)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -72,7 +75,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @app.exception_handler(InputError)
     async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
-        return JSONResponse({"detail": str(exc)}, status_code=400)
+        # no server path in an answer: the temporary, sandbox and runs folders shortened
+        return JSONResponse({"detail": scrub_paths(str(exc), *server_folders(settings))}, 400)
 
     app.include_router(health.router)
     # jobs first: routes are matched in order, and GET /jobs/{id} and POST /jobs are the hot

@@ -16,7 +16,7 @@ from sqlalchemy import bindparam, func, select, update
 from sqlalchemy.orm import Session
 
 from backend.core.config import Settings
-from backend.db.models import Run, User, World, utcnow
+from backend.db.models import Run, RunEstimate, User, World, utcnow
 from worker.explore.params import ExploreParams
 from worker.status import RunStatus
 
@@ -96,6 +96,32 @@ def check_upload(session: Session, owner_id: int, settings: Settings) -> None:
             f"{recent} worlds uploaded in the last 24 h reach the limit of "
             f"{settings.quota_uploads_per_day} per day",
             "quota_uploads_per_day",
+        )
+
+
+def check_estimates(
+    session: Session, owner_id: int, settings: Settings, run_id: int, name: str, new_bytes: int = 0
+) -> None:
+    """429 unless one more estimate of `new_bytes` (stored trajectory) keeps the owner within
+    `quota_estimates` (estimates stored) and `quota_estimate_mb` (their trajectories' bytes).
+    The estimate it replaces (the same run and name) does not count."""
+    lock_owner(session, owner_id)
+    others = (RunEstimate.owner_id == owner_id) & ~(
+        (RunEstimate.run_id == run_id) & (RunEstimate.name == name)
+    )
+    size = func.coalesce(func.sum(func.length(RunEstimate.data)), 0)
+    stored, nbytes = session.execute(select(func.count(RunEstimate.id), size).where(others)).one()
+    if stored + 1 > settings.quota_estimates:
+        _refuse(
+            f"{stored} estimates stored reach the limit of {settings.quota_estimates}",
+            "quota_estimates",
+        )
+    limit = settings.quota_estimate_mb * 1024 * 1024
+    if new_bytes and nbytes + new_bytes > limit:
+        _refuse(
+            f"{nbytes / 2**20:.1f} MiB of estimates stored and {new_bytes / 2**20:.1f} MiB more "
+            f"exceed the limit of {settings.quota_estimate_mb:g} MiB",
+            "quota_estimate_mb",
         )
 
 

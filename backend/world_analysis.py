@@ -46,10 +46,11 @@ def unpack_upload(blob: bytes, folder: Path) -> None:
 
 
 def without_folder(message: str, folder: Path) -> str:
-    """A loader message naming the uploaded files, not the server's temporary folder."""
-    for f in {str(folder), str(folder.resolve())}:
-        message = message.replace(f"{f}/", "")
-    return message
+    """A loader message naming the uploaded files, not the server's temporary folder (the
+    folder itself, e.g. from `image: .`, shown as `.`)."""
+    from backend.sandbox import scrub_paths
+
+    return scrub_paths(message, folder)
 
 
 def analyse_world(database_url: str, world_id: int, max_pixels: int) -> WorldStatus | None:

@@ -55,6 +55,23 @@ class Settings(BaseSettings):
     quota_sim_hours: float = Field(default=100.0, gt=0, alias="MAPQUAL_QUOTA_SIM_HOURS")
     quota_worlds: int = Field(default=500, ge=1, alias="MAPQUAL_QUOTA_WORLDS")
     quota_uploads_per_day: int = Field(default=200, ge=1, alias="MAPQUAL_QUOTA_UPLOADS_PER_DAY")
+    # Per-owner quotas on external estimates (POST /runs/{id}/estimates): how many are stored,
+    # and their stored trajectories' bytes in all [MiB].
+    quota_estimates: int = Field(default=1000, ge=1, alias="MAPQUAL_QUOTA_ESTIMATES")
+    quota_estimate_mb: float = Field(default=256.0, gt=0, alias="MAPQUAL_QUOTA_ESTIMATE_MB")
+    # The upload sandbox (`backend.sandbox`): uploads are parsed in separate processes, at
+    # most this many at once per API process (others wait for one, up to the wall time)...
+    sandbox_workers: int = Field(default=2, ge=1, le=64, alias="MAPQUAL_SANDBOX_WORKERS")
+    # ...each with this much address space [MiB], CPU time [s] and wall time [s]...
+    sandbox_memory_mb: int = Field(default=1024, ge=256, alias="MAPQUAL_SANDBOX_MEMORY_MB")
+    sandbox_cpu_s: int = Field(default=10, ge=1, alias="MAPQUAL_SANDBOX_CPU_S")
+    sandbox_wall_s: float = Field(default=12.0, gt=0, alias="MAPQUAL_SANDBOX_WALL_S")
+    # ...and a temporary folder of its own holding at most this much [MiB] (the upload and what
+    # is unpacked from it), made under this folder (unset: the system's temporary folder).
+    sandbox_temp_mb: int = Field(default=96, ge=1, alias="MAPQUAL_SANDBOX_TEMP_MB")
+    sandbox_dir: Path | None = Field(default=None, alias="MAPQUAL_SANDBOX_DIR")
+    # Bytes one upload may decompress to in all [MiB]: zip members, bag chunks, gzip.
+    upload_unpacked_mb: int = Field(default=64, ge=1, alias="MAPQUAL_UPLOAD_UNPACKED_MB")
     # A running run whose attempt gave no sign of life for this long [s] may be taken over by
     # another delivery of its task (the first attempt's worker is presumed dead).
     run_lease_s: float = Field(default=60.0, gt=0, alias="MAPQUAL_RUN_LEASE")
@@ -67,6 +84,20 @@ class Settings(BaseSettings):
     # a JSON object name -> argv, e.g. {"cartographer": ["/opt/slam/bridge", "--cfg", "c.lua"]}.
     # Only these run on the workers; a request that gives a command of its own is refused.
     external_slam: dict[str, list[str]] = Field(default_factory=dict, alias="MAPQUAL_EXTERNAL_SLAM")
+    # Caps on the time-outs a run may ask its external program for [s] (slam.external.
+    # start_timeout_s, step_timeout_s, close_timeout_s): a run asking for more gets a 400.
+    external_start_timeout_max_s: float = Field(
+        default=120.0, gt=0, alias="MAPQUAL_EXTERNAL_START_TIMEOUT_MAX"
+    )
+    external_step_timeout_max_s: float = Field(
+        default=60.0, gt=0, alias="MAPQUAL_EXTERNAL_STEP_TIMEOUT_MAX"
+    )
+    external_close_timeout_max_s: float = Field(
+        default=10.0, gt=0, alias="MAPQUAL_EXTERNAL_CLOSE_TIMEOUT_MAX"
+    )
+    # An external program's address space [MiB] and CPU time [s] (its whole run).
+    external_memory_mb: int = Field(default=4096, ge=64, alias="MAPQUAL_EXTERNAL_MEMORY_MB")
+    external_cpu_s: int = Field(default=7200, ge=1, alias="MAPQUAL_EXTERNAL_CPU_S")
 
     @field_validator("storage")
     @classmethod

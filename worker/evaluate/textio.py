@@ -35,12 +35,23 @@ def read_bytes(path: str | Path) -> bytes:
 
 def _inflate(raw: bytes, path: Path) -> bytes:
     """gzip data (one or more members) inflated. A stream that ends early (a copy cut off)
-    gives what it holds, with an InputWarning: the reader then finds a truncated last line."""
+    gives what it holds, with an InputWarning: the reader then finds a truncated last line.
+    Inflated piece by piece, each counted against the process's decompression budget
+    (`worker.export.bounded`: unlimited unless the upload sandbox set one)."""
+    from worker.export.bounded import spend, step
+
     out = []
     while raw:
         inflater = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
+        data = raw
         try:
-            out.append(inflater.decompress(raw))
+            while True:
+                piece = inflater.decompress(data, step())
+                spend(len(piece))
+                out.append(piece)
+                data = inflater.unconsumed_tail
+                if inflater.eof or (not data and not piece):
+                    break
         except zlib.error as exc:
             raise InputError(f"corrupt gzip data: {exc}", path=path) from None
         if not inflater.eof:

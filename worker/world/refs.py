@@ -36,6 +36,8 @@ def referenced_file(owner: Path, key: str, value: object, *, allow_outside: bool
             "permits it on the command line)",
             path=owner,
         )
+    if target.is_dir():  # e.g. `image: .`: said so, the folder's path not shown
+        raise InputError(f"`{key}` {text!r} names a folder, not a file", path=owner)
     return target
 
 

@@ -12,6 +12,10 @@ from worker.errors import InputError
 _TOKEN = re.compile(r'"([^"]*)"|([()\[\]])|([^\s()\[\]"]+)')
 # Entity types that are never the robot (they carry a `pose` too).
 _NOT_ROBOT = {"window", "floorplan", "map", "zone", "include", "define", "model"}
+# Blocks nested deeper than this are refused: Stage's own worlds nest a handful deep (a model
+# inside a robot inside a define), and the recursive descent below must not meet Python's
+# recursion limit on a hostile file (a 500 instead of a 400).
+MAX_NESTING = 32
 
 
 @dataclass(frozen=True)
@@ -91,16 +95,21 @@ class _Parser:
                 if not self._opens("("):
                     raise InputError("malformed define", path=path, line=ln)
                 self.pos += 1
-                self.block("define", ln)
+                self.block("define", ln, 1)
             elif self._opens("("):
                 self.pos += 1
-                entities.append(self.block(v, ln))
+                entities.append(self.block(v, ln, 1))
             else:
                 self.value(ln)  # a global setting such as `resolution 0.02`
         return entities
 
-    def block(self, kind: str, line: int) -> StageEntity:
+    def block(self, kind: str, line: int, depth: int) -> StageEntity:
         toks, path = self.toks, self.path
+        if depth > MAX_NESTING:
+            raise InputError(
+                f"blocks nested more than {MAX_NESTING} deep (a Stage world needs a few)",
+                path=path, line=line,
+            )  # fmt: skip
         props: dict = {}
         children = []
         while self.pos < len(toks):
@@ -113,7 +122,7 @@ class _Parser:
             self.pos += 1
             if self._opens("("):
                 self.pos += 1
-                children.append(self.block(v, ln))
+                children.append(self.block(v, ln, depth + 1))
             else:
                 props[v] = self.value(ln)
         raise InputError(f"block {kind!r} is never closed", path=path, line=line)

@@ -6,16 +6,18 @@ from __future__ import annotations
 import re
 import tempfile
 import zipfile
-import zlib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile, status
+import numpy as np
+from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import Response
 
+from backend import quotas
 from backend.api.artifacts import built, report_files, unavailable
 from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
 from backend.api.routes.runs import _run
+from backend.sandbox import Sandbox, sandbox
 from backend.store_estimates import list_estimates, save_estimate
 from worker.errors import InputError
 from worker.export.score import ESTIMATES_DIR
@@ -24,9 +26,6 @@ from worker.storage import RunFiles, StorageError
 router = APIRouter(tags=["runs"])
 
 _FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,120}$")
-ZIP_MAX_MEMBERS = 64  # a rosbag2 directory: metadata.yaml and a few storage files
-ZIP_MAX_RATIO = 200  # uncompressed bytes per compressed byte past which a zip is a bomb
-ZIP_MAX_BYTES = 1 << 30  # [bytes] and never more than this unpacked
 
 
 def _estimate_out(row) -> dict[str, Any]:
@@ -82,53 +81,10 @@ def _build_bag(log: Path, work: Path, name: str, format: str) -> Path:
     return path
 
 
-def _unzip_bag(data: bytes, folder: Path) -> Path:
-    """A rosbag2 directory from an uploaded zip, refusing what a hostile zip may hold: paths
-    out of the folder, too many members, a compression ratio of a zip bomb."""
-    src = folder / "upload.zip"
-    src.write_bytes(data)
-    try:
-        with zipfile.ZipFile(src) as zf:
-            infos = [i for i in zf.infolist() if not i.is_dir()]
-            if not infos or len(infos) > ZIP_MAX_MEMBERS:
-                raise InputError(f"a rosbag2 zip holds 1 to {ZIP_MAX_MEMBERS} files")
-            total = sum(i.file_size for i in infos)
-            if total > min(ZIP_MAX_RATIO * max(len(data), 1), ZIP_MAX_BYTES):
-                raise InputError("the zip unpacks to too much (compression ratio of a zip bomb)")
-            metas = [i for i in infos if Path(i.filename).name == "metadata.yaml"]
-            if len(metas) != 1:
-                raise InputError("a rosbag2 zip holds exactly one metadata.yaml")
-            base = Path(metas[0].filename).parent
-            out = folder / "bag"
-            out.mkdir()
-            for i in infos:
-                rel = Path(i.filename)
-                if rel.is_absolute() or ".." in rel.parts or rel.parent != base:
-                    raise InputError(f"zip member {i.filename!r}: not beside metadata.yaml")
-                if not _FILE_NAME.match(rel.name):
-                    raise InputError(f"zip member {i.filename!r}: unsafe file name")
-                (out / rel.name).write_bytes(zf.read(i))
-            return out
-    except InputError:
-        raise
-    except (zipfile.BadZipFile, NotImplementedError, RuntimeError, ValueError, EOFError,
-            OSError, zlib.error):  # fmt: skip
-        # a damaged zip, an unknown compression method, an encrypted member, a bad CRC
-        raise InputError("not a readable zip file") from None
-
-
-def _estimate_file(upload_name: str, data: bytes, folder: Path) -> Path:
-    """The uploaded estimate on disk: a rosbag2 directory for a zip, else the file itself."""
-    if upload_name.lower().endswith(".zip"):
-        return _unzip_bag(data, folder)
-    path = folder / upload_name
-    path.write_bytes(data)
-    return path
-
-
 @router.post("/runs/{run_id}/estimates", status_code=201)
 def post_estimate(
     run_id: IdPath,
+    request: Request,
     session: SessionDep,
     user: CurrentUser,
     file: Annotated[UploadFile, File(description="TUM, CARMEN, .bag, .mcap, .db3, rosbag2 .zip")],
@@ -137,8 +93,8 @@ def post_estimate(
 ) -> dict[str, Any]:
     """Score an estimate of the run's motion on the run's own B, A and SM relations and store
     it as an algorithm of the run (a name again replaces the earlier one). 400 with one line
-    for an estimate that does not cover the run, is in another frame, or mixes units."""
-    from worker.export.estimate import read_estimate
+    for an estimate that does not cover the run, is in another frame, or mixes units; 429
+    past the owner's estimate quotas."""
     from worker.export.score import check_name
 
     check_name(name)
@@ -148,16 +104,32 @@ def post_estimate(
     run = _run(session, user, run_id)
     files = report_files(run)
     data = file.file.read()  # the body limit (BodyLimit) bounds it
-    with tempfile.TemporaryDirectory(prefix="mapqual-est-") as tmp:
-        path = _estimate_file(upload_name, data, Path(tmp))
-        try:
-            est = read_estimate(path, "auto", topic)
-        except InputError as exc:
-            raise InputError(str(exc).replace(f"{tmp}/", "")) from None
+    settings = request.app.state.settings
+    quotas.check_estimates(session, user.id, settings, run.id, name)
+    # parsed in a limited process of its own: a typed, validated trajectory or a 400
+    est = read_estimate_sandboxed(sandbox(request.app), upload_name, data, topic)
+    stored_bytes = 4 * 8 * len(est.t)  # (t, x, y, yaw) float64 a pose, before packing
+    quotas.check_estimates(session, user.id, settings, run.id, name, new_bytes=stored_bytes)
     summary, location = _score_into_storage(files, est, name, upload_name, run_id)
     row = save_estimate(session, run, summary=summary, t=est.t, poses=est.poses,
                         report_dir=location)  # fmt: skip
     return _estimate_out(row)
+
+
+def read_estimate_sandboxed(box: Sandbox, upload_name: str, data: bytes, topic: str | None):
+    """The uploaded estimate as a Trajectory, parsed in the sandbox and checked again here."""
+    from worker.evaluate.trajectory import Trajectory
+
+    parsed = box.run("estimate", {upload_name: data}, file=upload_name, topic=topic)
+    samples = parsed.samples
+    if samples is None or len(samples) == 0:
+        raise InputError(f"{upload_name}: no poses")
+    if not np.isfinite(samples).all():
+        raise InputError(f"{upload_name}: the estimate holds values that are not finite")
+    try:
+        return Trajectory(samples[:, 0].copy(), samples[:, 1:4].copy())
+    except ValueError as exc:
+        raise InputError(f"{upload_name}: {exc}") from None
 
 
 def _score_into_storage(

@@ -7,7 +7,6 @@ import asyncio
 import contextlib
 import hashlib
 import re
-import tempfile
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -31,13 +30,12 @@ from backend.api.deps import (
 )
 from backend.core.config import Settings
 from backend.db.models import World
+from backend.sandbox import shared_sandbox
 from backend.schemas import WorldOut
 from backend.store import create_pending_world, world_occupancy
-from backend.world_analysis import pack_upload, without_folder, world_pool
-from worker.errors import InputError
+from backend.world_analysis import pack_upload, world_pool
 from worker.world.image_io import ImageTooLarge
 from worker.world.picture import occupancy_png
-from worker.world.refs import check_floorplan
 
 router = APIRouter(tags=["worlds"])
 
@@ -83,20 +81,19 @@ def _content_hash(files: dict[str, bytes], resolution: float | None) -> str:
     return h.hexdigest()
 
 
-def check_upload(files: dict[str, bytes], main: str, resolution: float | None, max_px: int) -> None:
+def check_upload(
+    settings: Settings, files: dict[str, bytes], main: str, resolution: float | None
+) -> None:
     """Refuse in the request what needs no decoding: references leaving the uploaded files,
-    a missing or bad resolution, unreadable image headers (400), too many pixels (413)."""
-    with tempfile.TemporaryDirectory(prefix="mapqual-upload-") as tmp:
-        folder = Path(tmp)
-        for name, data in files.items():
-            (folder / name).write_bytes(data)
-        try:
-            check_floorplan(folder / main, resolution, max_px)
-        except ImageTooLarge as exc:
-            detail = without_folder(str(exc), folder)
-            raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, detail) from None
-        except InputError as exc:  # -> 400, naming the uploaded file rather than our temp path
-            raise InputError(without_folder(str(exc), folder)) from None
+    a missing or bad resolution, unreadable image headers, a malformed YAML or Stage world
+    (400), too many pixels (413). Read in the upload sandbox (a limited process)."""
+    try:
+        shared_sandbox(settings).run(
+            "floorplan", files, file=main, resolution=resolution,
+            max_pixels=settings.max_image_pixels,
+        )  # fmt: skip
+    except ImageTooLarge as exc:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(exc)) from None
 
 
 def accept_upload(
@@ -116,7 +113,7 @@ def accept_upload(
     if existing is not None and existing.status != "invalid":
         return existing, False
     quotas.check_upload(session, user.id, settings)  # 429 before anything is stored
-    check_upload(files, main, resolution, settings.max_image_pixels)
+    check_upload(settings, files, main, resolution)
     if existing is not None:
         session.delete(existing)  # invalid worlds have no jobs; the retry gets a new id
         session.flush()
@@ -242,7 +239,8 @@ def prediction_cache(app) -> Any:
 
     cache = getattr(app.state, "prediction_cache", None)
     if cache is None:
-        cache = app.state.prediction_cache = PredictionCache()
+        workers = app.state.settings.world_workers  # as many as analyse uploads
+        cache = app.state.prediction_cache = PredictionCache(workers=workers)
     return cache
 
 

@@ -204,7 +204,7 @@ def _zip(members: dict[str, bytes]) -> bytes:
             {},
             "not beside metadata.yaml",
         ),
-        ("bomb.zip", _zip({"metadata.yaml": b"0" * 5_000_000}), {}, "zip bomb"),
+        ("bomb.zip", _zip({"metadata.yaml": b"0" * 5_000_000}), {}, "metadata.yaml holds"),
         ("no.zip", b"PK\x03\x04 not really", {}, "not a readable zip"),
         ("junk.bag", b"#ROSBAG V2.0\n" + b"\x00" * 100, {}, "not a readable ROS bag"),
         ("junk.mcap", b"\x89MCAP0\r\n" + b"\xff" * 64, {}, "not a readable ROS bag"),

@@ -46,6 +46,17 @@ def _job(api, external, slam="external"):
         ({"name": "deadreck", "command": []}, "cannot be given over the API"),
         ({"name": "other"}, "'other' is not a registered program: 'deadreck'"),
         ("deadreck", "slam.external must be a mapping"),
+        ({"name": "deadreck", "memory_mb": 10**9}, "memory_mb cannot be given over the API"),
+        ({"name": "deadreck", "cpu_s": 10**9}, "cpu_s cannot be given over the API"),
+        (
+            {"name": "deadreck", "step_timeout_s": 1e300},
+            "slam.external.step_timeout_s = 1e+300 s is over this server's cap of 60 s "
+            "(setting external_step_timeout_max_s, environment "
+            "MAPQUAL_EXTERNAL_STEP_TIMEOUT_MAX)",
+        ),
+        ({"name": "deadreck", "start_timeout_s": 121}, "cap of 120 s"),
+        ({"name": "deadreck", "close_timeout_s": 10.5}, "cap of 10 s"),
+        ({"name": "deadreck", "close_timeout_s": "9"}, "must be a number [s]"),
     ],
 )
 def test_a_user_cannot_make_the_server_run_a_command(api, external, needle):
@@ -61,8 +72,15 @@ def test_a_registered_program_is_picked_by_name_and_stored_with_its_command(api)
     assert r.status_code == 202, r.text
     job = r.json()
     assert job["slam"] == "external:deadreck"  # the program by its name (runs and jobs alike)
-    want = {"name": "deadreck", "command": PROGRAMS["deadreck"], "start_timeout_s": 30.0,
-            "step_timeout_s": 5.0, "close_timeout_s": 2.0}  # fmt: skip
+    want = {
+        "name": "deadreck",
+        "command": PROGRAMS["deadreck"],
+        "start_timeout_s": 30.0,
+        "step_timeout_s": 5.0,
+        "close_timeout_s": 2.0,
+        "memory_mb": 4096,
+        "cpu_s": 7200,
+    }  # fmt: skip  (the server's limits, filled in)
     assert job["params"]["slam"]["external"] == want
     with session_scope(api.url) as s:  # what the worker will read
         ((params, slam),) = s.execute(select(Run.params, Run.slam)).all()

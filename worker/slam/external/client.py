@@ -120,7 +120,9 @@ class ExternalSlam:
         """Start the program and send mapqual's hello (a failure is raised at the first scan,
         as a failed start-up)."""
         try:
-            self._child = ChildProcess(self.ext.command)
+            self._child = ChildProcess(
+                self.ext.command, memory_mb=self.ext.memory_mb or 0, cpu_s=self.ext.cpu_s or 0
+            )
             # a few bytes into an empty pipe: never waits
             self._child.send(
                 proto.frame(proto.hello()), time.monotonic() + self.ext.start_timeout_s

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from worker.errors import InputError
 
@@ -25,6 +25,10 @@ class ExternalSlamParams:
     start_timeout_s: float = 30.0  # [s] wall time allowed for start-up and the handshake
     step_timeout_s: float = 10.0  # [s] wall time allowed for one step's answer
     close_timeout_s: float = 2.0  # [s] wall time allowed to exit after "bye", then killed
+    # Limits on the program: address space [MiB] and CPU time [s]; None: none (stored runs
+    # of the CLI). Over the API the server fills them in from its settings (users cannot).
+    memory_mb: int | None = field(default=None, metadata={"omit_if_none": True})
+    cpu_s: int | None = field(default=None, metadata={"omit_if_none": True})
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("-", "_").isidentifier():
@@ -37,6 +41,12 @@ class ExternalSlamParams:
             raise InputError("slam.external.command must be a list of strings without NUL bytes")
         if self.command and not self.command[0]:
             raise InputError("slam.external.command[0] (the program) must not be empty")
+        for key in ("memory_mb", "cpu_s"):
+            value = getattr(self, key)
+            if value is None:
+                continue
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise InputError(f"slam.external.{key} must be a whole number >= 1, got {value}")
         for key in ("start_timeout_s", "step_timeout_s", "close_timeout_s"):
             value = getattr(self, key)
             if not (math.isfinite(value) and value > 0):

@@ -1,23 +1,30 @@
 """The external program as a child process: frames over its stdin / stdout with a deadline,
-its stderr kept in a file for the failure message, and no zombie or orphan left behind."""
+its stderr kept in a file for the failure message, and no zombie or orphan left behind (its
+whole tree ends with it, see `confine`), within its memory and CPU limits."""
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import fcntl
 import os
 import select
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
+from worker.slam.external.confine import (
+    become_subreaper,
+    children_of,
+    end_tree,
+    preexec,
+    program_env,
+)
 from worker.slam.external.protocol import HEADER, MAX_FRAME, ProtocolError, unpack
 
-_PR_SET_PDEATHSIG = 1
 PIPE_BYTES = 1 << 20  # [bytes] pipe buffers asked for (Linux's default maximum)
 
 
@@ -25,21 +32,9 @@ class ChildGone(RuntimeError):
     """The program exited, closed its pipes or missed a deadline (the message says which)."""
 
 
-def _libc_prctl():
-    """libc's prctl, looked up in the parent (no dynamic loading between fork and exec)."""
-    try:
-        return ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
-
-
-_PRCTL = _libc_prctl()
-
-
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """Linux: the child gets SIGKILL if the worker dies (a hard time limit, an OOM kill)."""
-    if _PRCTL is not None:
-        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
+# The programs this process runs now: never taken for another program's orphans.
+_LIVE: set[int] = set()
+_LIVE_LOCK = threading.Lock()
 
 
 def _grow_pipe(fd: int, size: int = PIPE_BYTES) -> None:
@@ -51,18 +46,31 @@ def _grow_pipe(fd: int, size: int = PIPE_BYTES) -> None:
 class ChildProcess:
     """A started program; `send` and `recv` take an absolute `time.monotonic()` deadline."""
 
-    def __init__(self, command: Sequence[str], env: dict[str, str] | None = None):
+    def __init__(
+        self,
+        command: Sequence[str],
+        env: dict[str, str] | None = None,
+        memory_mb: int = 0,
+        cpu_s: int = 0,
+    ):
+        """`env`: the program's environment (None: the allow-listed part of ours);
+        `memory_mb`, `cpu_s`: its address space and CPU time limits (0: none)."""
         # a file, not a pipe: a chatty program never blocks on it, and no thread drains it
         self._stderr = tempfile.TemporaryFile()  # noqa: SIM115 - open for the program's life
+        self._subreaper = become_subreaper()
+        self._before = children_of([os.getpid()]) if self._subreaper else set()
         try:
             self.proc = subprocess.Popen(
                 list(command), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                 stderr=self._stderr, bufsize=0, close_fds=True, start_new_session=True,
-                preexec_fn=_die_with_parent if _PRCTL is not None else None, env=env,
+                preexec_fn=preexec(memory_mb, cpu_s),
+                env=program_env() if env is None else env,
             )  # fmt: skip
         except OSError as exc:
             self._stderr.close()
             raise ChildGone(f"cannot start {command[0]!r}: {exc.strerror or exc}") from None
+        with _LIVE_LOCK:
+            _LIVE.add(self.proc.pid)
         self._out = self.proc.stdout.fileno()  # type: ignore[union-attr]
         self._in = self.proc.stdin.fileno()  # type: ignore[union-attr]
         os.set_blocking(self._out, False)
@@ -184,10 +192,22 @@ class ChildProcess:
         except subprocess.TimeoutExpired:
             self._kill_group()
         self._kill_group(signal.SIGKILL, quiet=True)  # whatever it started and left behind
+        end_tree(self.proc.pid, self._orphans)  # and what left its process group
+        with _LIVE_LOCK:
+            _LIVE.discard(self.proc.pid)
         self._tail = self.stderr_tail()
         self.closed = True
         self._stderr.close()
         return self.proc.returncode
+
+    def _orphans(self) -> set[int]:
+        """Children of this process that it did not start itself: descendants of the program
+        that re-parented here (we are their subreaper) after their parent ended."""
+        if not self._subreaper:
+            return set()
+        with _LIVE_LOCK:
+            live = set(_LIVE)
+        return children_of([os.getpid()]) - self._before - live - {self.proc.pid}
 
     def _kill_group(self, sig: int = signal.SIGKILL, quiet: bool = False) -> None:
         with contextlib.suppress(ProcessLookupError, PermissionError):

@@ -1,0 +1,153 @@
+"""The upload sandbox's processes: a zygote that loads the parsers once, and per upload a
+forked child that limits itself, parses the upload and writes a typed result.
+
+The zygote is started by `backend.sandbox` with an allow-listed environment (no database or
+broker URL, no secret key). Each child works in a temporary folder of its own (`in/` the
+uploaded files, `out/` the result, `tmp/` its TMPDIR), in a session of its own, and sets its
+hard limits before it reads a byte of the upload: address space, CPU seconds, bytes a file
+may grow to, open files, no core dumps; and the decompression budget. The result is
+`out/result.json` ({"ok": true, ...} or {"ok": false, "kind": ..., "error": one line}) and,
+for an estimate, `out/trajectory.npy` (N x 4 float64: t, x, y, yaw).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import sys
+from pathlib import Path
+from typing import Any
+
+MiB = 1 << 20
+
+
+def limit_self(limits: dict[str, int]) -> None:
+    """Hard limits on this process (soft = hard: nothing in here may raise them again)."""
+    cpu = int(limits["cpu_s"])
+    for rlimit, value in (
+        (resource.RLIMIT_AS, int(limits["memory_mb"]) * MiB),
+        (resource.RLIMIT_CPU, cpu),
+        (resource.RLIMIT_FSIZE, int(limits["temp_mb"]) * MiB),
+        (resource.RLIMIT_NOFILE, int(limits["open_files"])),
+        (resource.RLIMIT_CORE, 0),
+    ):
+        resource.setrlimit(rlimit, (value, value))
+
+
+def _estimate(req: dict[str, Any]) -> dict[str, Any]:
+    import numpy as np
+
+    from worker.export.untrusted import read_upload_estimate
+
+    est = read_upload_estimate(Path(req["file"]), req.get("topic"), req["unpacked_bytes"])
+    t = np.asarray(est.t, np.float64)
+    data = np.column_stack([t, np.asarray(est.poses, np.float64).reshape(len(t), 3)])
+    np.save(Path("../out/trajectory.npy"), data, allow_pickle=False)
+    return {"n": int(len(t))}
+
+
+def _floorplan(req: dict[str, Any]) -> dict[str, Any]:
+    from worker.world.refs import check_floorplan
+
+    check_floorplan(Path(req["file"]), req.get("resolution"), int(req["max_pixels"]))
+    return {}
+
+
+TASKS = {"estimate": _estimate, "floorplan": _floorplan}
+
+
+def run(req: dict[str, Any]) -> dict[str, Any]:
+    """The task's outcome as the result's JSON (every failure a one-line reason)."""
+    from worker.errors import InputError
+    from worker.export.bounded import bound_bag_readers, set_budget
+    from worker.world.image_io import ImageTooLarge
+
+    set_budget(int(req["unpacked_bytes"]))
+    try:
+        if req["task"] == "estimate":
+            bound_bag_readers()
+        return {"ok": True, **TASKS[req["task"]](req)}
+    except ImageTooLarge as exc:
+        return {"ok": False, "kind": "too_large", "error": str(exc)}
+    except InputError as exc:
+        return {"ok": False, "kind": "input", "error": str(exc)}
+    except MemoryError:
+        return {"ok": False, "kind": "memory", "error": ""}
+    except RecursionError:
+        return {"ok": False, "kind": "input", "error": "nested too deeply to be read"}
+    except Exception as exc:  # noqa: BLE001 - a hostile file fails deep in a parser
+        return {"ok": False, "kind": "input", "error": f"cannot be read ({type(exc).__name__})"}
+
+
+def serve(work: Path) -> int:
+    """In a forked child: read the request in `work`, limit this process, run the task,
+    write the result. Its exit code."""
+    devnull = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):  # the zygote's pipes to the API are not the parser's to write
+        os.dup2(devnull, fd)
+    os.chdir(work)
+    req = json.loads(Path("request.json").read_text())
+    limit_self(req["limits"])
+    os.environ["TMPDIR"] = str(work / "tmp")
+    import tempfile
+
+    tempfile.tempdir = None  # read TMPDIR again: the parser's own folder
+    os.chdir("in")
+    out = run(req)
+    Path("../out/result.json").write_text(json.dumps(out))
+    return 0
+
+
+def warm_up() -> None:
+    """Import the parsers and run each once on a tiny file, so that forked children start
+    with everything loaded and compiled (numba kernels included)."""
+    import tempfile
+
+    import numpy as np
+
+    from worker.export.bounded import bound_bag_readers
+    from worker.export.untrusted import read_upload_estimate
+    from worker.world.refs import check_floorplan
+
+    bound_bag_readers()
+    with tempfile.TemporaryDirectory(prefix="mapqual-warm-") as tmp:
+        tum = Path(tmp) / "warm.tum"
+        lines = [f"{i * 0.1:.1f} {i * 0.01} 0 0 0 0 0 1" for i in range(50)]
+        tum.write_text("\n".join(lines) + "\n")
+        est = read_upload_estimate(tum, None, 1 << 20)
+        np.column_stack([est.t, est.poses])
+        png = Path(tmp) / "warm.png"
+        from PIL import Image
+
+        Image.fromarray(np.full((8, 8), 255, np.uint8)).save(png)
+        check_floorplan(png, 0.05, 1000)
+
+
+def zygote() -> int:
+    """Serve requests from the API, one at a time: a line {"work": folder} in, a forked child
+    serves it; lines {"pid": ...} then {"status": exit code (negative: a signal)} out."""
+    warm_up()
+    out = sys.stdout.buffer
+    out.write(b'{"ready": true}\n')
+    out.flush()
+    for line in sys.stdin.buffer:
+        work = Path(json.loads(line)["work"])
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child, measured by the API's tests
+            code = 70
+            try:
+                os.setsid()
+                code = serve(work)
+            finally:
+                os._exit(code)
+        out.write(json.dumps({"pid": pid}).encode() + b"\n")
+        out.flush()
+        _, st = os.waitpid(pid, 0)
+        out.write(json.dumps({"status": os.waitstatus_to_exitcode(st)}).encode() + b"\n")
+        out.flush()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(zygote())
