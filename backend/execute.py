@@ -121,12 +121,18 @@ def execute_run(
         if place.fail_on_interrupt:
             job.failed(f"{type(exc).__name__}: {exc}")
         raise
-    try:  # whatever attempts that lost earlier (killed ones) left
-        files.sweep()
-    except StorageError as exc:  # the result is stored: leftovers wait for the next sweep
-        log.warning("run %s: leftovers of earlier attempts not removed (%s)", run_id, exc)
+    _sweep(files, run_id)
     summary = result.summary
     return Outcome(RunStatus.DONE, f"run {run_id}: {summary.outcome}", summary, files.location)
+
+
+def _sweep(files: AttemptFiles, run_id: int) -> None:
+    """Remove what attempts that lost earlier (killed ones) left; where storage refuses, the
+    result is stored all the same and the leftovers wait for the next sweep."""
+    try:
+        files.sweep()
+    except StorageError as exc:
+        log.warning("run %s: leftovers of earlier attempts not removed (%s)", run_id, exc)
 
 
 def signalled(exc: BaseException) -> BaseException:

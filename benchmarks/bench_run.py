@@ -46,29 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
-    ap.add_argument("--slam", default="rbpf", choices=registry.names())
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
-    ap.add_argument("--slam-threads", type=int, default=1, help="scan-matching threads")
-    ap.add_argument("--against", type=Path, help="another checkout to time side by side")
-    ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
-    ap.add_argument("--this-threads", type=int, default=None, help="--against: this tree's")
-    ap.add_argument("--other-threads", type=int, default=None, help="--against: the other's")
-    ap.add_argument(
-        "--this-slam",
-        type=json.loads,
-        default=None,
-        help="--against: SLAM settings of this tree's runs, JSON (e.g. '{\"coarse_skip\": 1}')",
-    )
-    ap.add_argument(
-        "--this-realtime",
-        type=float,
-        default=None,
-        metavar="SPEED",
-        help="--against: this tree's runs under real-time SLAM emulation at SPEED",
-    )
+    ap = _parser()
     args = ap.parse_args()
     if args.this_slam is not None and not isinstance(args.this_slam, dict):
         ap.error("--this-slam must be a JSON object")
@@ -124,6 +102,34 @@ def main() -> None:
         ("report files", t2 - t1),
     ):
         print(f"  {name:26s} {v:8.2f} s  {100 * v / total:5.1f} %")
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line's options."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--world", default=str(ROOT / "worlds/bormann/office_a.yaml"))
+    ap.add_argument("--slam", default="rbpf", choices=registry.names())
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--time-limit", type=float, default=None, help="[s] simulated")
+    ap.add_argument("--slam-threads", type=int, default=1, help="scan-matching threads")
+    ap.add_argument("--against", type=Path, help="another checkout to time side by side")
+    ap.add_argument("--rounds", type=int, default=3, help="--against: alternations")
+    ap.add_argument("--this-threads", type=int, default=None, help="--against: this tree's")
+    ap.add_argument("--other-threads", type=int, default=None, help="--against: the other's")
+    ap.add_argument(
+        "--this-slam",
+        type=json.loads,
+        default=None,
+        help="--against: SLAM settings of this tree's runs, JSON (e.g. '{\"coarse_skip\": 1}')",
+    )
+    ap.add_argument(
+        "--this-realtime",
+        type=float,
+        default=None,
+        metavar="SPEED",
+        help="--against: this tree's runs under real-time SLAM emulation at SPEED",
+    )
+    return ap
 
 
 def _side_by_side(args: argparse.Namespace) -> None:

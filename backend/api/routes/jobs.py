@@ -87,16 +87,7 @@ def submit(
             status.HTTP_409_CONFLICT,
             f"world {body.world_id} is {world.status}, not ready: runs need an analysed world",
         )
-    variants = []  # (label, params JSON) per algorithm: each runs on every seed
-    for name in body.algorithm_list():
-        data = resolve_external(dict(body.params), settings, name)  # no command of the user's
-        if name is not None:
-            data["algorithm"] = name
-        variants.append(_run_params(json.dumps(data, sort_keys=True)))
-    algorithm, params_json = variants[0]
-    if len(variants) > 1:  # the job's label (a column of 40 characters); each run has its own
-        algorithm = "+".join(label for label, _ in variants)
-        algorithm = algorithm if len(algorithm) <= 40 else f"{len(variants)} algorithms"
+    algorithm, params_json, variants = _variants(body, settings)
     if idempotency_key is not None:
         found = session.scalars(
             select(Job).where(Job.owner_id == user.id, Job.idempotency_key == idempotency_key)
@@ -122,14 +113,36 @@ def submit(
         variants=[(label, json.loads(p)) for label, p in variants] if len(variants) > 1 else None,
     )
     session.commit()  # the runs must exist before a worker can pick them up
+    _enqueue(session, settings, job)
+    return JobOut.of(job)
+
+
+def _variants(body: JobIn, settings: Settings) -> tuple[str, str, list[tuple[str, str]]]:
+    """(the job's label, the first variant's params JSON, (label, params JSON) per algorithm):
+    each algorithm runs on every seed."""
+    variants = []
+    for name in body.algorithm_list():
+        data = resolve_external(dict(body.params), settings, name)  # no command of the user's
+        if name is not None:
+            data["algorithm"] = name
+        variants.append(_run_params(json.dumps(data, sort_keys=True)))
+    algorithm, params_json = variants[0]
+    if len(variants) > 1:  # the job's label (a column of 40 characters); each run has its own
+        algorithm = "+".join(label for label, _ in variants)
+        algorithm = algorithm if len(algorithm) <= 40 else f"{len(variants)} algorithms"
+    return algorithm, params_json, variants
+
+
+def _enqueue(session: Session, settings: Settings, job: Job) -> None:
+    """Send the job's runs to the queue; where that fails, fail them (still queued, nothing could
+    take them from a queue they missed) and answer 503."""
     try:
         send_runs(settings.redis_url, [run.id for run in job.runs])
     except Exception as exc:
-        for run in job.runs:  # still queued: nothing could take them from a queue they missed
+        for run in job.runs:
             mark_run_failed(session, run.id, f"could not enqueue: {type(exc).__name__}")
         session.commit()
         raise _queue_down() from None
-    return JobOut.of(job)
 
 
 def json_response(model: BaseModel, status_code: int = 200) -> Response:
