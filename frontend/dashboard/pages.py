@@ -45,7 +45,11 @@ templates = Jinja2Templates(directory=HERE / "templates")
 templates.env.globals.update(
     RunStatus=RunStatus, WorldStatus=WorldStatus, FINISHED_RUN=FINISHED_RUN
 )
-templates.env.globals["slam_algorithms"] = registry.entries  # the job form's choices
+# the job form's choices: what a run can use (the replay-only third-party programs replay
+# recorded logs with `mapqual slam`, they cannot drive a robot)
+templates.env.globals["slam_algorithms"] = lambda: tuple(
+    e for e in registry.entries() if not e.replay_only
+)
 templates.env.globals["job_result"] = job_result  # the jobs list's result column
 router = APIRouter(include_in_schema=False)
 # Where the API key lived in the cookie before sessions: no longer read, deleted on sign-in.

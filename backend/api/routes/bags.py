@@ -20,7 +20,6 @@ from backend.api.routes.runs import _run
 from backend.sandbox import Sandbox, sandbox
 from backend.store_estimates import list_estimates, save_estimate
 from worker.errors import InputError
-from worker.export.score import ESTIMATES_DIR
 from worker.storage import RunFiles, StorageError
 
 router = APIRouter(tags=["runs"])
@@ -137,7 +136,8 @@ def _score_into_storage(
 ) -> tuple[dict[str, Any], str]:
     """Score `est` on the run's parts fetched from its storage, write the estimate's report
     folder back there as `estimates/<name>/`: (its summary, that folder's location)."""
-    from worker.export.score import RUN_PARTS, score_estimate
+    # here, not at the top: the scorer pulls numba, which the API process never loads
+    from worker.export.score import ESTIMATES_DIR, RUN_PARTS, score_estimate
 
     with tempfile.TemporaryDirectory(prefix="mapqual-score-") as tmp:
         run_dir = files.local_path("") or files.fetch(RUN_PARTS, Path(tmp) / "run")

@@ -71,13 +71,17 @@ def test_the_dashboard_form_lists_the_registry(scratch_registry):
     html = templates.get_template("jobs.html").render(
         worlds=[{"id": 1, "name": "w"}], jobs=[], total=0, user=None, csrf_token="x",
         world_names={}, refresh=False, error=None, external_programs=["mine"],
+        default_time_limit=7200.0,
     )  # fmt: skip
     for e in registry.entries():
-        if e.name == "external":  # one choice per program an administrator registered
+        if e.replay_only:  # replays recorded logs (mapqual slam), cannot drive a run
+            assert f'<option value="{e.name}">' not in html
+        elif e.name == "external":  # one choice per program an administrator registered
             assert '<option value="external">' not in html
             assert '<option value="external:mine">' in html
-        else:
-            assert f'<option value="{e.name}">{e.description}</option>' in html
+        else:  # rbpf comes selected, the form's default
+            chosen = " selected" if e.name == "rbpf" else ""
+            assert f'<option value="{e.name}"{chosen}>{e.description}</option>' in html
     assert '<option value="plugin">a plugin SLAM</option>' in html
 
 
