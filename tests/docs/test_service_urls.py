@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -17,7 +14,7 @@ import pytest
 
 from tests.docs.conftest import ROOT
 from tests.docs.tutorial_commands import environment, workspace
-from tests.services import ensure_redis
+from tests.services import api_server, ensure_redis
 
 pytestmark = pytest.mark.slow
 
@@ -63,12 +60,6 @@ def named_urls() -> dict[str, str]:
     return out
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def service(tmp_path_factory, built_site):
     """A real run stored by `mapqual run`, and the API serving it and the built manual."""
@@ -78,40 +69,13 @@ def service(tmp_path_factory, built_site):
         ["mapqual", "run", "worlds/bormann/office_a.yaml", "--time-limit", "10"],
         cwd=work, env=env, check=True, capture_output=True, timeout=600,
     )  # fmt: skip
-    port = _free_port()
     env.update(
         MAPQUAL_AUTH="off",
         MAPQUAL_MANUAL_DIR=str(built_site),
         REDIS_URL=ensure_redis().rsplit("/", 1)[0] + "/12",
     )
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "backend.main:app", "--port", str(port)],
-        cwd=work, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-    )  # fmt: skip
-    base = f"http://127.0.0.1:{port}"
-    try:
-        _wait_up(base, proc)
+    with api_server(env, cwd=work) as (base, _):
         yield base
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-def _wait_up(base: str, proc: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 90
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(proc.stderr.read().decode(errors="replace"))
-        try:
-            if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
-                return
-        except httpx.HTTPError:
-            time.sleep(0.3)
-    raise RuntimeError("the server did not come up")
 
 
 def test_the_pages_name_the_service_urls_users_need():

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -24,8 +22,8 @@ from backend.db.migrate import upgrade
 from backend.db.session import session_scope
 from backend.store import add_user
 from tests.backend.api import hostile
-from tests.backend.api.test_upload_limits import Usage, _free_port, _wait_up
-from tests.services import ensure_redis, scratch_database
+from tests.backend.api.test_upload_limits import Usage
+from tests.services import api_server, ensure_redis, scratch_database
 from tests.worker.export.runs import finished_run, store_run
 
 MB = 1 << 20
@@ -44,28 +42,14 @@ def server(tmp_path_factory):
             user, key = add_user(s, "alice")
             owner = user.id
         run_id = store_run(db_url, owner, result, report)
-        port = _free_port()
         env = {
             **os.environ, "DATABASE_URL": db_url, "MAPQUAL_AUTH": "on", "TMPDIR": str(tmp),
             "REDIS_URL": ensure_redis().rsplit("/", 1)[0] + "/12",
             "MAPQUAL_RUNS_DIR": str(runs_dir), "MAPQUAL_QUOTA_ESTIMATES": "2",
         }  # fmt: skip
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "backend.main:app", "--port", str(port)],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        )  # fmt: skip
-        base = f"http://127.0.0.1:{port}"
-        try:
-            _wait_up(base, proc)
+        with api_server(env) as (base, proc):
             yield {"base": base, "pid": proc.pid, "key": key, "run": run_id, "tmp": tmp,
                    "report": report}  # fmt: skip
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
 
 
 def _auth(server) -> dict[str, str]:

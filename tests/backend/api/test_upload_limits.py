@@ -25,16 +25,10 @@ from PIL import Image
 from backend.db.migrate import upgrade
 from backend.db.session import session_scope
 from backend.store import add_user
-from tests.services import ensure_redis, scratch_database
+from tests.services import api_server, ensure_redis, scratch_database
 
 LIMIT = 20 * 1024 * 1024  # the default MAPQUAL_MAX_UPLOAD_BYTES
 MB = 1024 * 1024
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +39,6 @@ def server(tmp_path_factory):
         upgrade(db_url)
         with session_scope(db_url) as s:
             keys = {name: add_user(s, name)[1] for name in ("alice", "bob")}
-        port = _free_port()
         env = {
             **os.environ,
             "DATABASE_URL": db_url,
@@ -53,36 +46,9 @@ def server(tmp_path_factory):
             "MAPQUAL_AUTH": "on",
             "MAPQUAL_RUNS_DIR": str(runs_dir),
         }
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "backend.main:app", "--port", str(port)],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-        )
-        base = f"http://127.0.0.1:{port}"
-        try:
-            _wait_up(base, proc)
+        with api_server(env) as (base, proc):
+            port = int(base.rsplit(":", 1)[1])
             yield {"base": base, "port": port, "pid": proc.pid, "keys": keys, "runs": runs_dir}
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-
-def _wait_up(base: str, proc: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(proc.stderr.read().decode(errors="replace"))
-        try:
-            if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
-                return
-        except httpx.HTTPError:
-            time.sleep(0.2)
-    raise RuntimeError("the server did not come up")
 
 
 class Usage:
