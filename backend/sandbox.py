@@ -110,17 +110,20 @@ class Sandbox:
 
     def start(self) -> None:
         """Start the idle parser processes now (an API's start-up), not at the first upload."""
+        for z in self._drain():
+            if z is None or z.proc.poll() is not None:
+                with contextlib.suppress(OSError):
+                    z = Zygote(self.settings.sandbox_dir)
+            self._free.put(z)
+
+    def _drain(self) -> list[Zygote | None]:
+        """Take every idle slot out of the pool (the caller puts one back for each)."""
         held = []
         while True:
             try:
                 held.append(self._free.get_nowait())
             except queue.Empty:
-                break
-        for z in held:
-            if z is None or z.proc.poll() is not None:
-                with contextlib.suppress(OSError):
-                    z = Zygote(self.settings.sandbox_dir)
-            self._free.put(z)
+                return held
 
     def _take(self, timeout: float) -> Zygote | None:
         try:
@@ -143,13 +146,7 @@ class Sandbox:
     def shutdown(self) -> None:
         """Stop the idle parser processes (those at work stop when their upload is done);
         the next upload starts new ones."""
-        held = []
-        while True:
-            try:
-                held.append(self._free.get_nowait())
-            except queue.Empty:
-                break
-        for z in held:
+        for z in self._drain():
             if z is not None:
                 z.stop()
             self._free.put(None)
