@@ -12,20 +12,19 @@ import argparse
 import statistics
 import sys
 import time
-import uuid
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sqlalchemy import create_engine, text, update  # noqa: E402
+from sqlalchemy import update  # noqa: E402
 
 from backend.core.config import Settings  # noqa: E402
 from backend.db.migrate import upgrade  # noqa: E402
 from backend.db.models import Run  # noqa: E402
-from backend.db.session import get_engine, session_scope  # noqa: E402
+from backend.db.session import session_scope  # noqa: E402
 from backend.new_job import insert_job  # noqa: E402
 from backend.store import add_user, save_world  # noqa: E402
-from tests.services import ensure_postgres, ensure_redis  # noqa: E402
+from tests.services import ensure_redis, scratch_database  # noqa: E402
 from tests.summaries import make_summary, relation  # noqa: E402
 from tests.summaries import stats as rel_stats  # noqa: E402
 from worker.run_params import RunParams  # noqa: E402
@@ -110,13 +109,7 @@ def main() -> None:
 
     from backend.main import create_app
 
-    admin_url = ensure_postgres()
-    name = f"mapqual_bench_{uuid.uuid4().hex[:8]}"
-    admin = create_engine(admin_url, isolation_level="AUTOCOMMIT")
-    with admin.connect() as c:
-        c.execute(text(f'CREATE DATABASE "{name}"'))
-    url = admin_url.rsplit("/", 1)[0] + f"/{name}"
-    try:
+    with scratch_database("mapqual_bench") as url:
         upgrade(url)
         t0 = time.perf_counter()
         key = fill(url, args.runs)
@@ -133,10 +126,6 @@ def main() -> None:
                      "/explore/plot/scores.png?world=world_1", "/compare"):  # fmt: skip
             med, worst, size = timed(client, path, args.repeats)
             print(f"{path[:58]:58s} {med:10.3f} {worst:8.3f} {size:9d}")
-    finally:
-        get_engine(url).dispose()
-        with admin.connect() as c:
-            c.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
 
 
 if __name__ == "__main__":

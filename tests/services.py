@@ -142,3 +142,26 @@ def api_server(
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+def apt_install(package: str, binary: str) -> str:
+    """The path of `binary`, installing Debian's `package` with apt-get when it is missing
+    (as root); raises RuntimeError with apt-get's output tail when that cannot be done."""
+    found = shutil.which(binary)
+    if found:
+        return found
+    if shutil.which("apt-get") is None or os.geteuid() != 0:
+        raise RuntimeError(
+            f"{binary} is missing: install Debian's package (apt-get install {package})"
+        )
+    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
+    subprocess.run(["apt-get", "update", "-q"], env=env, check=False, capture_output=True)
+    done = subprocess.run(
+        ["apt-get", "install", "-y", "-q", package], env=env, capture_output=True, text=True
+    )
+    found = shutil.which(binary)
+    if not found:
+        raise RuntimeError(
+            f"apt-get install {package} failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}"
+        )
+    return found

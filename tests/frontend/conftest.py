@@ -14,6 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.services import apt_install
+from tests.services import free_port as free_port  # the frontend tests import it from here
+
 ARTIFACTS = Path(__file__).resolve().parents[1] / "artifacts"
 CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"]
 
@@ -21,8 +24,10 @@ CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swifts
 def chromium_path() -> str:
     """The system Chromium; installs Debian's `chromium` package when it is missing."""
     found = shutil.which("chromium") or shutil.which("chromium-browser")
-    if found:
-        return found
+    try:
+        return found or apt_install("chromium", "chromium")
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
     if shutil.which("apt-get") is None or os.geteuid() != 0:
         pytest.fail("chromium is missing: install Debian's package (apt-get install chromium)")
     env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
@@ -34,12 +39,6 @@ def chromium_path() -> str:
     if not found:
         pytest.fail(f"apt-get install chromium failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}")
     return found
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="session")

@@ -5,14 +5,13 @@ when MRPT is absent. MRPT (Debian's mrpt-apps) is installed with apt-get when mi
 from __future__ import annotations
 
 import math
-import os
 import re
-import shutil
 import subprocess
 
 import numpy as np
 import pytest
 
+from tests.services import apt_install
 from tests.worker.slam.helpers import box_scan
 from worker.errors import InputError
 from worker.evaluate.se2 import compose
@@ -33,21 +32,10 @@ ROOM = (0.0, 0.0, 9.0, 6.0)
 @pytest.fixture(scope="module")
 def mrpt() -> str:
     """rawlog-edit's path: MRPT's programs, installed with apt-get when missing (never skipped)."""
-    found = shutil.which("rbpf-slam") and shutil.which("icp-slam") and shutil.which("rawlog-edit")
-    if found:
-        return shutil.which("rawlog-edit")
-    if shutil.which("apt-get") is None or os.geteuid() != 0:
-        pytest.fail("MRPT is missing: install Debian's package (apt-get install mrpt-apps)")
-    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    subprocess.run(["apt-get", "update", "-q"], env=env, check=False, capture_output=True)
-    done = subprocess.run(
-        ["apt-get", "install", "-y", "-q", "mrpt-apps"], env=env, capture_output=True, text=True
-    )
-    if not shutil.which("rbpf-slam"):
-        pytest.fail(
-            f"apt-get install mrpt-apps failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}"
-        )
-    return shutil.which("rawlog-edit")
+    try:  # one package brings rbpf-slam, icp-slam and rawlog-edit
+        return apt_install("mrpt-apps", "rawlog-edit")
+    except RuntimeError as exc:
+        pytest.fail(str(exc))
 
 
 def loop_log(n: int = 160):
