@@ -29,6 +29,7 @@ from worker.evaluate.trajectory import Trajectory
 from worker.explore.coverage import reachable_free
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
 from worker.report.summary import RunSummary
+from worker.report.timeline import Timeline
 from worker.run_params import EvalParams, RunParams
 from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
@@ -85,6 +86,7 @@ class RunResult:
     ate: AteResult | None
     summary: RunSummary
     map_score: MapScore | None = None  # the final map against the floorplan
+    timeline: Timeline | None = None  # coverage etc. against simulated time (progress reports)
 
 
 class _TimedSimulator:
@@ -163,7 +165,10 @@ def run_one(
     entry = registry.get(params.algorithm)
     inner, rt = _make_slam(entry, params, rng_slam)
     slam = _TimedSlam(inner)
-    callback = None if on_progress is None else _progress_relay(on_progress, params, wall0)
+    # the progress reports for timeline.csv (without on_progress no coverage is measured)
+    timeline = None if on_progress is None else Timeline()
+    relay = None if timeline is None else timeline.tap(on_progress)
+    callback = None if relay is None else _progress_relay(relay, params, wall0)
     with _open_log(sim_log) as stream, closed_after(slam):
         writer = None
         if stream is not None:
@@ -195,8 +200,9 @@ def run_one(
     if rt_doc is not None:  # another (issue 51): what the real-time SLAM kept up with
         summary = RunSummary.model_validate({**summary.to_dict(), "realtime": rt_doc})
     return RunResult(
-        world, seed, params, exploration, gt, est, relations, errors, ate, summary, map_score
-    )
+        world, seed, params, exploration, gt, est, relations, errors, ate, summary, map_score,
+        timeline,
+    )  # fmt: skip
 
 
 def _make_slam(entry: registry.SlamEntry, params: RunParams, rng: np.random.Generator):

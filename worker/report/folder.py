@@ -11,6 +11,7 @@ from worker.evaluate.trajectory import Trajectory
 from worker.evaluate.trajio import write_carmen, write_errors, write_relations, write_tum
 from worker.report.plots import errors_png, map_png, overlay_png, trajectories_png
 from worker.report.summary import RunSummary
+from worker.report.timeline import TIMELINE
 
 SUMMARY = "summary.json"
 SIM_LOG = "sim.log"
@@ -70,6 +71,9 @@ def write_report(result, out_dir: str | Path) -> Path:
     if score is not None:
         overlay_png(out / "map_overlay.png", score.floorplan_walls, score.map_walls_xy,
                     world.resolution, world.origin, map_score_lines(summary))  # fmt: skip
+    timeline = getattr(result, "timeline", None)
+    if timeline:  # coverage against simulated time, for the viewer's replay
+        timeline.write(out / TIMELINE)
     for kind, rel in result.relations.items():
         write_relations(out / f"relations_{kind}.txt", rel)
     if "B" in result.errors:
