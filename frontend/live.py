@@ -3,6 +3,7 @@ run read from the database."""
 
 from __future__ import annotations
 
+import bisect
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,6 +16,7 @@ from backend.db.session import session_scope
 from backend.store import load_map, load_trajectory, world_occupancy
 from worker.live_wire import decode_map_patch, ros_codes
 from worker.report.summary import RunSummary
+from worker.report.timeline import TIMELINE, Timeline
 from worker.status import RunOutcome, RunStatus
 
 
@@ -87,6 +89,8 @@ class FinishedRun:
     est: np.ndarray  # (N, 3)
     map: MapState | None
     summary: RunSummary | None
+    timeline: Timeline | None = None  # coverage etc. against simulated time
+    timeline_note: str = ""  # why there is none
 
     def index_at(self, t: float) -> int:
         """Index of the last pose at or before `t` (0 before the start)."""
@@ -106,7 +110,26 @@ def load_finished(url: str, run_id: int) -> FinishedRun | None:
             state = MapState(ros_codes(grid), res, origin)
         except LookupError:
             state = None
-        return FinishedRun(t, gt, est, state, RunSummary.load(run.summary))
+        report_dir = run.report_dir
+        fin = FinishedRun(t, gt, est, state, RunSummary.load(run.summary))
+    fin.timeline, fin.timeline_note = load_timeline(report_dir)
+    return fin
+
+
+def load_timeline(report_dir: str | None) -> tuple[Timeline | None, str]:
+    """The run's timeline.csv read through the storage layer, or None and why not (a run
+    from before it was stored, or storage that cannot be reached now)."""
+    from worker.storage import StorageError, run_files
+
+    if not report_dir:
+        return None, "this run has no report folder"
+    try:
+        files = run_files(report_dir)
+        if files.size(TIMELINE) is None:
+            return None, "not stored for this run (it predates the stored series)"
+        return Timeline.from_csv(files.read_bytes(TIMELINE).decode("utf-8")), ""
+    except (StorageError, OSError, ValueError, UnicodeDecodeError) as exc:
+        return None, f"could not be read ({type(exc).__name__})"
 
 
 @dataclass
@@ -138,6 +161,10 @@ class LiveRun:
     goal: np.ndarray | None = None
     plan: np.ndarray | None = None
     lock: threading.Lock = field(default_factory=threading.Lock)
+    # the timeline's past as it arrived: simulated times, path lengths then, progress then
+    hist_t: list[float] = field(default_factory=list)
+    hist_n: list[int] = field(default_factory=list)
+    hist_p: list[dict[str, Any]] = field(default_factory=list)
 
     def apply(self, msg: dict[str, Any]) -> Delta:
         """Fold one message in; the returned Delta says what changed."""
@@ -156,7 +183,26 @@ class LiveRun:
                 self.plan = d.plan = None if plan is None else np.asarray(plan).reshape(-1, 2)
             if "map" in msg:
                 self._apply_map(msg["map"], d)
+            t = self.progress.get("t")
+            if t is not None and (not self.hist_t or t > self.hist_t[-1]):
+                self.hist_t.append(float(t))
+                self.hist_n.append(len(self.gt))
+                self.hist_p.append(self.progress)
             return d
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, dict[str, Any] | None]:
+        """The paths as they were at simulated time `t` and the progress last reported by
+        then (None: before this viewer's first message; the paths sent whole on joining go
+        back further, one point per progress report, so their length is interpolated)."""
+        with self.lock:
+            ts, ns = [0.0, *self.hist_t], [0, *self.hist_n]
+            i = bisect.bisect_right(ts, t + 1e-9) - 1
+            p = self.hist_p[i - 1] if i >= 1 else None
+            n = ns[i]
+            if i + 1 < len(ts):  # between two messages: the points in between by time
+                n += int((t - ts[i]) / (ts[i + 1] - ts[i]) * (ns[i + 1] - ns[i]))
+            n = max(1, min(n, len(self.gt)))
+            return self.gt[:n].copy(), self.est[:n].copy(), p
 
     def _apply_path(self, path: dict[str, Any], d: Delta) -> None:
         i0 = int(path["i0"])

@@ -22,9 +22,12 @@ from frontend.layers import (
     SCAN_RGB,
 )
 
-# viser 1.1.1 has a perspective camera only (its CameraControls); a narrow field of view seen
-# from high above is as near orthographic as it gets: 1 % of scale change from the floor to a
-# robot 5 cm above it, seen from a few metres, and no tilt.
+# viser 1.1.1, the newest release (2026-12-06), has a perspective camera only: its client's
+# <Canvas> is made without react-three-fiber's `orthographic` flag, its camera controls read
+# the camera as a THREE.PerspectiveCamera (`fov`), and the Python CameraHandle offers fov,
+# position, look_at, up, near and far, no projection or zoom. A narrow field of view seen
+# from high above is as near orthographic as it gets: 1 % of scale change from the floor to
+# a robot 5 cm above it, seen from a few metres, and no tilt.
 TOP_DOWN_FOV = math.radians(20.0)
 TILT = 1e-3  # [share of the height] the camera's step south: straight down has no "up"
 
@@ -111,9 +114,10 @@ def follow(camera: Any, x: float, y: float) -> None:
 
 
 def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
-    """The metrics panel at the timeline's moment: run, simulated time, coverage (live; once
-    done, the final figure, as coverage over time is not stored), pose error against the
-    ground truth, real-time factor; outcome and B errors when done."""
+    """The metrics panel at the timeline's moment: run, simulated time, coverage, what the
+    navigation is doing, pose error against the ground truth, real-time factor (live); a note
+    (`p["note"]`: looking back, or why a replay has no coverage over time); outcome and B
+    errors when done."""
     lines = []
     if info is not None:
         lines.append(f"**Run #{info.id}** · {info.world} · seed {info.seed} · {info.slam}")
@@ -121,7 +125,7 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
     if p.get("t") is not None:
         row.append(f"sim time **{p['t']:.1f} s**")
     if p.get("coverage") is not None:
-        row.append(f"coverage **{100 * p['coverage']:.0f} %**")
+        row.append(f"coverage **{100 * p['coverage']:.1f} %**")
     if p.get("rtf"):
         row.append(f"RTF **{p['rtf']:.1f}x**")
     if p.get("status"):
@@ -130,8 +134,8 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
     if p.get("pose_gt") is not None and p.get("pose_est") is not None:
         et, er = pose_error(p["pose_gt"], p["pose_est"])
         lines.append(f"pose error now: **{et:.3f} m**, **{math.degrees(er):.1f}°** (unaligned)")
-    if p.get("final_coverage") is not None:
-        lines.append(f"coverage at the end **{100 * p['final_coverage']:.0f} %**")
+    if p.get("note"):
+        lines.append(p["note"])
     if summary:
         lines.append(f"outcome **{summary.outcome}** ({summary.stop})")
         b = summary.relation("B")
@@ -142,3 +146,18 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
                 f"rot **{rot.mean:.4f} ± {rot.std:.4f} rad** ({tr.n} relations)"
             )
     return "\n\n".join(lines)
+
+
+def replay_figures(fin: Any, t: float) -> dict[str, Any]:
+    """A replay's figures at simulated time `t` from the run's stored timeline (a
+    `frontend.live.FinishedRun`'s): coverage, status and goals of the last progress report by
+    then; without a stored timeline a note says so, beside the final coverage."""
+    if fin.timeline is None:
+        note = f"coverage over time: {fin.timeline_note}"
+        if fin.summary is not None:
+            note += f"; at the end **{100 * fin.summary.coverage:.1f} %**"
+        return {"note": note}
+    now = fin.timeline.at(t)
+    if now is None:
+        return {"note": f"coverage: first estimate at {fin.timeline.t[0]:.1f} s"}
+    return {k: now[k] for k in ("coverage", "status", "goals_reached")}

@@ -16,6 +16,7 @@ from frontend.panel import (
     follow,
     legend_html,
     metrics_markdown,
+    replay_figures,
     run_title,
     title_html,
     top_down,
@@ -52,6 +53,8 @@ class RunView:
         self.stride = 1
         self.shown_i = -1  # replay: last trajectory index drawn
         self.playing = False
+        self.live: LiveRun | None = None
+        self.following = True  # live: the timeline at the live edge (False: looking back)
         self._build_gui(client.gui)
         self._layers: dict[str, Any] = {}
 
@@ -68,7 +71,7 @@ class RunView:
             self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="10x")
             self.slider = gui.add_slider("time [s]", 0.0, 1.0, 0.1, 0.0, disabled=True)
         self.play.on_click(lambda _: self._toggle_play())
-        self.slider.on_update(lambda _: self._on_slider())
+        self.slider.on_update(self._on_slider)
         self._folders.append(gui.add_folder("View"))
         with self._folders[-1]:
             self.follow = gui.add_checkbox("follow robot", False)
@@ -126,6 +129,7 @@ class RunView:
             self._clear()
             reframe = run_id != self.run_id  # the same run again (it finished): keep the camera
             self.run_id, self.mode, self.finished, self.playing = run_id, "none", None, False
+            self.live, self.following = None, True
             on = {n: b.value for n, b in self.toggles.items()}
             sc = self.scene
             L: dict[str, Any] = {"floor": None}
@@ -177,7 +181,7 @@ class RunView:
         with self.lock:
             if self.mode == "closed":
                 return
-            self.mode = "live"
+            self.mode, self.live, self.following = "live", live, True
             L = self._layers
             L["gt"].set(gt)
             L["est"].set(est)
@@ -192,12 +196,16 @@ class RunView:
             if self.mode != "live":
                 return
             L = self._layers
-            if d.gt is not None:
-                (L["gt"].set if d.path_reset else L["gt"].append)(d.gt)
-                (L["est"].set if d.path_reset else L["est"].append)(d.est)
             if d.map_box is not None and live.map is not None:
                 box = None if d.map_reset else d.map_box
                 L["map"].show(live.map.codes, live.map.resolution, live.map.origin, box)
+            if not self.following:  # looking back: the live edge moves on, the scene stays
+                self.slider.max = max(round(float(d.progress.get("t") or 0.0), 1), 0.1)
+                self._scrub_live(float(self.slider.value), redraw=False)
+                return
+            if d.gt is not None:
+                (L["gt"].set if d.path_reset else L["gt"].append)(d.gt)
+                (L["est"].set if d.path_reset else L["est"].append)(d.est)
             if d.scan is not None:
                 L["markers"].show_scan(d.scan)
             if d.has_nav:
@@ -215,6 +223,51 @@ class RunView:
             self.slider.max = max(t, 0.1)
             self.slider.value = t
         self.metrics.content = metrics_markdown(self.info, p, None)
+
+    def _scrub_live(self, t: float, redraw: bool = True) -> None:
+        """Show the live run as it was at `t` while it runs on: paths, robots and figures of
+        that moment (`redraw` False: the figures only); the SLAM map stays the latest (its past
+        is not kept)."""
+        live, L = self.live, self._layers
+        edge = float(self.slider.max)
+        if live is None or (redraw and t >= edge - 0.05):
+            self._go_live()
+            return
+        self.following = False
+        gt, est, p = live.at(t)
+        if redraw:
+            L["gt"].set(gt)
+            L["est"].set(est)
+            L["markers"].show_scan(None)
+            L["markers"].show_nav(None, None)
+        shown = dict(p or {}, t=t)
+        if p is not None and redraw:
+            L["robot_gt"].pose(*p["pose_gt"])
+            L["robot_est"].pose(*p["pose_est"])
+        elif p is None:
+            shown["note"] = "no figures for this moment: this viewer joined the run later"
+        shown["note"] = " · ".join(
+            filter(None, [shown.get("note"), f"**looking back**: live is at {edge:.1f} s; "
+                          "the SLAM map shown is the latest"])
+        )  # fmt: skip
+        self.metrics.content = metrics_markdown(self.info, shown, None)
+        self._sync_replay_gui()
+
+    def _go_live(self) -> None:
+        """Back to the live edge: the paths, scan and plan as they are now."""
+        live, L = self.live, self._layers
+        if live is None:
+            return
+        self.following = True
+        gt, est, _ = live.snapshot()
+        L["gt"].set(gt)
+        L["est"].set(est)
+        with live.lock:
+            scan, goal, plan, progress = live.scan, live.goal, live.plan, dict(live.progress)
+        L["markers"].show_scan(scan)
+        L["markers"].show_nav(goal, plan)
+        self._progress(progress)
+        self._sync_replay_gui()
 
     def _follow(self, pose) -> None:
         if self.follow.value:
@@ -245,19 +298,22 @@ class RunView:
                 self.slider.value = end  # renders (the slider's callback)
 
     def _sync_replay_gui(self) -> None:
-        """One timeline: it follows the simulated time while the run is live (the live edge,
-        not draggable: the past of a live run is not kept here), and plays and seeks once it
-        is done."""
-        replay = self.mode == "replay"
-        self.play.disabled = not replay
-        self.slider.disabled = not replay
-        if self.mode == "live":
-            self.play.label = "Live (replay once done)"
+        """One timeline: while the run is live it follows the live edge, and dragged back it
+        shows the run's past while the run goes on (the button returns to live); once done it
+        plays and seeks."""
+        replay, live = self.mode == "replay", self.mode == "live"
+        self.play.disabled = not replay and not (live and not self.following)
+        self.slider.disabled = not (replay or live)
+        if live:
+            self.play.label = "Live" if self.following else "Back to live"
         else:
             self.play.label = "Pause" if self.playing else "Play"
 
     def _toggle_play(self) -> None:
         with self.lock:
+            if self.mode == "live":
+                self._go_live()
+                return
             if self.mode != "replay":
                 return
             if not self.playing and self.slider.value >= self.slider.max - 1e-6:
@@ -265,10 +321,18 @@ class RunView:
             self.playing = not self.playing
             self._sync_replay_gui()
 
-    def _on_slider(self) -> None:
+    def _on_slider(self, event: Any) -> None:
         with self.lock:
             if self.mode == "replay":
                 self._render_at(float(self.slider.value))
+            elif self.mode == "live" and getattr(event, "client", None) is not None:
+                t = round(float(self.slider.value), 1)  # a user's move, not the live edge's
+                self._scrub_live(t)
+                if not self.following:
+                    # the live edge's values sent before this move reached us arrive after it
+                    # and move the page's slider: send the chosen time once more, last
+                    self.slider.value = t + 0.1
+                    self.slider.value = t
 
     def tick(self, dt: float) -> None:
         """Advance a playing replay by `dt` wall seconds at the chosen speed."""
@@ -300,8 +364,8 @@ class RunView:
         L["robot_gt"].pose(*fin.gt[i])
         L["robot_est"].pose(*fin.est[i])
         self._follow(fin.gt[i])
-        p = {"t": float(fin.t[i]), "pose_gt": fin.gt[i], "pose_est": fin.est[i],
-             "final_coverage": fin.summary.coverage if fin.summary else None}  # fmt: skip
+        p = {"t": float(fin.t[i]), "pose_gt": fin.gt[i], "pose_est": fin.est[i]}
+        p.update(replay_figures(fin, float(fin.t[i])))
         self.metrics.content = metrics_markdown(self.info, p, fin.summary)
 
     def describe(self) -> dict[str, Any]:
