@@ -128,15 +128,22 @@ def groups_csv(request: Request, session: SessionDep, user: PageUser, world: Nam
 @router.get("/explore/plot/{name}.png")
 def explore_plot(name: str, request: Request, session: SessionDep, user: PageUser,
                  world: Names = [], slam: Names = [], setting: Names = [],  # noqa: B006
-                 kind: Names = [], by: Names = [], g: Names = []) -> Response:  # noqa: B006  # fmt: skip
+                 kind: Names = [], by: Names = [], g: Names = [],  # noqa: B006
+                 dpi: Annotated[int, Query(ge=50, le=explore_plots.MAX_DPI)] = explore_plots.DPI,
+                 ) -> Response:  # fmt: skip
     """A plot of the selected groups: scores (box plots with per-seed points), success rates,
-    pose error over time, or paths coloured by their error."""
+    pose error over time, or paths coloured by their error; `dpi` for the zoom view's sharper
+    copy."""
     draw = explore_plots.PLOTS.get(name)
     if draw is None:
         raise HTTPException(404, f"no plot {name!r}")
     v = _view(request, session, user, world, slam, setting, kind, by, g)
     buf = io.BytesIO()
-    draw(buf, v.selected, session)
+    token = explore_plots.RENDER_DPI.set(dpi)
+    try:
+        draw(buf, v.selected, session)
+    finally:
+        explore_plots.RENDER_DPI.reset(token)
     headers = {"Content-Disposition": f'inline; filename="{name}.png"'}
     return Response(buf.getvalue(), media_type="image/png", headers=headers)
 

@@ -5,13 +5,18 @@ error over time, and ground-truth paths coloured by the pose error along them (a
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
 
 from frontend.dashboard.explore_data import SCORE_NAMES, SCORES, Group
 
-DPI = 110
+DPI = 110  # the pages' plots; the zoom view asks for ZOOM_DPI, sharp when enlarged
+ZOOM_DPI = 220  # pages.templates' zoom_dpi
+MAX_DPI = 300
+# the resolution of the plot being drawn (the route sets it from its `dpi` parameter)
+RENDER_DPI: ContextVar[int] = ContextVar("RENDER_DPI", default=DPI)
 RUNS_PER_GROUP = 10  # error-over-time curves drawn per group
 # outcome kind -> (marker, colour) of a run's point
 MARKERS = {"completed": ("o", "#1f5fbf"), "incomplete": ("s", "#2ca02c"),
@@ -33,7 +38,7 @@ def _empty(ax, text: str = "no runs selected") -> None:
 
 def _save(fig, out) -> None:
     fig.tight_layout()
-    fig.savefig(out, format="png", dpi=DPI)
+    fig.savefig(out, format="png", dpi=RENDER_DPI.get())
     _plt().close(fig)
 
 
@@ -180,7 +185,7 @@ def paths_png(out, groups: list[Group], session: Any) -> None:
         fig.colorbar(lc, ax=axes.ravel().tolist(), label="pose error [m] (unaligned)")
     else:
         _empty(axes[0, 0])
-    fig.savefig(out, format="png", dpi=DPI)
+    fig.savefig(out, format="png", dpi=RENDER_DPI.get())
     plt.close(fig)
 
 

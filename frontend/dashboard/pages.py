@@ -51,6 +51,7 @@ templates.env.globals["slam_algorithms"] = lambda: tuple(
     e for e in registry.entries() if not e.replay_only
 )
 templates.env.globals["job_result"] = job_result  # the jobs list's result column
+templates.env.globals["zoom_dpi"] = 220  # the plots' zoom view (explore_plots.ZOOM_DPI)
 router = APIRouter(include_in_schema=False)
 # Where the API key lived in the cookie before sessions: no longer read, deleted on sign-in.
 OLD_KEY_COOKIE = "mapqual_key"

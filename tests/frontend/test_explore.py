@@ -174,7 +174,7 @@ def test_the_explorer_filters_groups_and_compares(browser, dashboard, artifacts)
     assert rate.inner_text().startswith("100 %")
 
     # the CSV holds the same groups to full precision
-    csv_url = page.locator('a[href^="/explore/groups.csv"]').get_attribute("href")
+    csv_url = page.get_by_role("link", name="groups as CSV").get_attribute("href")
     got = context.request.get(base + csv_url)
     table = list(csv.DictReader(io.StringIO(got.text())))
     by_slam = {row["slam"]: row for row in table}
@@ -191,4 +191,56 @@ def test_the_explorer_filters_groups_and_compares(browser, dashboard, artifacts)
         name = re.search(r"plot/(\w+)\.png", src).group(1)
         (artifacts / f"explore-{name}.png").write_bytes(plot.body())
     page.screenshot(path=artifacts / "explore-by-algorithm.png", full_page=True)
+    context.close()
+
+
+def test_a_plot_opens_in_a_zoom_view(browser, dashboard, artifacts):
+    """A click on a comparison plot opens it over the page at twice the resolution (220 dpi
+    against the page's 110), the wheel zooms about the pointer, a drag pans, the PNG and CSV
+    stay downloadable from it, Esc closes it."""
+    base, key = dashboard
+    auth = {"Authorization": f"Bearer {key}"}
+    context = browser.new_context(viewport={"width": 1400, "height": 900}, extra_http_headers=auth)
+    context.set_default_timeout(90_000)
+    page = context.new_page()
+    page.goto(base + "/explore")
+    thumb = page.locator("#plot-scores img")
+    thumb.scroll_into_view_if_needed()
+    page.wait_for_function("document.querySelector('#plot-scores img').naturalWidth > 0")
+    small = page.evaluate("document.querySelector('#plot-scores img').naturalWidth")
+    thumb.click()
+    view = page.locator("#zoom-view")
+    page.wait_for_function("document.querySelector('#zoom-view').dataset.loaded === '1'")
+    assert view.is_visible() and len(context.pages) == 1  # over the page, not a new tab
+    big = page.evaluate("document.querySelector('#zoom-view img').naturalWidth")
+    assert abs(big - 2 * small) <= 2, (big, small)
+    img = page.locator("#zoom-view img")
+    fit = img.bounding_box()
+    stage = page.locator("#zoom-view .zoom-stage").bounding_box()
+    assert fit["width"] <= stage["width"] + 1 and fit["height"] <= stage["height"] + 1
+    cx, cy = stage["x"] + stage["width"] / 2, stage["y"] + stage["height"] / 2
+    page.mouse.move(cx, cy)
+    page.mouse.wheel(0, -400)
+    page.wait_for_function("parseFloat(document.querySelector('#zoom-view').dataset.scale) > 2")
+    zoomed = img.bounding_box()
+    scale = float(view.get_attribute("data-scale"))
+    assert zoomed["width"] == pytest.approx(fit["width"] * scale, rel=0.02)
+    # the point under the pointer stays under it: the image grew about it
+    share = (cx - fit["x"]) / fit["width"]
+    assert (cx - zoomed["x"]) / zoomed["width"] == pytest.approx(share, abs=0.01)
+    page.mouse.move(cx, cy)
+    page.mouse.down()
+    page.mouse.move(cx - 150, cy - 80, steps=5)
+    page.mouse.up()
+    panned = img.bounding_box()
+    assert panned["x"] == pytest.approx(zoomed["x"] - 150, abs=2)
+    assert panned["y"] == pytest.approx(zoomed["y"] - 80, abs=2)
+    page.screenshot(path=artifacts / "explore-zoom.png")
+    png = view.locator("a.zoom-png").get_attribute("href")
+    csv_href = view.locator("a.zoom-csv").get_attribute("href")
+    got = context.request.get(base + png)
+    assert got.status == 200 and got.headers["content-type"] == "image/png"
+    assert context.request.get(base + csv_href).text().startswith("run,job,world")
+    page.keyboard.press("Escape")
+    assert not view.is_visible()
     context.close()
