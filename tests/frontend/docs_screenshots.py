@@ -1,6 +1,7 @@
 """The manual's screenshots of the viewer and the results explorer, made on the real service
 (PostgreSQL, Redis, a Celery worker, headless Chromium): office_a, an asymmetric building, run
-by two algorithms on the same seeds; the viewer live and in replay, the job page, the explorer.
+by two algorithms on the same seeds in one comparison job; the viewer live, looking back during
+the run, and in replay half-way; the job page, the explorer and its zoom view.
 
     python -m tests.frontend.docs_screenshots docs/img   (needs PostgreSQL and redis-server)
 """
@@ -16,6 +17,7 @@ from pathlib import Path
 import tests.frontend.test_browser as tb
 from tests.frontend.conftest import CHROMIUM_ARGS, OwnRedis, Site, browser_service, chromium_path
 from tests.frontend.test_browser import _live_scene, _new_context, _shoot, _sign_in, _wait
+from tests.frontend.test_viewer_timeline import _slide_to
 
 WORLD = ("bormann", "office_a")
 SECONDS = 60  # [s] simulated per run: a map with a few rooms, on a shared machine
@@ -33,11 +35,11 @@ def _add_world(page, site) -> int:
     return world_id
 
 
-def _submit(page, site, world_id: int, slam: str, runs: int) -> int:
+def _submit(page, site, world_id: int, slams: list[str], seeds: str) -> int:
     page.goto(site.url + "/")
     page.select_option('select[name="world_id"]', str(world_id))
-    page.fill('input[name="runs"]', str(runs))
-    page.select_option('select[name="slam"]', slam)
+    page.fill('input[name="seeds"]', seeds)
+    page.select_option('select[name="slam"]', slams)
     page.fill('input[name="time_limit"]', str(SECONDS))
     page.click('button:has-text("Submit")')
     page.wait_for_url(re.compile(r".*/jobs/\d+$"))
@@ -55,12 +57,19 @@ def _viewer(context, page, site, out: Path) -> None:
     _live_scene(site, run_id)
     time.sleep(20.0)  # a map with a few rooms in it
     _shoot(viewer, out / "viewer-live.png")
+    _slide_to(viewer, 0.35)  # back in time while the run goes on
+    viewer.get_by_text("looking back").first.wait_for()
+    time.sleep(3.0)
+    _shoot(viewer, out / "viewer-live-back.png")
+    viewer.get_by_role("button", name="Back to live").click()
     _wait(
         lambda: any(v.mode == "replay" for v in site.viewer.views.values()),
         900,
         "the replay",
         step=2.0,
     )
+    time.sleep(3.0)
+    _slide_to(viewer, 0.5)  # half-way: the figures of that moment
     time.sleep(3.0)
     _shoot(viewer, out / "viewer-replay.png")
 
@@ -71,13 +80,22 @@ def _results(page, site, out: Path, job_id: int) -> None:
     page.screenshot(path=out / "jobs.png", full_page=True)
     page.goto(f"{site.url}/jobs/{job_id}")
     page.wait_for_timeout(3000)
-    page.screenshot(path=out / "job.png", full_page=True)
+    # the page's head: the comparison it leads with, the summary plot and the runs table
+    clip = {"x": 0, "y": 0, "width": 1400, "height": 1760}
+    page.screenshot(path=out / "job-compare.png", full_page=True, clip=clip)
     page.goto(f"{site.url}/explore")
     page.wait_for_function(
         "Array.from(document.querySelectorAll('#comparison img'))"
         ".every(i => i.complete && i.naturalWidth > 0)"
     )
     page.screenshot(path=out / "explorer.png", full_page=True)
+    page.locator("#plot-paths img").click()
+    page.wait_for_function("document.querySelector('#zoom-view').dataset.loaded === '1'")
+    box = page.locator("#zoom-view .zoom-stage").bounding_box()
+    page.mouse.move(box["x"] + 0.3 * box["width"], box["y"] + 0.5 * box["height"])
+    page.mouse.wheel(0, -300)
+    page.wait_for_timeout(500)
+    page.screenshot(path=out / "explorer-zoom.png")
 
 
 def main(out: Path) -> None:
@@ -95,11 +113,10 @@ def main(out: Path) -> None:
             page = context.new_page()
             _sign_in(page, site)
             world_id = _add_world(page, site)
-            first = _submit(page, site, world_id, "rbpf", 1)
-            second = _submit(page, site, world_id, "graph", 1)
-            page.goto(f"{site.url}/jobs/{first}")
+            job = _submit(page, site, world_id, ["rbpf", "graph"], "1-2")
+            page.goto(f"{site.url}/jobs/{job}")
             _viewer(context, page, site, out)
-            _results(page, site, out, second)
+            _results(page, site, out, job)
             browser.close()
     finally:
         site.stop()
