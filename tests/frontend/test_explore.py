@@ -136,13 +136,19 @@ def _fmt(e: dict) -> str:
     return f"{e['mean']:.3f} ± {e['std']:.3f} [{e['ci'][0]:.3f}, {e['ci'][1]:.3f}]"
 
 
-def test_the_explorer_filters_groups_and_compares(browser, dashboard, artifacts):
+def _explore(browser, dashboard):
+    """(base URL, browser context, page on /explore) signed in by the key header."""
     base, key = dashboard
     auth = {"Authorization": f"Bearer {key}"}
     context = browser.new_context(viewport={"width": 1400, "height": 900}, extra_http_headers=auth)
     context.set_default_timeout(90_000)
     page = context.new_page()
     page.goto(base + "/explore")
+    return base, context, page
+
+
+def test_the_explorer_filters_groups_and_compares(browser, dashboard, artifacts):
+    base, context, page = _explore(browser, dashboard)
     # by default time-limited runs count with their scores; the collision (no scores) does not
     kinds = {"completed", "time limit"}
     assert page.locator("#groups-table tbody tr").count() == 4
@@ -198,12 +204,7 @@ def test_a_plot_opens_in_a_zoom_view(browser, dashboard, artifacts):
     """A click on a comparison plot opens it over the page at twice the resolution (220 dpi
     against the page's 110), the wheel zooms about the pointer, a drag pans, the PNG and CSV
     stay downloadable from it, Esc closes it."""
-    base, key = dashboard
-    auth = {"Authorization": f"Bearer {key}"}
-    context = browser.new_context(viewport={"width": 1400, "height": 900}, extra_http_headers=auth)
-    context.set_default_timeout(90_000)
-    page = context.new_page()
-    page.goto(base + "/explore")
+    base, context, page = _explore(browser, dashboard)
     thumb = page.locator("#plot-scores img")
     thumb.scroll_into_view_if_needed()
     page.wait_for_function("document.querySelector('#plot-scores img').naturalWidth > 0")
