@@ -123,7 +123,8 @@ def main() -> None:
         for path in ("/explore", "/explore?applied=1&kind=completed&by=slam",
                      "/explore?applied=1&kind=completed&kind=time+limit&by=world&by=slam"
                      "&by=setting&world=world_1", "/explore/groups.csv", "/explore/runs.csv",
-                     "/explore/plot/scores.png?world=world_1", "/compare"):  # fmt: skip
+                     "/explore/plot/scores.png?world=world_1",
+                     "/explore/plot/scores.png?world=world_1&dpi=220", "/compare"):  # fmt: skip
             med, worst, size = timed(client, path, args.repeats)
             print(f"{path[:58]:58s} {med:10.3f} {worst:8.3f} {size:9d}")
 
