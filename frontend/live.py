@@ -165,6 +165,9 @@ class LiveRun:
     hist_t: list[float] = field(default_factory=list)
     hist_n: list[int] = field(default_factory=list)
     hist_p: list[dict[str, Any]] = field(default_factory=list)
+    max_history: int = 20000  # moments kept (about 10 MB); beyond, thinned by half
+    _every: int = 1  # keep every _every-th moment
+    _seen: int = 0
 
     def apply(self, msg: dict[str, Any]) -> Delta:
         """Fold one message in; the returned Delta says what changed."""
@@ -185,10 +188,20 @@ class LiveRun:
                 self._apply_map(msg["map"], d)
             t = self.progress.get("t")
             if t is not None and (not self.hist_t or t > self.hist_t[-1]):
-                self.hist_t.append(float(t))
-                self.hist_n.append(len(self.gt))
-                self.hist_p.append(self.progress)
+                self._keep(float(t))
             return d
+
+    def _keep(self, t: float) -> None:
+        """Remember this moment; a long watch keeps every other one, evenly."""
+        self._seen += 1
+        if (self._seen - 1) % self._every:
+            return
+        if len(self.hist_t) >= self.max_history:  # the 1st, 3rd, ... kept: still evenly spaced
+            del self.hist_t[1::2], self.hist_n[1::2], self.hist_p[1::2]
+            self._every *= 2
+        self.hist_t.append(t)
+        self.hist_n.append(len(self.gt))
+        self.hist_p.append(self.progress)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, dict[str, Any] | None]:
         """The paths as they were at simulated time `t` and the progress last reported by
@@ -196,8 +209,12 @@ class LiveRun:
         back further, one point per progress report, so their length is interpolated)."""
         with self.lock:
             ts, ns = [0.0, *self.hist_t], [0, *self.hist_n]
+            now = self.progress.get("t")
+            if now is not None and now > ts[-1]:  # the live edge, past the last moment kept
+                ts.append(float(now))
+                ns.append(len(self.gt))
             i = bisect.bisect_right(ts, t + 1e-9) - 1
-            p = self.hist_p[i - 1] if i >= 1 else None
+            p = None if i < 1 else self.progress if i > len(self.hist_p) else self.hist_p[i - 1]
             n = ns[i]
             if i + 1 < len(ts):  # between two messages: the points in between by time
                 n += int((t - ts[i]) / (ts[i + 1] - ts[i]) * (ns[i + 1] - ns[i]))
