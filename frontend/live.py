@@ -165,7 +165,7 @@ class LiveRun:
     hist_t: list[float] = field(default_factory=list)
     hist_n: list[int] = field(default_factory=list)
     hist_p: list[dict[str, Any]] = field(default_factory=list)
-    max_history: int = 20000  # moments kept (about 10 MB); beyond, thinned by half
+    max_history: int = 10000  # moments kept (11 MB measured); beyond, thinned by half
     _every: int = 1  # keep every _every-th moment
     _seen: int = 0
 
