@@ -1,6 +1,9 @@
 """Real-time factor of a whole run (simulate, explore with SLAM, evaluate, write the report) on
-office_a with the thesis settings, the share of wall time per stage, and the process's peak
-resident memory.
+office_a with the thesis settings, the share of wall time per stage, the process's peak
+resident memory and the peak memory of each component (particle maps, costmap, planners,
+simulator, recording: their arrays' nbytes at their largest, sampled every simulated second
+through the progress callback, which `mapqual run` passes too; the report: tracemalloc's peak
+while its files are written; see benchmarks/memory_parts.py).
 
 Target (issue 6): >= 20x real time on one core. Memory (issue 21): a run under 1 GB; the
 largest plans are the ones to check (`--world worlds/bormann/office_g.yaml`).
@@ -40,6 +43,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from memory_parts import PARTS, peak_sampler, traced_peak
+
 from worker.slam import registry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,12 +75,15 @@ def main() -> None:
     params = RunParams.from_json(data)
     # warm the numba caches so that the figures are about running, not compiling
     run_one(world, RunParams.from_json({**data, "explore": {"time_limit": 5.0}}), args.seed)
+    sampler, parts = peak_sampler()
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        result = run_one(world, params, args.seed, sim_log=Path(tmp) / SIM_LOG)
+        result = run_one(world, params, args.seed, sampler, sim_log=Path(tmp) / SIM_LOG)
         t1 = time.perf_counter()
         write_report(result, tmp)
         t2 = time.perf_counter()
+        # written a second time, traced (tracemalloc slows it), for its memory only
+        _, parts["report"] = traced_peak(lambda: write_report(result, Path(tmp) / "traced"))
     s = result.summary
     t = s.timings
     total = t2 - t0
@@ -92,6 +100,9 @@ def main() -> None:
     print(f"real-time factor, with report files:  {t.sim_time_s / total:7.1f}x{target}")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
     print(f"peak resident memory:                 {peak:7.0f} MiB  (target under 1 GB)")
+    print("peak memory per component (arrays' nbytes; report: tracemalloc's peak):")
+    for name in (*PARTS, "report"):
+        print(f"  {name:26s} {parts[name] / 2**20:8.1f} MiB")
     print("share of wall time per stage:")
     for name, v in (
         ("simulation + CARMEN log", sim),
@@ -187,8 +198,15 @@ def _side_by_side(args: argparse.Namespace) -> None:
             f"{got['other']['sim_s']:.0f} s); this / other {ratios[-1]:.3f}; peak memory "
             f"{got['this']['peak_mb']:.0f} / {got['other']['peak_mb']:.0f} MiB"
         )
+        print("  per component, MiB this / other: " + _parts_line(got))
     print(f"median real-time factor ratio this / other over {len(ratios)} rounds: "
           f"{statistics.median(ratios):.3f}")  # fmt: skip
+
+
+def _parts_line(got: dict) -> str:
+    """'particle maps 180.5 / 190.1, costmap ...' from two run_once results."""
+    this, other = got["this"].get("parts_mb", {}), got["other"].get("parts_mb", {})
+    return ", ".join(f"{k} {this[k]:.1f} / {other.get(k, float('nan')):.1f}" for k in this)
 
 
 if __name__ == "__main__":

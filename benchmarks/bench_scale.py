@@ -13,6 +13,7 @@ factor to the first plan's (issue 52's proof: RTF(virginia_cross) / RTF(office_a
 --generate KIND:WxH adds a plan made by `mapqual world generate` (this tree's generator, seed 1)
 in a temporary folder; --against runs every plan in OTHER too (its own .venv's interpreter,
 the same driver, benchmarks/run_once.py), this tree and the other in turn, plan by plan.
+Each run's line gives its components' peak memory too (benchmarks/memory_parts.py).
 """
 
 from __future__ import annotations
@@ -89,7 +90,8 @@ def _measure(world: Path, trees: dict, args: argparse.Namespace) -> dict:
         print(
             f"{time.strftime('%H:%M', time.gmtime())} UTC, load {os.getloadavg()[0]:.1f}: "
             f"{name} {world.stem}: x{row[name]['rtf']:.2f}, {got['peak_mb']:.0f} MiB, "
-            f"{got['outcome']}, {got['sim_s']:.0f} s simulated",
+            f"{got['outcome']}, {got['sim_s']:.0f} s simulated; per component (MiB) "
+            + ", ".join(f"{k} {v:.0f}" for k, v in got.get("parts_mb", {}).items()),
             flush=True,
         )
     return row

@@ -1,7 +1,9 @@
 """One whole run in the checkout it is started in, for `bench_run.py --against`: prints one
-JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb} (peak_mb: the process's peak
-resident memory in MiB, warm-up included). Uses only what every checkout since 39ad88e has
-(load_world, RunParams.from_json, run_one), so the same driver times both trees:
+JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb, parts_mb} (peak_mb: the process's
+peak resident memory in MiB, warm-up included; parts_mb: each component's peak, MiB, as
+benchmarks/memory_parts.py measures it, through a progress callback given to both trees).
+Uses only what every checkout since 39ad88e has (load_world, RunParams.from_json, run_one),
+so the same driver times both trees:
 
     OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
         [--seed 1] [--time-limit S] [--threads N] [--slam-params JSON]
@@ -18,6 +20,8 @@ import resource
 import sys
 import time
 from pathlib import Path
+
+from memory_parts import peak_sampler
 
 
 def main() -> None:
@@ -53,8 +57,9 @@ def main() -> None:
     if args.realtime is not None:  # issue 51's option (absent from older trees)
         data["realtime"] = {"speed": args.realtime}
     params = RunParams.from_json(data)
+    sampler, parts = peak_sampler()
     t0, c0 = time.perf_counter(), time.process_time()
-    result = run_one(world, params, args.seed)
+    result = run_one(world, params, args.seed, sampler)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     s = result.summary
     s = s if isinstance(s, dict) else s.to_dict()  # a dict in older trees
@@ -62,6 +67,7 @@ def main() -> None:
         "sim_s": s["timings"]["sim_time_s"], "wall_s": wall, "cpu_s": cpu,
         "outcome": s["outcome"], "threads": params.slam.threads,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "parts_mb": {k: round(v / 2**20, 1) for k, v in parts.items()},
     }))  # fmt: skip
 
 

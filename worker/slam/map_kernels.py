@@ -27,8 +27,9 @@ FULLNESS = 0.1  # GMapping's m_fullnessThreshold on hits / visits
 
 
 @njit(cache=True)
-def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty):
-    """Patch id that this particle may write at table cell (tx, ty); -1 if the pool is full."""
+def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty, dirty):
+    """Patch id that this particle may write at table cell (tx, ty); -1 if the pool is full.
+    A patch allocated there marks the cell in `dirty` (TH, TW) bool."""
     e = table[ty, tx]
     if e >= 0 and counts[e] == 1:
         return e
@@ -49,6 +50,7 @@ def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table,
         counts[e] -= 1
     counts[new] = 1
     table[ty, tx] = new
+    dirty[ty, tx] = True
     return new
 
 
@@ -96,6 +98,7 @@ def _register_one(
     res,
     usable_range,
     max_range,
+    dirty,
     may_allocate=True,
 ):
     """Integrate one scan into one particle's map (GMapping ScanMatcher::registerScan).
@@ -107,7 +110,8 @@ def _register_one(
     leaves one. Returns the number of cell updates dropped for lack of pool space (0 when
     the caller reserved enough patches). may_allocate False (the patches were claimed
     beforehand, `claim_patches`; particles registered in parallel): a patch not this
-    particle's alone is not written, and its updates count as dropped.
+    particle's alone is not written, and its updates count as dropped. Every table cell whose
+    patch is written is marked in `dirty` (TH, TW) bool (the incremental map assembly's cue).
     """
     th, tw = table.shape
     x, y, theta = pose[0], pose[1], pose[2]
@@ -147,10 +151,12 @@ def _register_one(
                         if may_allocate:
                             e = _writable_patch(
                                 visits, hits, mean, bits, counts, free_stack, n_free, table,
-                                tx, ty,
+                                tx, ty, dirty,
                             )  # fmt: skip
                         else:
                             e = -1
+                    if e >= 0:
+                        dirty[ty, tx] = True
             if e < 0:
                 dropped += 1
             else:
@@ -202,6 +208,7 @@ def register_scans(
     need,
     todo,
     start,
+    dirty,
 ):
     """Register the scan for particles todo[start:] in turn; stop early when the pool runs
     short.
@@ -233,6 +240,7 @@ def register_scans(
             res,
             usable_range,
             max_range,
+            dirty,
         )
     return todo.shape[0], dropped
 
@@ -303,7 +311,7 @@ def scan_patches(
 @njit(cache=True)
 def claim_patches(
     visits, hits, mean, bits, counts, free_stack, n_free, tables, lists, n_listed, need, todo,
-    start,
+    start, dirty,
 ):  # fmt: skip
     """For particles todo[start:] in turn, make writable (copy-on-write, or new) the patches
     `scan_patches` listed, so that the particles can then be registered in parallel
@@ -323,7 +331,9 @@ def claim_patches(
             if e >= 0 and counts[e] == 1:
                 continue
             if (
-                _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty)
+                _writable_patch(
+                    visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty, dirty
+                )
                 < 0
             ):
                 return k  # cannot happen when need[p] patches were free: they bound the box
@@ -333,7 +343,7 @@ def claim_patches(
 @njit(cache=True, parallel=True)
 def register_claimed(
     visits, hits, mean, bits, counts, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, res,
-    usable_range, max_range, todo,
+    usable_range, max_range, todo, dirty,
 ):  # fmt: skip
     """Register the scan for every particle of todo, in parallel, after `claim_patches`:
     the same cells as `register_scans` would write. Returns the updates dropped (cells off
@@ -345,38 +355,6 @@ def register_claimed(
         p = todo[k]
         dropped[k] = _register_one(
             visits, hits, mean, bits, counts, none, n_free, tables[p], tpx0, tpy0, poses[p],
-            ranges, cos_a, sin_a, res, usable_range, max_range, False,
+            ranges, cos_a, sin_a, res, usable_range, max_range, dirty, False,
         )  # fmt: skip
     return dropped.sum()
-
-
-@njit(cache=True)
-def dense_hits(hits, table):
-    """(TH*32, TW*32) float32 end-point counts of one particle's map, 0 where none."""
-    th, tw = table.shape
-    out = np.zeros((th * PATCH, tw * PATCH), dtype=np.float32)
-    for ty in range(th):
-        for tx in range(tw):
-            e = table[ty, tx]
-            if e < 0:
-                continue
-            out[ty * PATCH : (ty + 1) * PATCH, tx * PATCH : (tx + 1) * PATCH] = hits[e]
-    return out
-
-
-@njit(cache=True)
-def dense_prob(visits, hits, table):
-    """(TH*32, TW*32) float32 hits / visits of one particle's map, NaN where never visited."""
-    th, tw = table.shape
-    out = np.full((th * PATCH, tw * PATCH), np.nan, dtype=np.float32)
-    for ty in range(th):
-        for tx in range(tw):
-            e = table[ty, tx]
-            if e < 0:
-                continue
-            for ly in range(PATCH):
-                for lx in range(PATCH):
-                    v = visits[e, ly, lx]
-                    if v > 0:
-                        out[ty * PATCH + ly, tx * PATCH + lx] = hits[e, ly, lx] / v
-    return out

@@ -59,3 +59,8 @@ class OdometrySlam:
     def occupancy_with_hits(self) -> OccupancyGrid:
         """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
         return self.maps.occupancy(0, with_hits=True)
+
+    def map_changes(self) -> np.ndarray:
+        """(K, 4) [x0, y0, x1, y1] map frame [m]: where the map changed since the previous
+        call (see RbpfSlam.map_changes)."""
+        return self.maps.changes(0)

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from worker.slam.assembly import MapAssembly, dense_hits
 from worker.slam.grid import OccupancyGrid
 from worker.slam.map_kernels import (
     PATCH,
     PATCH_BITS,
     claim_patches,
-    dense_hits,
-    dense_prob,
     register_claimed,
     register_scans,
     scan_patches,
@@ -26,6 +25,8 @@ class PatchMaps:
     particles alike) when a scan reaches past it, so a map covers the explored area only.
     Resampling copies table rows, never patches (`select`). The pool's cell planes (`visits`,
     `hits`, `mean`) and row bit masks (`bits`) are described in worker.slam.map_kernels.
+    `dirty` (TH, TW) marks the table cells whose patches a scan wrote since the dense map was
+    last assembled (worker.slam.assembly): `occupancy` and `changes` reassemble those only.
     """
 
     def __init__(self, n_particles: int, resolution: float, margin_m: float, occ_thresh: float):
@@ -40,6 +41,8 @@ class PatchMaps:
         self.mean = np.zeros((0, PATCH, PATCH, 2), dtype=np.float32)  # [m] in the cell
         self.bits = np.zeros((0, 2, PATCH), dtype=np.int64)  # occupied / full row bit masks
         self.counts = np.zeros(0, dtype=np.int32)
+        self.dirty = np.zeros((0, 0), dtype=np.bool_)
+        self._assembly = MapAssembly()
         self.dropped = 0  # cell updates lost for lack of pool space (always 0 in practice)
 
     @property
@@ -56,9 +59,10 @@ class PatchMaps:
         return int(np.count_nonzero(self.counts))
 
     def nbytes(self) -> int:
-        """Bytes held by the pool and the tables."""
+        """Bytes held by the pool, the tables and the assembled dense map."""
         planes = self.visits.nbytes + self.hits.nbytes + self.mean.nbytes + self.bits.nbytes
-        return int(planes + self.tables.nbytes + self.counts.nbytes)
+        tables = self.tables.nbytes + self.counts.nbytes + self.dirty.nbytes
+        return int(planes + tables + self._assembly.nbytes())
 
     def select(self, indices: np.ndarray) -> None:
         """Resampling: particle k becomes a copy of old particle indices[k] (shares patches)."""
@@ -93,7 +97,9 @@ class PatchMaps:
         grown = np.full((n, ny1 - ny0, nx1 - nx0), -1, dtype=np.int32)
         oy, ox = self.tpy0 - ny0, self.tpx0 - nx0
         grown[:, oy : oy + th, ox : ox + tw] = self.tables
-        self.tables, self.tpx0, self.tpy0 = grown, nx0, ny0
+        dirty = np.zeros(grown.shape[1:], dtype=np.bool_)
+        dirty[oy : oy + th, ox : ox + tw] = self.dirty
+        self.tables, self.dirty, self.tpx0, self.tpy0 = grown, dirty, nx0, ny0
 
     def _grow_pool(self, extra: int) -> None:
         old = self.capacity
@@ -149,7 +155,7 @@ class PatchMaps:
                 start, dropped = register_scans(
                     self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
                     self.tables, self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
-                    self.resolution, usable_range, max_range, need, todo, start,
+                    self.resolution, usable_range, max_range, need, todo, start, self.dirty,
                 )  # fmt: skip
                 self.dropped += int(dropped)
                 return start
@@ -170,14 +176,14 @@ class PatchMaps:
         def claim(free_stack: np.ndarray, n_free: np.ndarray, start: int) -> int:
             return claim_patches(
                 self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
-                self.tables, lists, n_listed, need, todo, start,
+                self.tables, lists, n_listed, need, todo, start, self.dirty,
             )  # fmt: skip
 
         self._in_pool(need, todo, claim)
         dropped = register_claimed(
             self.visits, self.hits, self.mean, self.bits, self.counts, self.tables, self.tpx0,
             self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range, max_range,
-            todo,
+            todo, self.dirty,
         )  # fmt: skip
         if dropped:  # a patch the claim missed: the maps would differ from the serial ones
             raise RuntimeError(f"parallel scan registration dropped {dropped} cell updates")
@@ -228,22 +234,34 @@ class PatchMaps:
 
     def occupancy(self, particle: int, with_hits: bool = False) -> OccupancyGrid:
         """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none);
-        with_hits: with its cells' end-point counts (`OccupancyGrid.hits`)."""
-        table = self.tables[particle]
-        prob = dense_prob(self.visits, self.hits, table)
-        known = ~np.isnan(prob)
+        with_hits: with its cells' end-point counts (`OccupancyGrid.hits`). Only the patches
+        written or re-pointed since the previous call are reassembled (MapAssembly)."""
+        a = self._assembly
+        a.update(self.visits, self.hits, self.tables[particle], self.tpx0, self.tpy0, self.dirty)
         side = self.resolution * PATCH
         origin = np.array([self.tpx0 * side, self.tpy0 * side])
-        if not known.any():
+        crop = a.crop()
+        if crop is None:
             empty = np.full((1, 1), np.nan, np.float32)
             hits = np.zeros((1, 1), np.float32) if with_hits else None
             return OccupancyGrid(empty, self.resolution, origin, self.occ_thresh, hits)
-        rows = np.flatnonzero(known.any(axis=1))
-        cols = np.flatnonzero(known.any(axis=0))
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        r0, r1, c0, c1 = crop
         origin = origin + np.array([c0, r0]) * self.resolution
-        hits = dense_hits(self.hits, table)[r0:r1, c0:c1] if with_hits else None
-        return OccupancyGrid(prob[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh, hits)
+        hits = None
+        if with_hits:
+            hits = dense_hits(self.hits, self.tables[particle])[r0:r1, c0:c1]
+        return OccupancyGrid(a.dense[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh, hits)
+
+    def changes(self, particle: int) -> np.ndarray:
+        """(K, 4) [x0, y0, x1, y1] map frame [m]: rectangles (whole 32-cell patches) covering
+        every cell of `occupancy(particle)` that differs from the map the previous call of
+        `changes` saw (at the first call: every seen cell); (0, 4) when none does. The map
+        is brought up to date as `occupancy` does (the same incremental assembly)."""
+        a = self._assembly
+        a.update(self.visits, self.hits, self.tables[particle], self.tpx0, self.tpy0, self.dirty)
+        rects = a.take_changes()
+        side = self.resolution * PATCH
+        return (rects + np.array([a.tpx0, a.tpy0, a.tpx0, a.tpy0])) * side
 
 
 __all__ = ["PatchMaps", "PATCH", "PATCH_BITS"]

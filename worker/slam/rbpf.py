@@ -323,6 +323,14 @@ class RbpfSlam:
         """`occupancy` with its cells' end-point counts (for the map score; not cached)."""
         return self.maps.occupancy(self._best, with_hits=True)
 
+    def map_changes(self) -> np.ndarray:
+        """(K, 4) [x0, y0, x1, y1] map frame [m]: rectangles covering every cell in which the
+        map `occupancy` gives now differs from the one it gave at the previous call of
+        map_changes (the first call: every seen cell); (0, 4) when none does. What the scans
+        since then wrote, and where the best particle changed: a map consumer (the costmap)
+        refreshes these only. Rectangles are whole 32-cell patches and do not overlap."""
+        return self.maps.changes(self._best)
+
 
 # [m^2 or rad^2] the smallest motion-model variance of the proposal's prior: a noise-free model
 # (srr = ... = 0, as some tests set) pins the draw to the odometry instead of dividing by zero

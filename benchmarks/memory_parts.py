@@ -1,0 +1,107 @@
+"""Peak memory of a run per component, for bench_run.py and run_once.py (issue 52).
+
+Measured as the bytes of the numpy arrays each component holds (`nbytes`, each buffer counted
+once), sampled at every progress report of the run (each simulated second) and kept at its
+maximum: what the component's state weighs at its largest, not the allocator's view, and
+blind to scratch arrays freed within a step (a numba kernel's temporaries, a pool's growth
+copy). The report stage is measured apart, with tracemalloc (numpy reports its allocations
+to it), as its peak of traced allocations while the report files are written.
+
+The components are found from the progress callback's caller, the exploration loop
+(worker.explore.loop.Exploration): its slam (particle maps), nav.costmap and nav.local
+(costmap), the rest of nav (planners: frontier search, global planner, DWA, trail, door,
+safety), sim and world with the reachability masks (simulator) and the trajectory recording.
+"""
+
+from __future__ import annotations
+
+import sys
+import tracemalloc
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+PARTS = ("particle maps", "costmap", "planners", "simulator", "recording")
+_COSTMAP = ("costmap", "local")
+_MAX_DEPTH = 8
+
+
+def array_bytes(obj: Any, seen: set[int], depth: int = 0) -> int:
+    """Bytes of the numpy arrays reachable from obj (attributes, slots, containers), each
+    buffer counted once across calls sharing `seen` (a view counts as its base)."""
+    if depth > _MAX_DEPTH or isinstance(obj, str | bytes | int | float | bool | type(None)):
+        return 0
+    if isinstance(obj, np.ndarray):
+        base = obj
+        while isinstance(base.base, np.ndarray):
+            base = base.base
+        if id(base) in seen:
+            return 0
+        seen.add(id(base))
+        return int(base.nbytes)
+    if id(obj) in seen or callable(obj) and not hasattr(obj, "__dict__"):
+        return 0
+    seen.add(id(obj))
+    if isinstance(obj, dict):
+        children = list(obj.values())
+    elif isinstance(obj, list | tuple | set | frozenset):
+        children = list(obj)
+    else:
+        children = list(getattr(obj, "__dict__", {}).values())
+        for cls in type(obj).__mro__:
+            for name in getattr(cls, "__slots__", ()):
+                if hasattr(obj, name):
+                    children.append(getattr(obj, name))
+    return sum(array_bytes(c, seen, depth + 1) for c in children)
+
+
+def _exploration() -> Any:
+    """The Exploration object whose progress report is being handled (up the call stack)."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        me = frame.f_locals.get("self")
+        if type(me).__name__ == "Exploration" and hasattr(me, "nav"):
+            return me
+        frame = frame.f_back
+    return None
+
+
+def sample(run: Any) -> dict[str, int]:
+    """Bytes per component of one exploration loop now."""
+    seen: set[int] = set()
+    nav = run.nav
+    out = {"particle maps": array_bytes(run.slam, seen)}
+    out["costmap"] = sum(array_bytes(getattr(nav, n, None), seen) for n in _COSTMAP)
+    rest = {k: v for k, v in vars(nav).items() if k not in _COSTMAP}
+    out["planners"] = array_bytes(rest, seen)
+    sim = (run.sim, run.world, getattr(run, "reach", None), getattr(run, "passable", None))
+    out["simulator"] = array_bytes(sim, seen)
+    out["recording"] = array_bytes(getattr(run, "rec", None), seen)
+    return out
+
+
+def peak_sampler() -> tuple[Callable[[Any], None], dict[str, int]]:
+    """(on_progress callback, peaks): each call samples the components of the run that
+    called it and keeps the maxima in peaks (bytes)."""
+    peaks = dict.fromkeys(PARTS, 0)
+
+    def on_progress(_progress: Any) -> None:
+        run = _exploration()
+        if run is None:
+            return
+        for k, v in sample(run).items():
+            peaks[k] = max(peaks[k], v)
+
+    return on_progress, peaks
+
+
+def traced_peak(fn: Callable[[], Any]) -> tuple[Any, int]:
+    """(fn(), the peak bytes of allocations traced by tracemalloc while it ran)."""
+    tracemalloc.start()
+    try:
+        out = fn()
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return out, int(peak)
