@@ -172,28 +172,37 @@ def first_colliding_pose(lethal, near, inner, origin_x, origin_y, resolution, po
 
 
 @njit(cache=True)
-def inflate_tiles(lethal, kernel, cost, tiles, tile):
-    """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`.
+def inflate_tiles(lethal, kernel, cost, tiles, tile, ty0, ty1, tx0, tx1):
+    """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`
+    (the flags cleared here).
 
-    tiles: (ceil(H / tile), ceil(W / tile)) bool, the blocks where obstacle cells went. A
-    cell's cost depends on the obstacles within R (the kernel's radius) only, so the blocks
-    within ceil(R / tile) blocks of a flagged one are all that can change; scattered changes
-    (new walls at both ends of a long corridor) recompute a few blocks, not their bounding box.
+    tiles: (ceil(H / tile), ceil(W / tile)) bool, the blocks where obstacle cells went, all
+    within the block range `[ty0, ty1) x [tx0, tx1)` (the updated window's: the work is the
+    window's, not the map's). A cell's cost depends on the obstacles within R (the kernel's
+    radius) only, so the blocks within ceil(R / tile) blocks of a flagged one are all that
+    can change; scattered changes (new walls at both ends of a long corridor) recompute a few
+    blocks, not their bounding box. Each block is recomputed from `lethal` alone, so the order
+    does not matter.
     """
     h, w = lethal.shape
     th, tw = tiles.shape
     r = kernel.shape[0] // 2
     reach = (r + tile - 1) // tile
-    todo = np.zeros((th, tw), dtype=np.bool_)
-    for ty in range(th):
-        for tx in range(tw):
+    oy0, oy1 = max(0, ty0 - reach), min(th, ty1 + reach)
+    ox0, ox1 = max(0, tx0 - reach), min(tw, tx1 + reach)
+    if oy1 <= oy0 or ox1 <= ox0:
+        return
+    todo = np.zeros((oy1 - oy0, ox1 - ox0), dtype=np.bool_)
+    for ty in range(ty0, ty1):
+        for tx in range(tx0, tx1):
             if tiles[ty, tx]:
-                for uy in range(max(0, ty - reach), min(th, ty + reach + 1)):
-                    for ux in range(max(0, tx - reach), min(tw, tx + reach + 1)):
-                        todo[uy, ux] = True
-    for ty in range(th):
-        for tx in range(tw):
-            if todo[ty, tx]:
+                tiles[ty, tx] = False
+                for uy in range(max(oy0, ty - reach), min(oy1, ty + reach + 1)):
+                    for ux in range(max(ox0, tx - reach), min(ox1, tx + reach + 1)):
+                        todo[uy - oy0, ux - ox0] = True
+    for ty in range(oy0, oy1):
+        for tx in range(ox0, ox1):
+            if todo[ty - oy0, tx - ox0]:
                 inflate_region(
                     lethal, kernel, cost, ty * tile, min(h, (ty + 1) * tile), tx * tile,
                     min(w, (tx + 1) * tile),
@@ -201,9 +210,9 @@ def inflate_tiles(lethal, kernel, cost, tiles, tile):
 
 
 @njit(cache=True)
-def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
+def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile, ty0, ty1, tx0, tx1):
     """Raise the costs around the new obstacle cells (`fresh`, cleared here) of the blocks
-    flagged in `tiles` (in place).
+    flagged in `tiles` (all within `[ty0, ty1) x [tx0, tx1)`; the flags cleared here), in place.
 
     A cost is the kernel's value at the nearest obstacle, the max over all of their stamps,
     so a new obstacle only raises costs: its stamp, max-ed in, is the exact update. Cells
@@ -211,10 +220,11 @@ def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
-    for ty in range(tiles.shape[0]):
-        for tx in range(tiles.shape[1]):
+    for ty in range(max(0, ty0), min(tiles.shape[0], ty1)):
+        for tx in range(max(0, tx0), min(tiles.shape[1], tx1)):
             if not tiles[ty, tx]:
                 continue
+            tiles[ty, tx] = False
             for sy in range(ty * tile, min(h, (ty + 1) * tile)):
                 for sx in range(tx * tile, min(w, (tx + 1) * tile)):
                     if not fresh[sy, sx]:
