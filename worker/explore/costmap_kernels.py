@@ -68,9 +68,13 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
 
     lethal: (H, W) bool; kernel: (2R+1, 2R+1) uint8 stamp; cost: (H, W) uint8 inflated costs.
     A cell's cost is the kernel's value at its nearest obstacle within the kernel's square,
-    what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Exact and in
-    O(R) per cell: first, per row, the distance to the nearest obstacle in that row (two
-    sweeps); then, per cell, the least dy^2 + row distance^2 over the 2R+1 rows around it.
+    what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Exact: first, per
+    row, the distance to the nearest obstacle in that row within R (two sweeps); then, per
+    column, the least dy^2 + row distance^2 over the rows, by the lower envelope of parabolas
+    (Meijster's exact distance transform, integer arithmetic), in O(1) per cell. The kernel is
+    0 past R cells (`effective_inflation_cells`), so an obstacle farther than R in a row or
+    in a column changes no cost, and the rows past R that the envelope also looks at cannot
+    lower a cost under R^2.
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
@@ -81,9 +85,49 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
             table[dy * dy + dx * dx] = kernel[dy + r, dx + r]
-    far = r + 1  # "no obstacle within R in this row"
     ry0 = max(0, y0 - r)
     ry1 = min(h, y1 + r)
+    hd = _row_distances(lethal, r, ry0, ry1, x0, x1)
+    n = ry1 - ry0
+    inf = np.int64(1) << 40  # "no obstacle within R in this row"
+    f = np.empty(n, dtype=np.int64)
+    s = np.empty(n, dtype=np.int64)  # the envelope's parabolas (rows) ...
+    t = np.empty(n, dtype=np.int64)  # ... and where each starts
+    for j in range(x1 - x0):
+        for u in range(n):
+            d = hd[u, j]
+            f[u] = d * d if d <= r else inf
+        q = 0
+        s[0] = 0
+        t[0] = 0
+        for u in range(1, n):
+            while q >= 0 and (t[q] - s[q]) ** 2 + f[s[q]] > (t[q] - u) ** 2 + f[u]:
+                q -= 1
+            if q < 0:
+                q = 0
+                s[0] = u
+            else:
+                i = s[q]
+                start = 1 + (u * u - i * i + f[u] - f[i]) // (2 * (u - i))
+                if start < n:
+                    q += 1
+                    s[q] = u
+                    t[q] = start
+        for u in range(n - 1, -1, -1):
+            iy = ry0 + u
+            if y0 <= iy < y1:
+                best = (u - s[q]) ** 2 + f[s[q]]
+                cost[iy, x0 + j] = table[best] if best <= r * r else 0
+            if u == t[q]:
+                q -= 1
+
+
+@njit(cache=True)
+def _row_distances(lethal, r, ry0, ry1, x0, x1):
+    """`(ry1 - ry0, x1 - x0) int64`: per row, the distance [cells] from each cell of
+    `[x0, x1)` to the nearest lethal cell in that row, R + 1 where none lies within R."""
+    w = lethal.shape[1]
+    far = r + 1
     cx0 = max(0, x0 - r)
     cx1 = min(w, x1 + r)
     hd = np.empty((ry1 - ry0, x1 - x0), dtype=np.int64)
@@ -103,16 +147,7 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
                 d = last - xx
                 if d < row[xx - x0]:
                     row[xx - x0] = d
-    for iy in range(y0, y1):
-        for ix in range(x0, x1):
-            best = 2 * r * r + 1
-            for yy in range(max(ry0, iy - r), min(ry1, iy + r + 1)):
-                d = hd[yy - ry0, ix - x0]
-                if d <= r:
-                    d2 = (yy - iy) * (yy - iy) + d * d
-                    if d2 < best:
-                        best = d2
-            cost[iy, ix] = table[best] if best <= 2 * r * r else 0
+    return hd
 
 
 @njit(cache=True)
@@ -180,9 +215,7 @@ def inflate_tiles(lethal, kernel, cost, tiles, tile, ty0, ty1, tx0, tx1):
     within the block range `[ty0, ty1) x [tx0, tx1)` (the updated window's: the work is the
     window's, not the map's). A cell's cost depends on the obstacles within R (the kernel's
     radius) only, so the blocks within ceil(R / tile) blocks of a flagged one are all that
-    can change; scattered changes (new walls at both ends of a long corridor) recompute a few
-    blocks, not their bounding box. Each block is recomputed from `lethal` alone, so the order
-    does not matter.
+    can change (from `lethal` alone: in any order); scattered changes recompute a few blocks.
     """
     h, w = lethal.shape
     th, tw = tiles.shape
@@ -200,13 +233,24 @@ def inflate_tiles(lethal, kernel, cost, tiles, tile, ty0, ty1, tx0, tx1):
                 for uy in range(max(oy0, ty - reach), min(oy1, ty + reach + 1)):
                     for ux in range(max(ox0, tx - reach), min(ox1, tx + reach + 1)):
                         todo[uy - oy0, ux - ox0] = True
-    for ty in range(oy0, oy1):
-        for tx in range(ox0, ox1):
-            if todo[ty - oy0, tx - ox0]:
-                inflate_region(
-                    lethal, kernel, cost, ty * tile, min(h, (ty + 1) * tile), tx * tile,
-                    min(w, (tx + 1) * tile),
-                )  # fmt: skip
+    # the blocks to do, in rectangles (a run along a row, grown down while the rows below
+    # have the same run): one recomputation of a big rectangle costs far less than of its
+    # blocks one by one (each looks R rows above and below itself)
+    for ty in range(oy1 - oy0):
+        for tx in range(ox1 - ox0):
+            if not todo[ty, tx]:
+                continue
+            tx1 = tx
+            while tx1 < ox1 - ox0 and todo[ty, tx1]:
+                tx1 += 1
+            ty1 = ty + 1
+            while ty1 < oy1 - oy0 and todo[ty1, tx:tx1].all():
+                ty1 += 1
+            todo[ty:ty1, tx:tx1] = False
+            inflate_region(
+                lethal, kernel, cost, (oy0 + ty) * tile, min(h, (oy0 + ty1) * tile),
+                (ox0 + tx) * tile, min(w, (ox0 + tx1) * tile),
+            )  # fmt: skip
 
 
 @njit(cache=True)

@@ -109,3 +109,41 @@ def test_live_coverage_counts_the_reachable_cells_on_free_map_cells():
     assert cells.coverage(prob, RES, np.zeros(2), 0.25, T) == 0.3
     prob[:, 1] = 0.9  # an occupied column is not free
     assert cells.coverage(prob, RES, np.zeros(2), 0.25, T) == 0.2
+
+
+def _stamped(lethal: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """The definition of the inflation: every obstacle's kernel stamp, the maximum of them."""
+    r = kernel.shape[0] // 2
+    h, w = lethal.shape
+    out = np.zeros((h + 2 * r, w + 2 * r), dtype=np.uint8)
+    for y, x in np.argwhere(lethal):
+        np.maximum(
+            out[y : y + 2 * r + 1, x : x + 2 * r + 1],
+            kernel,
+            out=out[y : y + 2 * r + 1, x : x + 2 * r + 1],
+        )
+    return out[r : r + h, r : r + w]
+
+
+@SETTINGS
+@given(
+    st.integers(0, 2**32 - 1),
+    st.sampled_from([(0.05, 0.2, 7.5, 2.25), (0.1, 0.3, 3.0, 1.0), (0.05, 0.1, 20.0, 0.4)]),
+    st.floats(0.0, 0.08),
+    st.tuples(st.integers(0, 70), st.integers(0, 70), st.integers(0, 90), st.integers(0, 90)),
+)
+def test_region_inflation_equals_the_kernels_stamped_at_every_obstacle(seed, kp, density, box):
+    from worker.explore import costmap_kernels as ck
+
+    rng = np.random.default_rng(seed)
+    lethal = rng.random((70, 90)) < density
+    lethal[rng.integers(0, 70), :] = True  # a wall across, with gaps
+    lethal[:, rng.integers(0, 90)] &= rng.random(70) < 0.5
+    kernel = ck.inflation_kernel(*kp)
+    cost = np.full(lethal.shape, 77, dtype=np.uint8)  # stale costs outside the region stay
+    y0, y1 = sorted(box[:2])
+    x0, x1 = sorted(box[2:])
+    ck.inflate_region(lethal, kernel, cost, y0, y1, x0, x1)
+    expected = np.full(lethal.shape, 77, dtype=np.uint8)
+    expected[y0:y1, x0:x1] = _stamped(lethal, kernel)[y0:y1, x0:x1]
+    np.testing.assert_array_equal(cost, expected)
