@@ -39,6 +39,8 @@ class GlobalCostmap:
         self.map_lethal = np.zeros((0, 0), dtype=np.bool_)
         self._kernel = np.zeros((1, 1), dtype=np.uint8)
         self._fresh = np.zeros((0, 0), dtype=np.bool_)  # new obstacle cells to stamp
+        self._tiles = np.zeros((0, 0), dtype=np.bool_)  # blocks obstacles went from
+        self._fresh_tiles = np.zeros((0, 0), dtype=np.bool_)  # blocks with fresh cells
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -111,10 +113,7 @@ class GlobalCostmap:
         if self.params.door_align:
             self._classify_map(prob, off_y, off_x, y0, y1, x0, x1)
         t = _TILE
-        tiles = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.bool_)
-        fresh_tiles = np.zeros_like(tiles)
-        if self._fresh.shape != self.lethal.shape:
-            self._fresh = np.zeros(self.lethal.shape, dtype=np.bool_)
+        tiles, fresh_tiles = self._tile_flags()
         ly0, ly1, lx0, lx1, uy0, uy1, ux0, ux1 = ck.classify_region(
             prob, off_y, off_x, self.params.occupied_thresh, self.lethal, self.unknown,
             y0, y1, x0, x1, tiles, self._fresh, fresh_tiles, t, self.obstacle,
@@ -122,9 +121,27 @@ class GlobalCostmap:
         )  # fmt: skip
         if ly1 > ly0:
             # obstacles that went away: their blocks are recomputed; new ones: stamped in
-            ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t)
-            ck.stamp_fresh(self.lethal, self._kernel, self.inflated, self._fresh, fresh_tiles, t)
+            # (both look at the window's blocks only, and clear the flags they find)
+            box = (ly0 // t, (ly1 + t - 1) // t, lx0 // t, (lx1 + t - 1) // t)
+            ck.inflate_tiles(self.lethal, self._kernel, self.inflated, tiles, t, *box)
+            ck.stamp_fresh(
+                self.lethal, self._kernel, self.inflated, self._fresh, fresh_tiles, t, *box
+            )
         return _union((ly0, ly1, lx0, lx1), (uy0, uy1, ux0, ux1))
+
+    def _tile_flags(self) -> tuple[np.ndarray, np.ndarray]:
+        """The block flags of the inflation updates (kept all clear between updates, so that
+        an update costs its window, not the map) and the fresh-obstacle layer, sized to the
+        grid."""
+        h, w = self.shape
+        t = _TILE
+        shape = ((h + t - 1) // t, (w + t - 1) // t)
+        if self._tiles.shape != shape:
+            self._tiles = np.zeros(shape, dtype=np.bool_)
+            self._fresh_tiles = np.zeros(shape, dtype=np.bool_)
+        if self._fresh.shape != self.lethal.shape:
+            self._fresh = np.zeros(self.lethal.shape, dtype=np.bool_)
+        return self._tiles, self._fresh_tiles
 
     def _classify_map(self, prob, off_y: int, off_x: int, y0: int, y1: int, x0: int, x1: int):
         """map_lethal in the window `[y0, y1) x [x0, x1)`: the map's cells above

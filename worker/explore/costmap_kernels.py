@@ -68,9 +68,13 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
 
     lethal: (H, W) bool; kernel: (2R+1, 2R+1) uint8 stamp; cost: (H, W) uint8 inflated costs.
     A cell's cost is the kernel's value at its nearest obstacle within the kernel's square,
-    what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Exact and in
-    O(R) per cell: first, per row, the distance to the nearest obstacle in that row (two
-    sweeps); then, per cell, the least dy^2 + row distance^2 over the 2R+1 rows around it.
+    what costmap_2d's brushfire computes (nearest obstacle -> highest cost). Exact: first, per
+    row, the distance to the nearest obstacle in that row within R (two sweeps); then, per
+    column, the least dy^2 + row distance^2 over the rows, by the lower envelope of parabolas
+    (Meijster's exact distance transform, integer arithmetic), in O(1) per cell. The kernel is
+    0 past R cells (`effective_inflation_cells`), so an obstacle farther than R in a row or
+    in a column changes no cost, and the rows past R that the envelope also looks at cannot
+    lower a cost under R^2.
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
@@ -81,9 +85,49 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
             table[dy * dy + dx * dx] = kernel[dy + r, dx + r]
-    far = r + 1  # "no obstacle within R in this row"
     ry0 = max(0, y0 - r)
     ry1 = min(h, y1 + r)
+    hd = _row_distances(lethal, r, ry0, ry1, x0, x1)
+    n = ry1 - ry0
+    inf = np.int64(1) << 40  # "no obstacle within R in this row"
+    f = np.empty(n, dtype=np.int64)
+    s = np.empty(n, dtype=np.int64)  # the envelope's parabolas (rows) ...
+    t = np.empty(n, dtype=np.int64)  # ... and where each starts
+    for j in range(x1 - x0):
+        for u in range(n):
+            d = hd[u, j]
+            f[u] = d * d if d <= r else inf
+        q = 0
+        s[0] = 0
+        t[0] = 0
+        for u in range(1, n):
+            while q >= 0 and (t[q] - s[q]) ** 2 + f[s[q]] > (t[q] - u) ** 2 + f[u]:
+                q -= 1
+            if q < 0:
+                q = 0
+                s[0] = u
+            else:
+                i = s[q]
+                start = 1 + (u * u - i * i + f[u] - f[i]) // (2 * (u - i))
+                if start < n:
+                    q += 1
+                    s[q] = u
+                    t[q] = start
+        for u in range(n - 1, -1, -1):
+            iy = ry0 + u
+            if y0 <= iy < y1:
+                best = (u - s[q]) ** 2 + f[s[q]]
+                cost[iy, x0 + j] = table[best] if best <= r * r else 0
+            if u == t[q]:
+                q -= 1
+
+
+@njit(cache=True)
+def _row_distances(lethal, r, ry0, ry1, x0, x1):
+    """`(ry1 - ry0, x1 - x0) int64`: per row, the distance [cells] from each cell of
+    `[x0, x1)` to the nearest lethal cell in that row, R + 1 where none lies within R."""
+    w = lethal.shape[1]
+    far = r + 1
     cx0 = max(0, x0 - r)
     cx1 = min(w, x1 + r)
     hd = np.empty((ry1 - ry0, x1 - x0), dtype=np.int64)
@@ -103,16 +147,7 @@ def inflate_region(lethal, kernel, cost, y0, y1, x0, x1):
                 d = last - xx
                 if d < row[xx - x0]:
                     row[xx - x0] = d
-    for iy in range(y0, y1):
-        for ix in range(x0, x1):
-            best = 2 * r * r + 1
-            for yy in range(max(ry0, iy - r), min(ry1, iy + r + 1)):
-                d = hd[yy - ry0, ix - x0]
-                if d <= r:
-                    d2 = (yy - iy) * (yy - iy) + d * d
-                    if d2 < best:
-                        best = d2
-            cost[iy, ix] = table[best] if best <= 2 * r * r else 0
+    return hd
 
 
 @njit(cache=True)
@@ -172,38 +207,56 @@ def first_colliding_pose(lethal, near, inner, origin_x, origin_y, resolution, po
 
 
 @njit(cache=True)
-def inflate_tiles(lethal, kernel, cost, tiles, tile):
-    """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`.
+def inflate_tiles(lethal, kernel, cost, tiles, tile, ty0, ty1, tx0, tx1):
+    """Re-inflate every `tile x tile` block within reach of a block flagged in `tiles`
+    (the flags cleared here).
 
-    tiles: (ceil(H / tile), ceil(W / tile)) bool, the blocks where obstacle cells went. A
-    cell's cost depends on the obstacles within R (the kernel's radius) only, so the blocks
-    within ceil(R / tile) blocks of a flagged one are all that can change; scattered changes
-    (new walls at both ends of a long corridor) recompute a few blocks, not their bounding box.
+    tiles: (ceil(H / tile), ceil(W / tile)) bool, the blocks where obstacle cells went, all
+    within the block range `[ty0, ty1) x [tx0, tx1)` (the updated window's: the work is the
+    window's, not the map's). A cell's cost depends on the obstacles within R (the kernel's
+    radius) only, so the blocks within ceil(R / tile) blocks of a flagged one are all that
+    can change (from `lethal` alone: in any order); scattered changes recompute a few blocks.
     """
     h, w = lethal.shape
     th, tw = tiles.shape
     r = kernel.shape[0] // 2
     reach = (r + tile - 1) // tile
-    todo = np.zeros((th, tw), dtype=np.bool_)
-    for ty in range(th):
-        for tx in range(tw):
+    oy0, oy1 = max(0, ty0 - reach), min(th, ty1 + reach)
+    ox0, ox1 = max(0, tx0 - reach), min(tw, tx1 + reach)
+    if oy1 <= oy0 or ox1 <= ox0:
+        return
+    todo = np.zeros((oy1 - oy0, ox1 - ox0), dtype=np.bool_)
+    for ty in range(ty0, ty1):
+        for tx in range(tx0, tx1):
             if tiles[ty, tx]:
-                for uy in range(max(0, ty - reach), min(th, ty + reach + 1)):
-                    for ux in range(max(0, tx - reach), min(tw, tx + reach + 1)):
-                        todo[uy, ux] = True
-    for ty in range(th):
-        for tx in range(tw):
-            if todo[ty, tx]:
-                inflate_region(
-                    lethal, kernel, cost, ty * tile, min(h, (ty + 1) * tile), tx * tile,
-                    min(w, (tx + 1) * tile),
-                )  # fmt: skip
+                tiles[ty, tx] = False
+                for uy in range(max(oy0, ty - reach), min(oy1, ty + reach + 1)):
+                    for ux in range(max(ox0, tx - reach), min(ox1, tx + reach + 1)):
+                        todo[uy - oy0, ux - ox0] = True
+    # the blocks to do, in rectangles (a run along a row, grown down while the rows below
+    # have the same run): one recomputation of a big rectangle costs far less than of its
+    # blocks one by one (each looks R rows above and below itself)
+    for ty in range(oy1 - oy0):
+        for tx in range(ox1 - ox0):
+            if not todo[ty, tx]:
+                continue
+            tx1 = tx
+            while tx1 < ox1 - ox0 and todo[ty, tx1]:
+                tx1 += 1
+            ty1 = ty + 1
+            while ty1 < oy1 - oy0 and todo[ty1, tx:tx1].all():
+                ty1 += 1
+            todo[ty:ty1, tx:tx1] = False
+            inflate_region(
+                lethal, kernel, cost, (oy0 + ty) * tile, min(h, (oy0 + ty1) * tile),
+                (ox0 + tx) * tile, min(w, (ox0 + tx1) * tile),
+            )  # fmt: skip
 
 
 @njit(cache=True)
-def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
+def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile, ty0, ty1, tx0, tx1):
     """Raise the costs around the new obstacle cells (`fresh`, cleared here) of the blocks
-    flagged in `tiles` (in place).
+    flagged in `tiles` (all within `[ty0, ty1) x [tx0, tx1)`; the flags cleared here), in place.
 
     A cost is the kernel's value at the nearest obstacle, the max over all of their stamps,
     so a new obstacle only raises costs: its stamp, max-ed in, is the exact update. Cells
@@ -211,10 +264,11 @@ def stamp_fresh(lethal, kernel, cost, fresh, tiles, tile):
     """
     h, w = lethal.shape
     r = kernel.shape[0] // 2
-    for ty in range(tiles.shape[0]):
-        for tx in range(tiles.shape[1]):
+    for ty in range(max(0, ty0), min(tiles.shape[0], ty1)):
+        for tx in range(max(0, tx0), min(tiles.shape[1], tx1)):
             if not tiles[ty, tx]:
                 continue
+            tiles[ty, tx] = False
             for sy in range(ty * tile, min(h, (ty + 1) * tile)):
                 for sx in range(tx * tile, min(w, (tx + 1) * tile)):
                     if not fresh[sy, sx]:

@@ -63,6 +63,38 @@ def align_map_to_world(pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
     return np.array([x, y, th])
 
 
+class ReachCells:
+    """The centres [m] of the `reachable (H, W) bool` world cells, found once: the coverage
+    read every coverage_period costs the reachable cells, not a pass over the world grid."""
+
+    def __init__(self, reachable: np.ndarray, world_resolution: float, world_origin):
+        self.shape = reachable.shape
+        self.iy, self.ix = np.nonzero(reachable)
+        self.xw = world_origin[0] + (self.ix + 0.5) * world_resolution
+        self.yw = world_origin[1] + (self.iy + 0.5) * world_resolution
+
+    def free(self, prob, map_resolution, map_origin, occ_thresh, T_world_map):
+        """`(inside (N,) bool, free (M,) bool)`: which reachable cells' centres fall on the
+        map, and of those, which on a free map cell (arguments as `seen_free`)."""
+        xw = self.xw - T_world_map[0]
+        yw = self.yw - T_world_map[1]
+        c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
+        xm = c * xw + s * yw  # R^T (p_world - t)
+        ym = -s * xw + c * yw
+        mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
+        my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
+        h, w = prob.shape
+        inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
+        p = prob[my[inside], mx[inside]]
+        return inside, ~np.isnan(p) & (p <= occ_thresh)
+
+    def coverage(self, *args) -> float:
+        """Share of the reachable cells whose centre falls on a free map cell (arguments as
+        `seen_free`)."""
+        n = self.iy.size
+        return 0.0 if n == 0 else np.count_nonzero(self.free(*args)[1]) / n
+
+
 def seen_free(
     reachable: np.ndarray,
     world_resolution: float,
@@ -79,28 +111,18 @@ def seen_free(
     frame placed in the world by T_world_map `(3,)`.
     """
     out = np.zeros_like(reachable, dtype=np.bool_)
-    iy, ix = np.nonzero(reachable)
-    if iy.size == 0:
+    cells = ReachCells(reachable, world_resolution, world_origin)
+    if cells.iy.size == 0:
         return out
-    xw = world_origin[0] + (ix + 0.5) * world_resolution - T_world_map[0]
-    yw = world_origin[1] + (iy + 0.5) * world_resolution - T_world_map[1]
-    c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
-    xm = c * xw + s * yw  # R^T (p_world - t)
-    ym = -s * xw + c * yw
-    mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
-    my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
-    h, w = prob.shape
-    inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
-    p = prob[my[inside], mx[inside]]
-    out[iy[inside], ix[inside]] = ~np.isnan(p) & (p <= occ_thresh)
+    inside, free = cells.free(prob, map_resolution, map_origin, occ_thresh, T_world_map)
+    out[cells.iy[inside], cells.ix[inside]] = free
     return out
 
 
-def coverage(reachable: np.ndarray, *args) -> float:
+def coverage(reachable: np.ndarray, world_resolution: float, world_origin, *args) -> float:
     """Share of `reachable (H, W)` world cells whose centre falls on a free cell of the map
     (arguments as `seen_free`)."""
-    n = np.count_nonzero(reachable)
-    return 0.0 if n == 0 else np.count_nonzero(seen_free(reachable, *args)) / n
+    return ReachCells(reachable, world_resolution, world_origin).coverage(*args)
 
 
 @dataclass(frozen=True)

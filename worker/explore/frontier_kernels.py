@@ -9,10 +9,12 @@ from numba import njit
 
 
 @njit(cache=True)
-def update_frontier_region(lethal, unknown, frontier, y0, y1, x0, x1):
+def update_frontier_region(lethal, unknown, frontier, counts, tile, y0, y1, x0, x1):
     """Recompute `frontier[y0:y1, x0:x1]` in place: known free cells with an unknown 4-neighbour.
 
-    lethal, unknown, frontier: (H, W) bool. Returns the change in the number of frontier cells.
+    lethal, unknown, frontier: (H, W) bool; counts: (ceil(H / tile), ceil(W / tile)) int32,
+    the frontier cells of each `tile x tile` block, kept up to date here. Returns the change
+    in the number of frontier cells.
     """
     h, w = lethal.shape
     delta = 0
@@ -27,9 +29,40 @@ def update_frontier_region(lethal, unknown, frontier, y0, y1, x0, x1):
                     or (ix < w - 1 and unknown[iy, ix + 1])
                 )
             if f != frontier[iy, ix]:
-                delta += 1 if f else -1
+                d = 1 if f else -1
+                delta += d
+                counts[iy // tile, ix // tile] += d
                 frontier[iy, ix] = f
     return delta
+
+
+@njit(cache=True)
+def frontier_cells(frontier, counts, tile, n):
+    """`(n, 2) int64 [iy, ix]` the n frontier cells in row-major order (np.argwhere's), read
+    from the blocks that hold some (`counts`, see update_frontier_region): the work follows
+    the frontier, not the grid."""
+    h, w = frontier.shape
+    th, tw = counts.shape
+    out = np.empty((n, 2), dtype=np.int64)
+    busy = np.empty(tw, dtype=np.int64)
+    k = 0
+    for ty in range(th):
+        m = 0
+        for tx in range(tw):
+            if counts[ty, tx] > 0:
+                busy[m] = tx
+                m += 1
+        if m == 0:
+            continue
+        for iy in range(ty * tile, min(h, (ty + 1) * tile)):
+            for j in range(m):
+                tx = busy[j]
+                for ix in range(tx * tile, min(w, (tx + 1) * tile)):
+                    if frontier[iy, ix] and k < n:
+                        out[k, 0] = iy
+                        out[k, 1] = ix
+                        k += 1
+    return out[:k]
 
 
 @njit(cache=True)

@@ -20,6 +20,8 @@ from worker.explore.planner import (
     planner_blocked_cost,
 )
 
+_TILE = 16  # [cells] block size of the frontier cell counts
+
 
 @dataclass(frozen=True)
 class FrontierGoal:
@@ -70,6 +72,9 @@ class FrontierSearch:
         self._seen_origin = np.zeros(2)
         self._run_id = 0
         self._frame_id = -1
+        # frontier cells per _TILE x _TILE block: the clusters are read from the blocks
+        # that hold some, not map-wide
+        self._counts = np.zeros((0, 0), dtype=np.int32)
 
     def update(self, costmap: GlobalCostmap, bbox) -> None:
         """Refresh the frontier cells in `bbox (y0, y1, x0, x1)` grown by one cell (None: all)."""
@@ -85,6 +90,8 @@ class FrontierSearch:
             self._carry_seen(costmap)
             self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0
+            t = _TILE
+            self._counts = np.zeros(((h + t - 1) // t, (w + t - 1) // t), dtype=np.int32)
             bbox = None
         if bbox is None:
             bbox = (0, h, 0, w)
@@ -95,6 +102,8 @@ class FrontierSearch:
             costmap.lethal,
             costmap.unknown,
             self.frontier,
+            self._counts,
+            _TILE,
             max(0, y0 - 1),
             min(h, y1 + 1),
             max(0, x0 - 1),
@@ -133,7 +142,7 @@ class FrontierSearch:
 
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:
         """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
-        cells = np.argwhere(self.frontier).astype(np.int64)
+        cells = fk.frontier_cells(self.frontier, self._counts, _TILE, self.n_frontier_cells)
         self._run_id += 1
         labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
         return cells, labels

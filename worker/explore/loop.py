@@ -12,8 +12,8 @@ import numpy as np
 from worker.errors import SlamFailed
 from worker.evaluate import se2
 from worker.explore.coverage import (
+    ReachCells,
     align_map_to_world,
-    coverage,
     reachable_free,
     seen_free,
     unseen_regions,
@@ -151,6 +151,7 @@ class Exploration:
         self.map_hint = getattr(slam, "will_read_map", None)
         self.last_full_t = 0.0  # [s] the last whole-map re-read
         self.last_cov = 0.0
+        self.reach_cells: ReachCells | None = None  # for the live coverage (on_progress)
         self.next_progress = 0.0  # [s]
 
     def step(self) -> StopReason | None:
@@ -223,7 +224,9 @@ class Exploration:
         p, nav = self.p, self.nav
         self.next_progress += p.progress_period
         if int(round(t / self.dt)) % max(1, int(round(p.coverage_period / self.dt))) == 0:
-            self.last_cov = _coverage(self.world, self.reach, self.slam, self.rec)
+            if self.reach_cells is None:
+                self.reach_cells = ReachCells(self.reach, self.world.resolution, self.world.origin)
+            self.last_cov = _coverage(self.reach_cells, self.slam, self.rec)
         done = sum(g.status in ("reached", "explored") for g in nav.stats.goals)
         goal = None if nav.goal is None else np.asarray(nav.goal.goal_xy, dtype=float)
         live = (goal, nav.path, ranges, self.slam.occupancy)
@@ -340,10 +343,7 @@ def explore(
     return run.result(stop)
 
 
-def _coverage(world, reach, slam, rec: _Recorder) -> float:
+def _coverage(cells: ReachCells, slam, rec: _Recorder) -> float:
     grid = slam.occupancy()
     T = align_map_to_world(rec.buf[: rec.n, 4:7], rec.buf[: rec.n, 1:4])
-    return coverage(
-        reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
-        grid.occ_thresh, T,
-    )  # fmt: skip
+    return cells.coverage(grid.prob, grid.resolution, grid.origin, grid.occ_thresh, T)
