@@ -4,7 +4,8 @@ zygote warms up. Every task runs in a forked child that has limited itself, in i
 `out/result.json`.
 
 - reading uploads ("sandbox" zygotes): `estimate` (an estimate in any format) and
-  `floorplan` (a world's files read into a `Floorplan`: images decoded, YAML or Stage parsed);
+  `floorplan` (a world's files read into a `Floorplan`: images decoded, YAML or Stage parsed;
+  a plan of at most ANALYSE_AT_ONCE pixels analysed there too);
 - analysing worlds ("analysis" zygotes): `world` (a floorplan's regions, clearance, start
   pose and facts) and `predict` (its features and the bundled model's prediction).
 """
@@ -28,13 +29,24 @@ def estimate(req: dict[str, Any]) -> dict[str, Any]:
     return {"n": int(len(t))}
 
 
+ANALYSE_AT_ONCE = 2_000_000  # [pixels] a plan this small is analysed where it was read
+
+
 def floorplan(req: dict[str, Any]) -> dict[str, Any]:
+    """The upload read into a Floorplan's bytes; a small plan analysed here too (a fraction
+    of a second), which spares its world a second process."""
+    from worker.errors import InputError
     from worker.world.floorplan import pack_floorplan
-    from worker.world.loader import read_floorplan
+    from worker.world.loader import build_world, read_floorplan
 
     plan = read_floorplan(Path(req["file"]), req.get("resolution"), max_pixels=req["max_pixels"])
     Path("../out/result.bin").write_bytes(pack_floorplan(plan))
-    return {}
+    if plan.occ.size > ANALYSE_AT_ONCE:
+        return {}
+    try:
+        return {"analysis": _facts(build_world(plan))}
+    except InputError as exc:  # the world will be invalid for it (the upload is stored)
+        return {"analysis": {"error": str(exc)}}
 
 
 def _plan(req: dict[str, Any]):
@@ -48,7 +60,11 @@ def _plan(req: dict[str, Any]):
 def world(req: dict[str, Any]) -> dict[str, Any]:
     from worker.world.loader import build_world
 
-    w = build_world(_plan(req))
+    return _facts(build_world(_plan(req)))
+
+
+def _facts(w) -> dict[str, Any]:
+    """What the API stores of an analysed World besides its floorplan."""
     return {
         "start_pose": [float(v) for v in w.start_pose],
         "facts": dataclasses.asdict(w.facts),
@@ -78,13 +94,18 @@ def warm_up(kind: str) -> None:
     import numpy as np
 
     with tempfile.TemporaryDirectory(prefix="mapqual-warm-") as tmp:
-        if kind == "analysis":
+        if kind == "analysis":  # the `world` and `predict` tasks' own path
             from worker.predict.service import predict_world
+            from worker.world.floorplan import Floorplan, pack_floorplan
             from worker.world.world import World
 
             occ = np.zeros((62, 102), bool)  # a 3 m x 5 m room
             occ[[0, -1], :] = True
             occ[:, [0, -1]] = True
+            plan = Path(tmp) / "warm.bin"
+            plan.write_bytes(pack_floorplan(Floorplan("warm", occ, 0.05, (0, 0), None, None,
+                                                      (), "warm.png")))  # fmt: skip
+            world({"file": str(plan), "max_pixels": occ.size})
             predict_world(World.from_array(occ, 0.05, name="warm"))
             return
         from PIL import Image

@@ -5,7 +5,8 @@ time from the `analysis_*` settings), forked from a warm process that loaded the
 once. The API process never imports what the analysis needs (numba).
 
 The analysis starts from the floorplan the upload sandbox read (`worker.world.floorplan`),
-never from the raw upload. Its outcome is stored by a compare-and-set on `status = pending`,
+never from the raw upload; a small plan's was made where it was read (`remember`), sparing
+its world a second process. Its outcome is stored by a compare-and-set on `status = pending`,
 so a world analysed twice (a restart recovering it while another process still works) keeps
 one result.
 """
@@ -14,10 +15,12 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import hashlib
 import io
 import logging
 import threading
 import zipfile
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -39,6 +42,28 @@ def pack_upload(files: dict[str, bytes]) -> bytes:
         for name in sorted(files):
             zf.writestr(name, files[name])
     return buf.getvalue()
+
+
+# Analyses made where small uploads were read (`backend.sandbox_tasks.floorplan`), by the
+# floorplan bytes' digest, until their world's analysis takes them; the oldest dropped past
+# KNOWN_MAX (a world whose entry is gone is analysed in the analysis sandbox instead).
+KNOWN_MAX = 256
+_KNOWN: OrderedDict[bytes, dict[str, Any]] = OrderedDict()
+_KNOWING = threading.Lock()
+
+
+def remember(blob: bytes, analysis: object) -> None:
+    """Keep the analysis the read of `blob` made (facts, start pose, warnings; or error)."""
+    if isinstance(analysis, dict):
+        with _KNOWING:
+            _KNOWN[hashlib.sha256(blob).digest()] = analysis
+            while len(_KNOWN) > KNOWN_MAX:
+                _KNOWN.popitem(last=False)
+
+
+def _recall(blob: bytes) -> dict[str, Any] | None:
+    with _KNOWING:
+        return _KNOWN.pop(hashlib.sha256(blob).digest(), None)
 
 
 def analyse_world(box: Sandbox, database_url: str, world_id: int) -> WorldStatus | None:
@@ -78,7 +103,11 @@ def _analysed(box: Sandbox, blob: bytes, resolution: float | None, main: str):
     max_pixels = box.settings.max_image_pixels
     if blob.startswith(b"PK"):  # the raw upload an older server stored: read as uploads are
         blob = _read_stored_upload(box, blob, main, resolution)
-    f = box.run("world", {PLAN: blob}, label=main, file=PLAN, max_pixels=max_pixels).facts
+    f = _recall(blob)
+    if f is None:
+        f = box.run("world", {PLAN: blob}, label=main, file=PLAN, max_pixels=max_pixels).facts
+    elif "error" in f:  # analysed where it was read, and refused there
+        raise InputError(str(f["error"])[:500])
     facts, pose, notes = f.get("facts"), f.get("start_pose"), f.get("warnings")
     names = {x.name for x in dataclasses.fields(WorldFacts)}
     if (

@@ -33,7 +33,7 @@ from backend.db.models import World
 from backend.sandbox import shared_sandbox
 from backend.schemas import WorldOut
 from backend.store import create_pending_world, world_occupancy
-from backend.world_analysis import PLAN, world_pool
+from backend.world_analysis import PLAN, remember, world_pool
 from worker.errors import InputError
 from worker.world.floorplan import TEXT_MAX, Floorplan, floorplan_header, pack_floorplan
 from worker.world.image_io import ImageTooLarge
@@ -100,6 +100,7 @@ def read_upload(
     if parsed.blob is None:
         raise InputError(f"{main}: could not be read (no result)")
     floorplan_header(parsed.blob, settings.max_image_pixels)  # InputError if malformed
+    remember(parsed.blob, parsed.facts.get("analysis"))  # a small plan's, made there too
     return parsed.blob
 
 

@@ -23,8 +23,8 @@ from backend.store import create_pending_world
 from backend.world_analysis import WorldPool, pack_upload
 
 
-def _png(value: int | None = None) -> bytes:
-    img = np.full((40, 60), 255, np.uint8)
+def _png(value: int | None = None, shape: tuple[int, int] = (40, 60)) -> bytes:
+    img = np.full(shape, 255, np.uint8)
     img[[0, -1], :] = 0
     img[:, [0, -1]] = 0
     if value is not None:
@@ -52,7 +52,8 @@ def _wait_done(api, world_id: int, seconds: float = 30.0) -> dict:
 
 
 def test_a_world_is_pending_then_ready_and_usable_only_then(api):
-    r = _upload(api, _png())
+    # 9 MP: analysed in the analysis process (past ANALYSE_AT_ONCE), for a second or more
+    r = _upload(api, _png(shape=(3000, 3000)))
     assert r.status_code == 202, r.text
     w = r.json()
     assert w["status"] == "pending" and w["error"] is None
@@ -60,13 +61,13 @@ def test_a_world_is_pending_then_ready_and_usable_only_then(api):
     image = api.get(f"/api/v1/worlds/{w['id']}/image")
     job = api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1})
     # still pending after both requests means it was pending during them (status only moves
-    # forward); a spawned process takes a second to start, so this is the usual case
+    # forward)
     assert api.get(f"/api/v1/worlds/{w['id']}").json()["status"] == "pending"
     assert image.status_code == 409 and "pending" in image.json()["detail"]
     assert job.status_code == 409 and "pending" in job.json()["detail"]
     assert api.get("/api/v1/jobs").json()["total"] == 0
     done = _wait_done(api, w["id"])
-    assert done["status"] == "ready" and (done["width_px"], done["height_px"]) == (60, 40)
+    assert done["status"] == "ready" and (done["width_px"], done["height_px"]) == (3000, 3000)
     assert done["facts"]["free_area_m2"] > 0 and len(done["start_pose"]) == 3
     assert api.get(f"/api/v1/worlds/{w['id']}/image").status_code == 200
     assert api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1}).status_code == 202
@@ -138,8 +139,9 @@ def test_an_analysis_process_that_dies_leaves_its_world_invalid_and_the_next_is_
         ids = [
             create_pending_world(
                 s, owner_id=owner, name=name, sha256=name * 8, source_format="image",
-                source_path=f"{name}.png", upload=pack_upload({f"{name}.png": _png()}),
-                resolution=0.05,
+                source_path=f"{name}.png", resolution=0.05,
+                # past ANALYSE_AT_ONCE: analysed in the analysis process, not where it is read
+                upload=pack_upload({f"{name}.png": _png(shape=(1500, 1400))}),
             ).id
             for name in ("killed", "after")
         ]  # fmt: skip
