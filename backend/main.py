@@ -50,6 +50,7 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
     except SQLAlchemyError as exc:  # no database yet: the API still starts (health says so)
         log.warning("could not look for pending worlds: %s", exc.__class__.__name__)
     sandbox(app).start()  # the upload parsers load while the API starts serving
+    world_pool(app).start()  # and the world analysis's
     try:
         yield
     finally:

@@ -12,6 +12,7 @@ API gets back a validated, typed result or a one-line reason that names no serve
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 import json
 import os
@@ -25,6 +26,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,21 +51,57 @@ SINGLE_THREAD = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "
 
 @dataclass(frozen=True)
 class Parsed:
-    """What a sandbox returned: the task's facts and, for an estimate, its (N, 4) samples."""
+    """What a sandbox returned: the task's facts and, for an estimate, its (N, 4) samples;
+    for a floorplan, its bytes (`worker.world.floorplan`)."""
 
     facts: dict[str, Any]
     samples: np.ndarray | None = None
+    blob: bytes | None = None
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What one task's process may use, and the settings that say so (in its messages)."""
+
+    memory_mb: int  # [MiB] address space
+    cpu_s: int  # [s] CPU time
+    wall_s: float  # [s] wall time
+    temp_mb: int  # [MiB] its temporary folder (and any one file)
+    kind: str  # "sandbox" (reading uploads) or "analysis" (worlds, predictions): the
+    # settings' prefix and which parsers its processes load
+    verb: str  # what the messages say it took too much to do
+
+    @property
+    def done(self) -> str:
+        """What the messages say could not be done."""
+        return "analysed" if self.kind == "analysis" else "read"
+
+    @classmethod
+    def of(cls, settings: Settings, kind: str = "sandbox") -> Limits:
+        s = settings
+        if kind == "analysis":  # its folder holds a floorplan's bits too (1 a pixel)
+            temp = s.sandbox_temp_mb + -(-s.max_image_pixels // (8 * MiB)) + 1
+            return cls(s.analysis_memory_mb, s.analysis_cpu_s, s.analysis_wall_s, temp, kind,
+                       "to analyse")  # fmt: skip
+        return cls(s.sandbox_memory_mb, s.sandbox_cpu_s, s.sandbox_wall_s, s.sandbox_temp_mb,
+                   kind, "to read")  # fmt: skip
+
+    def over(self, what: str, limit: str, setting: str) -> str:
+        """`what` `limit` `verb` (setting ..., environment ...)."""
+        name = f"{self.kind}_{setting}" if setting != "temp_mb" else "sandbox_temp_mb"
+        env = Settings.model_fields[name].alias
+        return f"{what} {limit} {self.verb} (setting {name}, environment {env})"
 
 
 class Zygote:
-    """One warm parser process (`backend.sandbox_child`) serving one upload at a time."""
+    """One warm parser process (`backend.sandbox_child`) serving one task at a time."""
 
-    def __init__(self, root: Path | None):
+    def __init__(self, root: Path | None, kind: str = "sandbox"):
         env = {k: os.environ[k] for k in PASS_ENV if k in os.environ}
         env.update({k: "1" for k in SINGLE_THREAD})
         env.update(PATH="/usr/bin:/bin", HOME=tempfile.gettempdir())
         self.proc = subprocess.Popen(
-            [sys.executable, "-P", "-m", "backend.sandbox_child"], cwd=root, env=env,
+            [sys.executable, "-P", "-m", "backend.sandbox_child", kind], cwd=root, env=env,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             close_fds=True, start_new_session=True,
         )  # fmt: skip
@@ -100,20 +138,25 @@ class Zygote:
 
 
 class Sandbox:
-    """`settings.sandbox_workers` warm parser processes; an upload waits for a free one."""
+    """`workers` warm parser processes (`settings.sandbox_workers` for uploads); a task
+    waits for a free one."""
 
-    def __init__(self, settings: Settings):
+    def __init__(self, settings: Settings, limits: Limits | None = None, workers: int = 0):
         self.settings = settings
+        self.lim = limits or Limits.of(settings)
         self._free: queue.LifoQueue[Zygote | None] = queue.LifoQueue()  # the warmest first
-        for _ in range(settings.sandbox_workers):
+        for _ in range(workers or settings.sandbox_workers):
             self._free.put(None)  # started on first use (or by `start`)
+
+    def _zygote(self) -> Zygote:
+        return Zygote(self.settings.sandbox_dir, self.lim.kind)
 
     def start(self) -> None:
         """Start the idle parser processes now (an API's start-up), not at the first upload."""
         for z in self._drain():
             if z is None or z.proc.poll() is not None:
                 with contextlib.suppress(OSError):
-                    z = Zygote(self.settings.sandbox_dir)
+                    z = self._zygote()
             self._free.put(z)
 
     def _drain(self) -> list[Zygote | None]:
@@ -137,7 +180,7 @@ class Sandbox:
             ) from None
         if z is None or z.proc.poll() is not None:
             try:
-                z = Zygote(self.settings.sandbox_dir)
+                z = self._zygote()
             except OSError:
                 self._free.put(None)
                 raise
@@ -152,29 +195,32 @@ class Sandbox:
             self._free.put(None)
 
     def limits(self) -> dict[str, int]:
-        s = self.settings
+        lim = self.lim
         return {
-            "memory_mb": s.sandbox_memory_mb, "cpu_s": s.sandbox_cpu_s,
-            "temp_mb": s.sandbox_temp_mb, "open_files": OPEN_FILES,
+            "memory_mb": lim.memory_mb, "cpu_s": lim.cpu_s, "temp_mb": lim.temp_mb,
+            "open_files": OPEN_FILES,
         }  # fmt: skip
 
-    def run(self, task: str, files: dict[str, bytes], **args: Any) -> Parsed:
+    def run(self, task: str, files: dict[str, bytes], label: str = "", **args: Any) -> Parsed:
         """Parse `files` (name -> bytes; names already checked as plain file names) with
-        `task` (estimate: file, topic; floorplan: file, resolution, max_pixels). InputError
-        (a 400) or ImageTooLarge (413) with one line; 503 when every parser stays busy."""
-        z = self._take(QUEUE_WAITS * self.settings.sandbox_wall_s)
-        healthy = False
+        `task` (estimate: file, topic; floorplan: file, resolution, max_pixels; world and
+        predict: file, max_pixels (and slam)); `label` names the upload in messages (default:
+        `file`). InputError (a 400) or ImageTooLarge (413) with one line; 503 when every
+        parser stays busy."""
+        z = self._take(QUEUE_WAITS * self.lim.wall_s)
+        healthy = False  # a parser that answered serves the next task, whatever it answered
         try:
-            parsed, healthy = self._run(z, task, files, args)
-            return parsed
+            with self._folder(task, files, args) as work:
+                failure, healthy = self._serve(z, work)
+                return self._result(work, failure, label or args.get("file", ""))
         finally:
             if not healthy:
                 z.stop()
             self._free.put(z if healthy else None)
 
-    def _run(
-        self, z: Zygote, task: str, files: dict[str, bytes], args: dict[str, Any]
-    ) -> tuple[Parsed, bool]:
+    @contextlib.contextmanager
+    def _folder(self, task: str, files: dict[str, bytes], args: dict[str, Any]) -> Iterator[Path]:
+        """A task's folder (`in/` the files, `out/`, `tmp/`, request.json), removed after."""
         root = self.settings.sandbox_dir
         if root is not None:
             root.mkdir(parents=True, exist_ok=True)
@@ -187,10 +233,9 @@ class Sandbox:
             unpacked = self.settings.upload_unpacked_mb * MiB
             request = {"task": task, "limits": self.limits(), "unpacked_bytes": unpacked, **args}
             (work / "request.json").write_text(json.dumps(request))
-            failure, healthy = self._serve(z, work)
-            return self._result(work, failure, args.get("file", "")), healthy
-        finally:
-            shutil.rmtree(work, ignore_errors=True)
+            yield work
+        finally:  # off the answer's path: removing four folders takes ~15 ms on a busy disk
+            _REMOVER.submit(shutil.rmtree, work, ignore_errors=True)
 
     def _serve(self, z: Zygote, work: Path) -> tuple[str | None, bool]:
         """Hand `work` to the zygote and watch its child: (what ended it early, or None;
@@ -198,35 +243,37 @@ class Sandbox:
         if not z.ready:
             z.ready = z.line(STARTUP_S) is not None  # loading the parsers: a few seconds
             if not z.ready:
-                return "could not be read (no parser process started)", False
+                return f"could not be {self.lim.done} (no parser process started)", False
         z.send(work)
         started = z.line(STARTUP_S)
         if started is None or not isinstance(started.get("pid"), int):
-            return "could not be read (no parser process started)", False
+            return f"could not be {self.lim.done} (no parser process started)", False
         pid = started["pid"]
-        s = self.settings
-        deadline = time.monotonic() + s.sandbox_wall_s
+        lim = self.lim
+        deadline = time.monotonic() + lim.wall_s
+        disk = lim.over("needs more than", f"{lim.temp_mb} MiB of disk", "temp_mb")
         failure = None
         while (done := z.line(POLL_S)) is None:
             if z.proc.poll() is not None:
-                return "could not be read (its parser stopped unexpectedly)", False
+                return f"could not be {self.lim.done} (its parser stopped unexpectedly)", False
             if time.monotonic() > deadline:
-                failure = _over("took more than", f"{s.sandbox_wall_s:g} s", "sandbox_wall_s")
-            elif folder_bytes(work) > s.sandbox_temp_mb * MiB:
-                failure = _over(
-                    "needs more than", f"{s.sandbox_temp_mb} MiB of disk", "sandbox_temp_mb"
-                )  # noqa: E501
+                failure = lim.over("took more than", f"{lim.wall_s:g} s", "wall_s")
+            elif folder_bytes(work) > lim.temp_mb * MiB:
+                failure = disk
             if failure is not None:
                 _kill(pid)
                 done = z.line(STARTUP_S)
                 break
         code = None if done is None else done.get("status")
-        if failure is None and code in (-signal.SIGXCPU, -signal.SIGKILL):
-            failure = _over("took more than", f"{s.sandbox_cpu_s} s of CPU", "sandbox_cpu_s")
+        cpu = done.get("cpu_s") if done is not None else None
+        # SIGXCPU at the limit, or SIGKILL (soft = hard); a SIGKILL from elsewhere is no CPU's
+        on_cpu = code == -signal.SIGXCPU or (
+            code == -signal.SIGKILL and isinstance(cpu, (int, float)) and cpu >= lim.cpu_s - 0.5
+        )
+        if failure is None and on_cpu:
+            failure = lim.over("took more than", f"{lim.cpu_s} s of CPU", "cpu_s")
         if failure is None and code == -signal.SIGXFSZ:
-            failure = _over(
-                "needs more than", f"{s.sandbox_temp_mb} MiB of disk", "sandbox_temp_mb"
-            )  # noqa: E501
+            failure = disk
         return failure, done is not None
 
     def _result(self, work: Path, failure: str | None, name: str) -> Parsed:
@@ -236,26 +283,26 @@ class Sandbox:
             raise InputError(f"{name}: {failure}")
         out = _read_json(work / "out" / "result.json")
         if out is None:
-            raise InputError(f"{name}: could not be read (its parser stopped unexpectedly)")
+            raise InputError(
+                f"{name}: could not be {self.lim.done} (its parser stopped unexpectedly)"
+            )
         if not out.get("ok"):
             kind = out.get("kind")
             if kind == "memory":
-                mb = f"{self.settings.sandbox_memory_mb} MiB of memory"
-                raise InputError(f"{name}: {_over('needs more than', mb, 'sandbox_memory_mb')}")
+                mb = f"{self.lim.memory_mb} MiB of memory"
+                raise InputError(f"{name}: {self.lim.over('needs more than', mb, 'memory_mb')}")
             reason = scrub_paths(str(out.get("error", ""))[:500], work) or "cannot be read"
             raise (ImageTooLarge if kind == "too_large" else InputError)(reason)
-        samples = None
+        samples, blob = None, None
+        bin_ = work / "out" / "result.bin"
+        if bin_.is_file() and bin_.stat().st_size <= RESULT_MAX:
+            blob = bin_.read_bytes()
         npy = work / "out" / "trajectory.npy"
         if npy.is_file() and npy.stat().st_size <= RESULT_MAX:
             samples = np.load(npy, allow_pickle=False)
             if samples.dtype != np.float64 or samples.ndim != 2 or samples.shape[1] != 4:
-                raise InputError(f"{name}: could not be read (a malformed result)")
-        return Parsed({k: v for k, v in out.items() if k != "ok"}, samples)
-
-
-def _over(what: str, limit: str, setting: str) -> str:
-    env = Settings.model_fields[setting].alias
-    return f"{what} {limit} to read (setting {setting}, environment {env})"
+                raise InputError(f"{name}: could not be {self.lim.done} (a malformed result)")
+        return Parsed({k: v for k, v in out.items() if k != "ok"}, samples, blob)
 
 
 def _kill(pid: int) -> None:
@@ -319,16 +366,20 @@ def _last(path: str) -> str:
     return Path(path).name or "."
 
 
+_REMOVER = cf.ThreadPoolExecutor(1, thread_name_prefix="mapqual-sandbox-rm")
 _MAKING = threading.Lock()
-_SHARED: dict[int, tuple[Settings, Sandbox]] = {}
+_SHARED: dict[tuple[int, str], tuple[Settings, Sandbox]] = {}
 
 
-def shared_sandbox(settings: Settings) -> Sandbox:
-    """The process's sandbox for these settings (one pool per settings object: an app's)."""
+def shared_sandbox(settings: Settings, kind: str = "sandbox") -> Sandbox:
+    """The process's sandbox for these settings (one pool per settings object, an app's, and
+    kind: "sandbox" reads uploads, "analysis" analyses worlds with `world_workers`)."""
     with _MAKING:
-        found = _SHARED.get(id(settings))
+        found = _SHARED.get((id(settings), kind))
         if found is None or found[0] is not settings:
-            found = _SHARED[id(settings)] = (settings, Sandbox(settings))
+            workers = settings.world_workers if kind == "analysis" else 0
+            box = Sandbox(settings, Limits.of(settings, kind), workers)
+            found = _SHARED[(id(settings), kind)] = (settings, box)
         return found[1]
 
 

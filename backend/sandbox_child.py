@@ -1,5 +1,5 @@
-"""The upload sandbox's processes: a zygote that loads the parsers once, and per upload a
-forked child that limits itself, parses the upload and writes a typed result.
+"""The sandbox's processes: a zygote that loads the parsers (or the world analysis) once, and
+per task a forked child that limits itself, runs the task and writes a typed result.
 
 The zygote is started by `backend.sandbox` with an allow-listed environment (no database or
 broker URL, no secret key). Each child works in a temporary folder of its own (`in/` the
@@ -7,14 +7,17 @@ uploaded files, `out/` the result, `tmp/` its TMPDIR), in a session of its own, 
 hard limits before it reads a byte of the upload: address space, CPU seconds, bytes a file
 may grow to, open files, no core dumps; and the decompression budget. The result is
 `out/result.json` ({"ok": true, ...} or {"ok": false, "kind": ..., "error": one line}) and,
-for an estimate, `out/trajectory.npy` (N x 4 float64: t, x, y, yaw).
+for an estimate, `out/trajectory.npy` (N x 4 float64: t, x, y, yaw); for a floorplan,
+`out/result.bin` (`worker.world.floorplan`). The tasks are `backend.sandbox_tasks`'.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import resource
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -33,32 +36,14 @@ def limit_self(limits: dict[str, int]) -> None:
         (resource.RLIMIT_CORE, 0),
     ):
         resource.setrlimit(rlimit, (value, value))
-
-
-def _estimate(req: dict[str, Any]) -> dict[str, Any]:
-    import numpy as np
-
-    from worker.export.untrusted import read_upload_estimate
-
-    est = read_upload_estimate(Path(req["file"]), req.get("topic"), req["unpacked_bytes"])
-    t = np.asarray(est.t, np.float64)
-    data = np.column_stack([t, np.asarray(est.poses, np.float64).reshape(len(t), 3)])
-    np.save(Path("../out/trajectory.npy"), data, allow_pickle=False)
-    return {"n": int(len(t))}
-
-
-def _floorplan(req: dict[str, Any]) -> dict[str, Any]:
-    from worker.world.refs import check_floorplan
-
-    check_floorplan(Path(req["file"]), req.get("resolution"), int(req["max_pixels"]))
-    return {}
-
-
-TASKS = {"estimate": _estimate, "floorplan": _floorplan}
+    # Python ignores SIGXFSZ (a write past RLIMIT_FSIZE fails with EFBIG, which a parser may
+    # take for a damaged file); by default it ends the process, which the API reports.
+    signal.signal(signal.SIGXFSZ, signal.SIG_DFL)
 
 
 def run(req: dict[str, Any]) -> dict[str, Any]:
     """The task's outcome as the result's JSON (every failure a one-line reason)."""
+    from backend.sandbox_tasks import TASKS
     from worker.errors import InputError
     from worker.export.bounded import bound_bag_readers, set_budget
     from worker.world.image_io import ImageTooLarge
@@ -74,6 +59,10 @@ def run(req: dict[str, Any]) -> dict[str, Any]:
         return {"ok": False, "kind": "input", "error": str(exc)}
     except MemoryError:
         return {"ok": False, "kind": "memory", "error": ""}
+    except OSError as exc:
+        if exc.errno == errno.ENOMEM:  # a read or a mapping refused at the address-space limit
+            return {"ok": False, "kind": "memory", "error": ""}
+        return {"ok": False, "kind": "input", "error": f"cannot be read ({type(exc).__name__})"}
     except RecursionError:
         return {"ok": False, "kind": "input", "error": "nested too deeply to be read"}
     except Exception as exc:  # noqa: BLE001 - a hostile file fails deep in a parser
@@ -99,35 +88,14 @@ def serve(work: Path) -> int:
     return 0
 
 
-def warm_up() -> None:
-    """Import the parsers and run each once on a tiny file, so that forked children start
-    with everything loaded and compiled (numba kernels included)."""
-    import tempfile
-
-    import numpy as np
-
-    from worker.export.bounded import bound_bag_readers
-    from worker.export.untrusted import read_upload_estimate
-    from worker.world.refs import check_floorplan
-
-    bound_bag_readers()
-    with tempfile.TemporaryDirectory(prefix="mapqual-warm-") as tmp:
-        tum = Path(tmp) / "warm.tum"
-        lines = [f"{i * 0.1:.1f} {i * 0.01} 0 0 0 0 0 1" for i in range(50)]
-        tum.write_text("\n".join(lines) + "\n")
-        est = read_upload_estimate(tum, None, 1 << 20)
-        np.column_stack([est.t, est.poses])
-        png = Path(tmp) / "warm.png"
-        from PIL import Image
-
-        Image.fromarray(np.full((8, 8), 255, np.uint8)).save(png)
-        check_floorplan(png, 0.05, 1000)
-
-
-def zygote() -> int:
+def zygote(kind: str) -> int:
     """Serve requests from the API, one at a time: a line {"work": folder} in, a forked child
-    serves it; lines {"pid": ...} then {"status": exit code (negative: a signal)} out."""
-    warm_up()
+    serves it; lines {"pid": ...} then {"status": exit code (negative: a signal), "cpu_s": its
+    CPU time} out. `kind`:
+    which code it loads first ("sandbox": the upload parsers, "analysis": world analysis)."""
+    from backend.sandbox_tasks import warm_up
+
+    warm_up(kind)
     out = sys.stdout.buffer
     out.write(b'{"ready": true}\n')
     out.flush()
@@ -143,11 +111,13 @@ def zygote() -> int:
                 os._exit(code)
         out.write(json.dumps({"pid": pid}).encode() + b"\n")
         out.flush()
-        _, st = os.waitpid(pid, 0)
-        out.write(json.dumps({"status": os.waitstatus_to_exitcode(st)}).encode() + b"\n")
+        _, st, usage = os.wait4(pid, 0)
+        cpu = usage.ru_utime + usage.ru_stime
+        done = {"status": os.waitstatus_to_exitcode(st), "cpu_s": cpu}
+        out.write(json.dumps(done).encode() + b"\n")
         out.flush()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(zygote())
+    sys.exit(zygote(sys.argv[1] if len(sys.argv) > 1 else "sandbox"))

@@ -1,36 +1,42 @@
-"""Uploaded worlds analysed off the request thread: a bounded pool of spawned processes per
-API process turns a `pending` world into `ready` (geometry stored) or `invalid` (reason).
+"""Uploaded worlds analysed off the request thread: `world_workers` threads per API process
+turn a `pending` world into `ready` (geometry stored) or `invalid` (reason), each analysis in
+a limited process of its own (`backend.sandbox`, kind "analysis": address space, CPU and wall
+time from the `analysis_*` settings), forked from a warm process that loaded the analysis
+once. The API process never imports what the analysis needs (numba).
 
-The pool's processes are spawned, not forked, so the API process never imports what the
-analysis needs (the loader's numeric stack) and no lock or connection is inherited. Each
-process writes its result itself, by a compare-and-set on `status = pending`, so a world
-analysed twice (a restart recovering it while another process still works) keeps one result.
+The analysis starts from the floorplan the upload sandbox read (`worker.world.floorplan`),
+never from the raw upload; a small plan's was made where it was read (`remember`), sparing
+its world a second process. Its outcome is stored by a compare-and-set on `status = pending`,
+so a world analysed twice (a restart recovering it while another process still works) keeps
+one result.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
+import hashlib
 import io
 import logging
-import multiprocessing as mp
-import tempfile
 import threading
 import zipfile
-from pathlib import Path
+from collections import OrderedDict
 from typing import Any
 
+import numpy as np
+
+from backend.sandbox import Sandbox, shared_sandbox
 from worker.status import WorldStatus
 
 log = logging.getLogger("mapqual.worlds")
 
-CRASHED = (
-    "the analysis of this world stopped unexpectedly (its process died, e.g. out of memory); "
-    "upload it again to retry"
-)
+CRASHED = "the analysis of this world stopped unexpectedly; upload it again to retry"
+PLAN = "floorplan.bin"  # the floorplan's file name in the analysis's folder
 
 
 def pack_upload(files: dict[str, bytes]) -> bytes:
-    """The uploaded files (name -> bytes) in one blob (a stored, uncompressed zip)."""
+    """The uploaded files (name -> bytes) in one blob (a stored, uncompressed zip): what a
+    pending world held before floorplans were read in the request (still analysed)."""
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
         for name in sorted(files):
@@ -38,28 +44,34 @@ def pack_upload(files: dict[str, bytes]) -> bytes:
     return buf.getvalue()
 
 
-def unpack_upload(blob: bytes, folder: Path) -> None:
-    """Write the files of `pack_upload`'s blob into `folder` (names are plain file names)."""
-    with zipfile.ZipFile(io.BytesIO(blob)) as zf:
-        for name in zf.namelist():
-            (folder / Path(name).name).write_bytes(zf.read(name))
+# Analyses made where small uploads were read (`backend.sandbox_tasks.floorplan`), by the
+# floorplan bytes' digest, until their world's analysis takes them; the oldest dropped past
+# KNOWN_MAX (a world whose entry is gone is analysed in the analysis sandbox instead).
+KNOWN_MAX = 256
+_KNOWN: OrderedDict[bytes, dict[str, Any]] = OrderedDict()
+_KNOWING = threading.Lock()
 
 
-def without_folder(message: str, folder: Path) -> str:
-    """A loader message naming the uploaded files, not the server's temporary folder (the
-    folder itself, e.g. from `image: .`, shown as `.`)."""
-    from backend.sandbox import scrub_paths
+def remember(blob: bytes, analysis: object) -> None:
+    """Keep the analysis the read of `blob` made (facts, start pose, warnings; or error)."""
+    if isinstance(analysis, dict):
+        with _KNOWING:
+            _KNOWN[hashlib.sha256(blob).digest()] = analysis
+            while len(_KNOWN) > KNOWN_MAX:
+                _KNOWN.popitem(last=False)
 
-    return scrub_paths(message, folder)
+
+def _recall(blob: bytes) -> dict[str, Any] | None:
+    with _KNOWING:
+        return _KNOWN.pop(hashlib.sha256(blob).digest(), None)
 
 
-def analyse_world(database_url: str, world_id: int, max_pixels: int) -> WorldStatus | None:
-    """In a pool process: load the pending world's upload as `load_world` does and store the
-    outcome; returns the world's status afterwards (None: nothing was left to do)."""
+def analyse_world(box: Sandbox, database_url: str, world_id: int) -> WorldStatus | None:
+    """Analyse the pending world's floorplan in `box` and store the outcome; returns the
+    world's status afterwards (None: nothing was left to do)."""
     from backend.db.session import session_scope
     from backend.store import mark_world_invalid, mark_world_ready, world_upload
     from worker.errors import InputError
-    from worker.world.loader import load_world
 
     with session_scope(database_url) as s:
         found = world_upload(s, world_id)
@@ -67,16 +79,13 @@ def analyse_world(database_url: str, world_id: int, max_pixels: int) -> WorldSta
         return None  # finished meanwhile (or deleted): nothing to do
     blob, resolution, main = found
     world, error = None, None
-    with tempfile.TemporaryDirectory(prefix="mapqual-world-") as tmp:
-        folder = Path(tmp)
-        try:
-            unpack_upload(blob, folder)
-            world = load_world(folder / main, resolution, max_pixels=max_pixels)
-        except InputError as exc:
-            error = without_folder(str(exc), folder)
-        except Exception as exc:  # a loader bug must not leave the world pending forever
-            log.exception("analysis of world %s failed", world_id)
-            error = f"the floorplan could not be analysed ({exc.__class__.__name__})"
+    try:
+        world = _analysed(box, blob, resolution, main)
+    except InputError as exc:
+        error = str(exc)
+    except Exception as exc:  # a bug of ours must not leave the world pending forever
+        log.exception("analysis of world %s failed", world_id)
+        error = f"the floorplan could not be analysed ({exc.__class__.__name__})"
     with session_scope(database_url) as s:
         if world is not None:
             mark_world_ready(s, world_id, world)
@@ -85,17 +94,64 @@ def analyse_world(database_url: str, world_id: int, max_pixels: int) -> WorldSta
         return WorldStatus.INVALID
 
 
-class WorldPool:
-    """`workers` spawned processes that analyse worlds; a pool broken by a dying process is
-    replaced, and the worlds it held are marked invalid (they can be uploaded again)."""
+def _analysed(box: Sandbox, blob: bytes, resolution: float | None, main: str):
+    """The World of a stored floorplan, its analysis done in `box`; its facts checked."""
+    from worker.errors import InputError
+    from worker.world.floorplan import unpack_floorplan
+    from worker.world.world import World, WorldFacts
 
-    def __init__(self, database_url: str, workers: int, max_pixels: int):
-        self.database_url = database_url
-        self.workers = workers
-        self.max_pixels = max_pixels
+    max_pixels = box.settings.max_image_pixels
+    if blob.startswith(b"PK"):  # the raw upload an older server stored: read as uploads are
+        blob = _read_stored_upload(box, blob, main, resolution)
+    f = _recall(blob)
+    if f is None:
+        f = box.run("world", {PLAN: blob}, label=main, file=PLAN, max_pixels=max_pixels).facts
+    elif "error" in f:  # analysed where it was read, and refused there
+        raise InputError(str(f["error"])[:500])
+    facts, pose, notes = f.get("facts"), f.get("start_pose"), f.get("warnings")
+    names = {x.name for x in dataclasses.fields(WorldFacts)}
+    if (
+        not isinstance(facts, dict) or set(facts) != names
+        or not all(v is None or type(v) in (int, float, bool) for v in facts.values())
+        or not isinstance(pose, list) or len(pose) != 3
+        or not all(type(v) in (int, float) and np.isfinite(v) for v in pose)
+        or not isinstance(notes, list) or not all(isinstance(n, str) for n in notes)
+    ):  # fmt: skip
+        raise InputError(f"{main}: could not be analysed (a malformed result)")
+    plan = unpack_floorplan(blob, max_pixels)
+    return World(
+        name=plan.name, occ=plan.occ, resolution=plan.resolution,
+        origin=np.asarray(plan.origin, float), start_pose=np.asarray(pose, float),
+        facts=WorldFacts(**facts), warnings=tuple(notes), source=main,
+    )  # fmt: skip
+
+
+def _read_stored_upload(box: Sandbox, blob: bytes, main: str, resolution: float | None) -> bytes:
+    """A floorplan's bytes from `pack_upload`'s zip (stored by this server, its names plain
+    file names), read in the upload sandbox."""
+    from backend.api.routes.worlds import read_upload
+
+    with zipfile.ZipFile(io.BytesIO(blob)) as zf:
+        files = {name: zf.read(name) for name in zf.namelist()}
+    return read_upload(box.settings, files, main, resolution)
+
+
+class WorldPool:
+    """`world_workers` threads that analyse worlds, each in the analysis sandbox's limited
+    processes; a world whose analysis failed on our side is marked invalid (it can be
+    uploaded again)."""
+
+    def __init__(self, settings: Any):
+        self.database_url = settings.database_url
+        self.box = shared_sandbox(settings, "analysis")
         self._lock = threading.Lock()
-        self._executor: cf.ProcessPoolExecutor | None = None
+        self._workers = settings.world_workers
+        self._executor: cf.ThreadPoolExecutor | None = None
         self._futures: dict[int, cf.Future[WorldStatus | None]] = {}
+
+    def start(self) -> None:
+        """Start the analysis processes now (an API's start-up), not at the first upload."""
+        self.box.start()
 
     def submit(self, world_id: int) -> cf.Future[WorldStatus | None]:
         """The analysis of `world_id` (the one already under way, if any)."""
@@ -104,12 +160,10 @@ class WorldPool:
             if running is not None and not running.done():
                 return running
             if self._executor is None:
-                self._executor = cf.ProcessPoolExecutor(
-                    self.workers, mp_context=mp.get_context("spawn")
+                self._executor = cf.ThreadPoolExecutor(
+                    self._workers, thread_name_prefix="mapqual-world"
                 )
-            future = self._executor.submit(
-                analyse_world, self.database_url, world_id, self.max_pixels
-            )
+            future = self._executor.submit(analyse_world, self.box, self.database_url, world_id)
             self._futures[world_id] = future
         future.add_done_callback(lambda f: self._done(world_id, f))
         return future
@@ -130,9 +184,6 @@ class WorldPool:
         if exc is None:
             return
         log.error("analysis of world %s failed: %r", world_id, exc)
-        if isinstance(exc, cf.process.BrokenProcessPool):
-            with self._lock:
-                self._executor = None  # the next submit starts a fresh pool
         self._mark_invalid(world_id)
 
     def _mark_invalid(self, world_id: int) -> None:
@@ -146,21 +197,20 @@ class WorldPool:
             log.exception("could not mark world %s invalid", world_id)
 
     def shutdown(self) -> None:
-        """Stop the processes; queued analyses are dropped (their worlds stay pending)."""
+        """Stop the threads and the idle analysis processes; queued analyses are dropped
+        (their worlds stay pending)."""
         with self._lock:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
+        self.box.shutdown()
 
 
 def world_pool(app: Any) -> WorldPool:
     """The app's pool (made on first use, with the app's settings)."""
     pool = getattr(app.state, "world_pool", None)
     if pool is None:
-        settings = app.state.settings
-        pool = app.state.world_pool = WorldPool(
-            settings.database_url, settings.world_workers, settings.max_image_pixels
-        )
+        pool = app.state.world_pool = WorldPool(app.state.settings)
     return pool
 
 

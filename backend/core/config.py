@@ -70,6 +70,12 @@ class Settings(BaseSettings):
     # is unpacked from it), made under this folder (unset: the system's temporary folder).
     sandbox_temp_mb: int = Field(default=96, ge=1, alias="MAPQUAL_SANDBOX_TEMP_MB")
     sandbox_dir: Path | None = Field(default=None, alias="MAPQUAL_SANDBOX_DIR")
+    # A world's analysis and its predictions (`backend.world_analysis`) run after the upload
+    # was read, in processes of their own (`world_workers` of them) with this much address
+    # space [MiB], CPU time [s] and wall time [s] each.
+    analysis_memory_mb: int = Field(default=4096, ge=512, alias="MAPQUAL_ANALYSIS_MEMORY_MB")
+    analysis_cpu_s: int = Field(default=120, ge=1, alias="MAPQUAL_ANALYSIS_CPU_S")
+    analysis_wall_s: float = Field(default=180.0, gt=0, alias="MAPQUAL_ANALYSIS_WALL_S")
     # Bytes one upload may decompress to in all [MiB]: zip members, bag chunks, gzip.
     upload_unpacked_mb: int = Field(default=64, ge=1, alias="MAPQUAL_UPLOAD_UNPACKED_MB")
     # A running run whose attempt gave no sign of life for this long [s] may be taken over by

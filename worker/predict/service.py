@@ -8,19 +8,30 @@ import concurrent.futures as cf
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from worker.errors import InputError
-from worker.predict.model import load_model, predict
-from worker.world.features import world_features
-from worker.world.world import World
+from worker.predict.model import load_model
+
+if TYPE_CHECKING:
+    from worker.world.world import World
+
+# How a cache computes a prediction: (what `get` was given, the algorithm, the model) -> it.
+Compute = Callable[[Callable[[], Any], str, dict[str, Any]], dict]
 
 
 def predict_world(world: World, slam: str = "rbpf", model: dict[str, Any] | None = None) -> dict:
     """The JSON-ready prediction for `world` (features from the grid alone: uploads keep no
     segmentation image) with the bundled model unless `model` is given."""
+    from worker.predict.model import predict
+    from worker.world.features import world_features  # numba: where predictions are made
+
     p = predict(model if model is not None else load_model(), world_features(world), slam)
     return {"world": world.name, **p.as_dict()}
+
+
+def _in_process(world_of: Callable[[], Any], slam: str, model: dict[str, Any]) -> dict:
+    return predict_world(world_of(), slam, model)
 
 
 class PredictionCache:
@@ -28,10 +39,13 @@ class PredictionCache:
     recently used dropped first; thread-safe. Computed in a pool of `workers` threads, one
     computation per (world content, algorithm) however many requests ask at once (the others
     wait for it); an algorithm the model has no part for is refused before any feature work.
+    `compute` makes a prediction from `get`'s `world_of` (default: the World it returns,
+    here; the API's computes in a limited process of its own).
     """
 
-    def __init__(self, size: int = 256, workers: int = 1):
+    def __init__(self, size: int = 256, workers: int = 1, compute: Compute = _in_process):
         self.size = size
+        self._compute_one = compute
         self._items: OrderedDict[tuple, tuple[bool, Any]] = OrderedDict()
         self._flights: dict[tuple, cf.Future[tuple[bool, Any]]] = {}
         self._lock = threading.Lock()
@@ -45,7 +59,7 @@ class PredictionCache:
                 self._model = load_model()
             return self._model
 
-    def get(self, key: tuple, world_of: Callable[[], World], slam: str) -> dict:
+    def get(self, key: tuple, world_of: Callable[[], Any], slam: str) -> dict:
         """The prediction cached under (key, slam), else computed from `world_of()` (once,
         whoever else asks meanwhile); InputError, cached too, when none can be made."""
         model = self.model()
@@ -65,10 +79,10 @@ class PredictionCache:
         return _outcome(flight.result())
 
     def _compute(
-        self, full: tuple, world_of: Callable[[], World], slam: str, model: dict[str, Any]
+        self, full: tuple, world_of: Callable[[], Any], slam: str, model: dict[str, Any]
     ) -> tuple[bool, Any]:
         try:
-            out: tuple[bool, Any] = (True, predict_world(world_of(), slam, model))
+            out: tuple[bool, Any] = (True, self._compute_one(world_of, slam, model))
         except InputError as exc:  # the world's own fault: as lasting as the world's content
             out = (False, str(exc))
         except BaseException:

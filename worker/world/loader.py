@@ -9,6 +9,7 @@ import numpy as np
 
 from worker.errors import InputError
 from worker.sim.params import FOOTPRINT_M
+from worker.world.floorplan import Floorplan
 from worker.world.image_io import MAX_PIXELS, read_grey
 from worker.world.refs import (
     check_resolution,
@@ -39,6 +40,23 @@ def load_world(
     key `segmentation:`. Files a YAML or `.world` names must lie under its folder unless
     `allow_outside` (see `worker.world.refs`). Raises InputError on any bad input.
     """
+    plan = read_floorplan(
+        path, resolution, start_pose=start_pose, segmentation=segmentation,
+        max_pixels=max_pixels, allow_outside=allow_outside,
+    )  # fmt: skip
+    return build_world(plan, footprint_m)
+
+
+def read_floorplan(
+    path: str | Path,
+    resolution: float | None = None,
+    *,
+    start_pose: tuple[float, float, float] | None = None,
+    segmentation: str | Path | None = None,
+    max_pixels: int = MAX_PIXELS,
+    allow_outside: bool = False,
+) -> Floorplan:
+    """The floorplan's files read (what `load_world` reads, nothing analysed yet)."""
     path = Path(path)
     if not path.exists():
         raise InputError("no such file", path=path)
@@ -46,13 +64,9 @@ def load_world(
         raise InputError("is a folder, not a floorplan file", path=path)
     suffix = path.suffix.lower()
     if suffix in (".yaml", ".yml"):
-        return _load_yaml(
-            path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
-        )
+        return _read_yaml(path, resolution, start_pose, segmentation, max_pixels, allow_outside)
     if suffix == ".world":
-        return _load_stage(
-            path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
-        )
+        return _read_stage(path, resolution, start_pose, segmentation, max_pixels, allow_outside)
     if resolution is None:
         raise InputError("an image needs its resolution in m/pixel (--resolution)", path=path)
     grey, alpha = read_grey(path, max_pixels)
@@ -61,33 +75,30 @@ def load_world(
     if alpha is not None:
         free &= alpha >= 128
         notes.append("transparent pixels count as obstacles")
-    return _build(
-        path.stem,
-        free,
-        resolution,
-        (0.0, 0.0),
-        start_pose,
-        segmentation,
-        path,
-        max_pixels,
-        footprint_m,
+    return _plan(
+        path.stem, free, resolution, (0.0, 0.0), start_pose, segmentation, path, max_pixels,
         notes,
-    )
+    )  # fmt: skip
 
 
-def _build(
-    name,
-    free_img,
-    resolution,
-    origin,
-    start_pose,
-    segmentation,
-    source,
-    max_pixels,
-    footprint_m,
-    notes,
-) -> World:
-    """Flip the image rows to the grid's bottom-first order, count rooms, build the World."""
+def build_world(plan: Floorplan, footprint_m: float = FOOTPRINT_M) -> World:
+    """The World of a read floorplan: free regions, clearance, start pose, facts."""
+    try:
+        return World.from_array(
+            plan.occ, plan.resolution, plan.origin, plan.start_pose, plan.name,
+            footprint_m=footprint_m, n_rooms=plan.n_rooms, warnings=plan.notes,
+            source=plan.source,
+        )  # fmt: skip
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise InputError(str(exc), path=plan.source) from None
+
+
+def _plan(
+    name, free_img, resolution, origin, start_pose, segmentation, source, max_pixels, notes
+) -> Floorplan:
+    """Flip the image rows to the grid's bottom-first order, count rooms."""
     check_resolution(resolution, source)
     occ = np.flipud(~free_img)
     n_rooms = None
@@ -95,27 +106,15 @@ def _build(
         from worker.world.segmentation import count_rooms
 
         n_rooms = count_rooms(Path(segmentation), float(resolution), occ.shape, max_pixels)
-    try:
-        return World.from_array(
-            occ,
-            float(resolution),
-            origin,
-            start_pose,
-            name,
-            footprint_m=footprint_m,
-            n_rooms=n_rooms,
-            warnings=tuple(notes),
-            source=str(source),
-        )
-    except InputError as exc:
-        if exc.path is not None:
-            raise
-        raise InputError(str(exc), path=source) from None
+    return Floorplan(
+        name=name, occ=occ, resolution=float(resolution),
+        origin=(float(origin[0]), float(origin[1])),
+        start_pose=None if start_pose is None else tuple(float(v) for v in start_pose),
+        n_rooms=n_rooms, notes=tuple(notes), source=str(source),
+    )  # fmt: skip
 
 
-def _load_yaml(
-    path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
-) -> World:
+def _read_yaml(path, resolution, start_pose, segmentation, max_pixels, allow_outside) -> Floorplan:
     """ROS map_server YAML: image, resolution, origin, negate, occupied_thresh, free_thresh."""
     meta = read_map_yaml(path)
     refs = yaml_references(path, meta, allow_outside=allow_outside)
@@ -138,18 +137,10 @@ def _load_yaml(
         notes.append("transparent pixels count as obstacles")
     if segmentation is None and "segmentation" in refs:
         segmentation = refs["segmentation"]
-    return _build(
-        path.stem,
-        free,
-        resolution,
-        (origin[0], origin[1]),
-        start_pose,
-        segmentation,
-        path,
-        max_pixels,
-        footprint_m,
-        notes,
-    )
+    return _plan(
+        path.stem, free, resolution, (origin[0], origin[1]), start_pose, segmentation, path,
+        max_pixels, notes,
+    )  # fmt: skip
 
 
 def _yaml_thresholds(meta: dict, path: Path) -> tuple[list[float], int, float]:
@@ -187,9 +178,7 @@ def _map_server_free(grey: np.ndarray, negate: int, free_thresh: float) -> np.nd
     return ((255.0 - levels) / 255.0 < free_thresh)[grey]
 
 
-def _load_stage(
-    path, resolution, start_pose, segmentation, max_pixels, footprint_m, allow_outside
-) -> World:
+def _read_stage(path, resolution, start_pose, segmentation, max_pixels, allow_outside) -> Floorplan:
     """Stage `.world`: bitmap scaled to `size`, centred on the block's `pose`; robot pose."""
     stage, bitmap = stage_references(path, allow_outside=allow_outside)
     grey, alpha = read_grey(bitmap, max_pixels)
@@ -215,15 +204,6 @@ def _load_stage(
     origin = (stage.center[0] - 0.5 * w * resolution, stage.center[1] - 0.5 * h * resolution)
     if start_pose is None:
         start_pose = stage.robot_pose
-    return _build(
-        path.stem,
-        free,
-        resolution,
-        origin,
-        start_pose,
-        segmentation,
-        path,
-        max_pixels,
-        footprint_m,
-        notes,
+    return _plan(
+        path.stem, free, resolution, origin, start_pose, segmentation, path, max_pixels, notes
     )

@@ -136,7 +136,8 @@ def _score_into_storage(
 ) -> tuple[dict[str, Any], str]:
     """Score `est` on the run's parts fetched from its storage, write the estimate's report
     folder back there as `estimates/<name>/`: (its summary, that folder's location)."""
-    # here, not at the top: the scorer pulls numba, which the API process never loads
+    # here, not at the top: the scorer pulls numba, which the API process loads only once
+    # it scores an estimate (uploads, worlds and predictions never load it)
     from worker.export.score import ESTIMATES_DIR, RUN_PARTS, score_estimate
 
     with tempfile.TemporaryDirectory(prefix="mapqual-score-") as tmp:

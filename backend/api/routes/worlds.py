@@ -33,7 +33,9 @@ from backend.db.models import World
 from backend.sandbox import shared_sandbox
 from backend.schemas import WorldOut
 from backend.store import create_pending_world, world_occupancy
-from backend.world_analysis import pack_upload, world_pool
+from backend.world_analysis import PLAN, remember, world_pool
+from worker.errors import InputError
+from worker.world.floorplan import TEXT_MAX, Floorplan, floorplan_header, pack_floorplan
 from worker.world.image_io import ImageTooLarge
 from worker.world.picture import occupancy_png
 
@@ -81,19 +83,25 @@ def _content_hash(files: dict[str, bytes], resolution: float | None) -> str:
     return h.hexdigest()
 
 
-def check_upload(
+def read_upload(
     settings: Settings, files: dict[str, bytes], main: str, resolution: float | None
-) -> None:
-    """Refuse in the request what needs no decoding: references leaving the uploaded files,
-    a missing or bad resolution, unreadable image headers, a malformed YAML or Stage world
-    (400), too many pixels (413). Read in the upload sandbox (a limited process)."""
+) -> bytes:
+    """The upload read into a floorplan's bytes (`worker.world.floorplan`), in the upload
+    sandbox (a limited process), the only place its raw bytes are parsed: references leaving
+    the uploaded files, a missing or bad resolution, an unreadable image, a malformed YAML or
+    Stage world are 400, too many pixels 413."""
     try:
-        shared_sandbox(settings).run(
+        parsed = shared_sandbox(settings).run(
             "floorplan", files, file=main, resolution=resolution,
             max_pixels=settings.max_image_pixels,
         )  # fmt: skip
     except ImageTooLarge as exc:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(exc)) from None
+    if parsed.blob is None:
+        raise InputError(f"{main}: could not be read (no result)")
+    floorplan_header(parsed.blob, settings.max_image_pixels)  # InputError if malformed
+    remember(parsed.blob, parsed.facts.get("analysis"))  # a small plan's, made there too
+    return parsed.blob
 
 
 def accept_upload(
@@ -113,7 +121,7 @@ def accept_upload(
     if existing is not None and existing.status != "invalid":
         return existing, False
     quotas.check_upload(session, user.id, settings)  # 429 before anything is stored
-    check_upload(settings, files, main, resolution)
+    plan = read_upload(settings, files, main, resolution)
     if existing is not None:
         session.delete(existing)  # invalid worlds have no jobs; the retry gets a new id
         session.flush()
@@ -121,7 +129,7 @@ def accept_upload(
         with session.begin_nested():  # the same upload racing in: the first one stays
             row = create_pending_world(
                 session, owner_id=user.id, name=Path(main).stem, sha256=sha, source_format=fmt,
-                source_path=main, upload=pack_upload(files), resolution=resolution,
+                source_path=main, upload=plan, resolution=resolution,
             )  # fmt: skip
     except IntegrityError:
         return session.scalars(
@@ -234,14 +242,37 @@ def world_image(
 
 
 def prediction_cache(app) -> Any:
-    """The app's cache of world predictions (made on first use)."""
+    """The app's cache of world predictions (made on first use), each computed in the
+    analysis sandbox (a limited process: address space, CPU and wall time)."""
     from worker.predict.service import PredictionCache
 
     cache = getattr(app.state, "prediction_cache", None)
     if cache is None:
-        workers = app.state.settings.world_workers  # as many as analyse uploads
-        cache = app.state.prediction_cache = PredictionCache(workers=workers)
+        settings = app.state.settings
+        box = shared_sandbox(settings, "analysis")
+
+        def compute(plan_of, slam: str, _model: dict) -> dict:
+            facts = box.run(
+                "predict", {PLAN: plan_of()}, label="the world", file=PLAN, slam=slam,
+                max_pixels=settings.max_image_pixels,
+            ).facts  # fmt: skip
+            if not isinstance(facts.get("prediction"), dict):
+                raise InputError("the world could not be analysed (a malformed result)")
+            return facts["prediction"]
+
+        workers = settings.world_workers  # as many as analyse uploads
+        cache = app.state.prediction_cache = PredictionCache(workers=workers, compute=compute)
     return cache
+
+
+def stored_floorplan(w: World) -> bytes:
+    """A ready world's grid and geometry as a floorplan's bytes (what an analysis reads)."""
+    plan = Floorplan(
+        name=w.name[:TEXT_MAX], occ=world_occupancy(w), resolution=w.resolution,
+        origin=(w.origin_x, w.origin_y), start_pose=tuple(w.start_pose),
+        n_rooms=w.facts.get("n_rooms"), notes=(), source=w.name[:TEXT_MAX],
+    )  # fmt: skip
+    return pack_floorplan(plan)
 
 
 def measured_errors(session: Session, world_id: int, slam: str) -> dict[str, Any]:
@@ -264,9 +295,7 @@ def measured_errors(session: Session, world_id: int, slam: str) -> dict[str, Any
 
 def world_prediction_of(app, session: Session, w: World, slam: str) -> dict[str, Any]:
     """Predicted errors of a ready world (cached per content) and its measured ones."""
-    from backend.store_worlds import world_model
-
-    out = prediction_cache(app).get((w.id, w.sha256), lambda: world_model(w), slam)
+    out = prediction_cache(app).get((w.id, w.sha256), lambda: stored_floorplan(w), slam)
     return {**out, "world_id": w.id, "measured": measured_errors(session, w.id, slam)}
 
 

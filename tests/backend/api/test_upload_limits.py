@@ -220,7 +220,7 @@ def test_a_yaml_naming_another_owners_report_file_is_400_and_stores_nothing(serv
     assert _worlds(server) == []
 
 
-def test_the_analysis_runs_in_the_pool_and_the_api_process_never_loads_numba(server):
+def test_analysis_and_prediction_run_in_limited_processes_and_the_api_never_loads_numba(server):
     img = np.full((40, 60), 255, np.uint8)
     img[[0, -1], :] = 0
     img[:, [0, -1]] = 0
@@ -228,9 +228,14 @@ def test_the_analysis_runs_in_the_pool_and_the_api_process_never_loads_numba(ser
     Image.fromarray(img).save(buf, format="PNG")
     r = _post_world(server, [("room.png", buf.getvalue(), "image/png")], wait=30)
     assert r.status_code == 201 and r.json()["status"] == "ready", r.text
+    hdr = {"Authorization": f"Bearer {server['keys']['alice']}"}
+    url = f"{server['base']}/api/v1/worlds/{r.json()['id']}/prediction"
+    p = httpx.get(url, headers=hdr, timeout=60)
+    assert p.status_code == 200 and p.json()["features"]["free_area_m2"] > 0, p.text
     children = Path(f"/proc/{server['pid']}/task/{server['pid']}/children").read_text().split()
     cmdlines = [Path(f"/proc/{pid}/cmdline").read_bytes() for pid in children]
-    assert any(b"spawn_main" in c for c in cmdlines), "no spawned pool process"
+    assert sum(b"sandbox_child\0analysis" in c for c in cmdlines) == 1  # world_workers
+    assert sum(b"sandbox_child\0sandbox" in c for c in cmdlines) == 2  # sandbox_workers
     maps = Path(f"/proc/{server['pid']}/maps").read_text()
     assert "llvmlite" not in maps and "/numba/" not in maps
     out = subprocess.run(

@@ -1,4 +1,4 @@
-"""An uploaded world's life: pending (202) -> ready or invalid, decided by the pool's process;
+"""An uploaded world's life: pending (202) -> ready or invalid, decided by its analysis;
 `wait`; 409 for its image and its jobs until it is ready; worlds left pending are analysed
 again when the API starts."""
 
@@ -8,10 +8,9 @@ import io
 import os
 import signal
 import time
-from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
 
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 from sqlalchemy import select
@@ -21,11 +20,11 @@ from backend.db.models import User, World
 from backend.db.session import session_scope
 from backend.main import create_app
 from backend.store import create_pending_world
-from backend.world_analysis import CRASHED, WorldPool, pack_upload
+from backend.world_analysis import WorldPool, pack_upload
 
 
-def _png(value: int | None = None) -> bytes:
-    img = np.full((40, 60), 255, np.uint8)
+def _png(value: int | None = None, shape: tuple[int, int] = (40, 60)) -> bytes:
+    img = np.full(shape, 255, np.uint8)
     img[[0, -1], :] = 0
     img[:, [0, -1]] = 0
     if value is not None:
@@ -53,7 +52,8 @@ def _wait_done(api, world_id: int, seconds: float = 30.0) -> dict:
 
 
 def test_a_world_is_pending_then_ready_and_usable_only_then(api):
-    r = _upload(api, _png())
+    # 9 MP: analysed in the analysis process (past ANALYSE_AT_ONCE), for a second or more
+    r = _upload(api, _png(shape=(3000, 3000)))
     assert r.status_code == 202, r.text
     w = r.json()
     assert w["status"] == "pending" and w["error"] is None
@@ -61,13 +61,13 @@ def test_a_world_is_pending_then_ready_and_usable_only_then(api):
     image = api.get(f"/api/v1/worlds/{w['id']}/image")
     job = api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1})
     # still pending after both requests means it was pending during them (status only moves
-    # forward); a spawned process takes a second to start, so this is the usual case
+    # forward)
     assert api.get(f"/api/v1/worlds/{w['id']}").json()["status"] == "pending"
     assert image.status_code == 409 and "pending" in image.json()["detail"]
     assert job.status_code == 409 and "pending" in job.json()["detail"]
     assert api.get("/api/v1/jobs").json()["total"] == 0
     done = _wait_done(api, w["id"])
-    assert done["status"] == "ready" and (done["width_px"], done["height_px"]) == (60, 40)
+    assert done["status"] == "ready" and (done["width_px"], done["height_px"]) == (3000, 3000)
     assert done["facts"]["free_area_m2"] > 0 and len(done["start_pose"]) == 3
     assert api.get(f"/api/v1/worlds/{w['id']}/image").status_code == 200
     assert api.post("/api/v1/jobs", json={"world_id": w["id"], "runs": 1}).status_code == 202
@@ -117,30 +117,49 @@ def test_worlds_left_pending_are_analysed_when_the_api_starts(api):
     assert dark["status"] == "invalid" and "no free cell" in dark["error"]
 
 
-def test_a_pool_process_that_dies_leaves_its_world_invalid_and_the_pool_is_replaced(api):
-    pool = WorldPool(api.url, workers=1, max_pixels=25_000_000)
+def _analysis_processes() -> list[int]:
+    """This process's analysis zygotes (`backend.sandbox_child analysis`)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            stat = (proc / "stat").read_text()
+            cmd = (proc / "cmdline").read_bytes()
+        except OSError:
+            continue
+        ppid = int(stat[stat.rindex(")") + 2 :].split()[1])
+        if ppid == os.getpid() and b"backend.sandbox_child\0analysis" in cmd:
+            found.append(int(proc.name))
+    return found
+
+
+def test_an_analysis_process_that_dies_leaves_its_world_invalid_and_the_next_is_ready(api):
+    pool = WorldPool(Settings(DATABASE_URL=api.url, MAPQUAL_AUTH="on"))
     with session_scope(api.url) as s:
         owner = s.scalars(select(User).where(User.name == "alice")).one().id
         ids = [
             create_pending_world(
                 s, owner_id=owner, name=name, sha256=name * 8, source_format="image",
-                source_path=f"{name}.png", upload=pack_upload({f"{name}.png": _png()}),
-                resolution=0.05,
+                source_path=f"{name}.png", resolution=0.05,
+                # past ANALYSE_AT_ONCE: analysed in the analysis process, not where it is read
+                upload=pack_upload({f"{name}.png": _png(shape=(1500, 1400))}),
             ).id
             for name in ("killed", "after")
         ]  # fmt: skip
+    others = set(_analysis_processes())  # the api fixture's app's
     try:
         future = pool.submit(ids[0])
-        # SIGKILL the process while it is still starting (a spawned one imports for ~1 s)
-        for proc in list(pool._executor._processes.values()):
-            os.kill(proc.pid, signal.SIGKILL)
-        with pytest.raises(BrokenProcessPool):
-            future.result(timeout=30)
-        deadline = time.monotonic() + 10
-        while (w := api.get(f"/api/v1/worlds/{ids[0]}").json())["status"] == "pending":
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        assert w["status"] == "invalid" and w["error"] == CRASHED
-        assert pool.submit(ids[1]).result(timeout=60) == "ready"  # a fresh pool
+        # SIGKILL the analysis process while it is still starting (it loads for seconds)
+        deadline = time.monotonic() + 30
+        while not (pids := set(_analysis_processes()) - others):
+            assert time.monotonic() < deadline and not future.done()
+            time.sleep(0.01)
+        for pid in pids:
+            os.kill(pid, signal.SIGKILL)
+        assert future.result(timeout=60) == "invalid"
+        w = api.get(f"/api/v1/worlds/{ids[0]}").json()
+        assert w["status"] == "invalid"
+        assert w["error"] == "killed.png: could not be analysed (no parser process started)"
+        assert pool.submit(ids[1]).result(timeout=90) == "ready"  # a fresh process
     finally:
         pool.shutdown()
+    assert set(_analysis_processes()) <= others
