@@ -100,8 +100,12 @@ class Zygote:
         env = {k: os.environ[k] for k in PASS_ENV if k in os.environ}
         env.update({k: "1" for k in SINGLE_THREAD})
         env.update(PATH="/usr/bin:/bin", HOME=tempfile.gettempdir())
+        # the folder its warm-up writes its tiny inputs to: made and removed here, since the
+        # process may be killed in the middle of its warm-up (a server stopped at once)
+        self.warm = Path(tempfile.mkdtemp(prefix="mapqual-warm-", dir=root))
         self.proc = subprocess.Popen(
-            [sys.executable, "-P", "-m", "backend.sandbox_child", kind], cwd=root, env=env,
+            [sys.executable, "-P", "-m", "backend.sandbox_child", kind, str(self.warm)],
+            cwd=root, env=env,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             close_fds=True, start_new_session=True,
         )  # fmt: skip
@@ -135,6 +139,7 @@ class Zygote:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.proc.pid, signal.SIGKILL)
         self.proc.wait()
+        shutil.rmtree(self.warm, ignore_errors=True)
 
 
 class Sandbox:
@@ -242,6 +247,7 @@ class Sandbox:
         whether the zygote can serve again)."""
         if not z.ready:
             z.ready = z.line(STARTUP_S) is not None  # loading the parsers: a few seconds
+            shutil.rmtree(z.warm, ignore_errors=True)
             if not z.ready:
                 return f"could not be {self.lim.done} (no parser process started)", False
         z.send(work)

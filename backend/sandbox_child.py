@@ -88,14 +88,15 @@ def serve(work: Path) -> int:
     return 0
 
 
-def zygote(kind: str) -> int:
+def zygote(kind: str, warm: str) -> int:
     """Serve requests from the API, one at a time: a line {"work": folder} in, a forked child
     serves it; lines {"pid": ...} then {"status": exit code (negative: a signal), "cpu_s": its
     CPU time} out. `kind`:
-    which code it loads first ("sandbox": the upload parsers, "analysis": world analysis)."""
+    which code it loads first ("sandbox": the upload parsers, "analysis": world analysis),
+    trying it on tiny inputs written to the folder `warm`."""
     from backend.sandbox_tasks import warm_up
 
-    warm_up(kind)
+    warm_up(kind, Path(warm))
     out = sys.stdout.buffer
     out.write(b'{"ready": true}\n')
     out.flush()
@@ -120,4 +121,4 @@ def zygote(kind: str) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(zygote(sys.argv[1] if len(sys.argv) > 1 else "sandbox"))
+    sys.exit(zygote(sys.argv[1], sys.argv[2]))

@@ -86,40 +86,37 @@ def predict(req: dict[str, Any]) -> dict[str, Any]:
 TASKS = {"estimate": estimate, "floorplan": floorplan, "world": world, "predict": predict}
 
 
-def warm_up(kind: str) -> None:
-    """Import the kind's code and run it once on a tiny input, so that forked children start
-    with everything loaded and compiled (numba kernels included)."""
-    import tempfile
-
+def warm_up(kind: str, tmp: Path) -> None:
+    """Import the kind's code and run it once on a tiny input written to the folder `tmp`, so
+    that forked children start with everything loaded and compiled (numba kernels included)."""
     import numpy as np
 
-    with tempfile.TemporaryDirectory(prefix="mapqual-warm-") as tmp:
-        if kind == "analysis":  # the `world` and `predict` tasks' own path
-            from worker.predict.service import predict_world
-            from worker.world.floorplan import Floorplan, pack_floorplan
-            from worker.world.world import World
+    if kind == "analysis":  # the `world` and `predict` tasks' own path
+        from worker.predict.service import predict_world
+        from worker.world.floorplan import Floorplan, pack_floorplan
+        from worker.world.world import World
 
-            occ = np.zeros((62, 102), bool)  # a 3 m x 5 m room
-            occ[[0, -1], :] = True
-            occ[:, [0, -1]] = True
-            plan = Path(tmp) / "warm.bin"
-            plan.write_bytes(pack_floorplan(Floorplan("warm", occ, 0.05, (0, 0), None, None,
-                                                      (), "warm.png")))  # fmt: skip
-            world({"file": str(plan), "max_pixels": occ.size})
-            predict_world(World.from_array(occ, 0.05, name="warm"))
-            return
-        from PIL import Image
+        occ = np.zeros((62, 102), bool)  # a 3 m x 5 m room
+        occ[[0, -1], :] = True
+        occ[:, [0, -1]] = True
+        plan = Path(tmp) / "warm.bin"
+        plan.write_bytes(pack_floorplan(Floorplan("warm", occ, 0.05, (0, 0), None, None,
+                                                  (), "warm.png")))  # fmt: skip
+        world({"file": str(plan), "max_pixels": occ.size})
+        predict_world(World.from_array(occ, 0.05, name="warm"))
+        return
+    from PIL import Image
 
-        from worker.export.bounded import bound_bag_readers
-        from worker.export.untrusted import read_upload_estimate
-        from worker.world.loader import read_floorplan
+    from worker.export.bounded import bound_bag_readers
+    from worker.export.untrusted import read_upload_estimate
+    from worker.world.loader import read_floorplan
 
-        bound_bag_readers()
-        tum = Path(tmp) / "warm.tum"
-        lines = [f"{i * 0.1:.1f} {i * 0.01} 0 0 0 0 0 1" for i in range(50)]
-        tum.write_text("\n".join(lines) + "\n")
-        est = read_upload_estimate(tum, None, 1 << 20)
-        np.column_stack([est.t, est.poses])
-        png = Path(tmp) / "warm.png"
-        Image.fromarray(np.full((8, 8), 255, np.uint8)).save(png)
-        read_floorplan(png, 0.05, max_pixels=1000)
+    bound_bag_readers()
+    tum = Path(tmp) / "warm.tum"
+    lines = [f"{i * 0.1:.1f} {i * 0.01} 0 0 0 0 0 1" for i in range(50)]
+    tum.write_text("\n".join(lines) + "\n")
+    est = read_upload_estimate(tum, None, 1 << 20)
+    np.column_stack([est.t, est.poses])
+    png = Path(tmp) / "warm.png"
+    Image.fromarray(np.full((8, 8), 255, np.uint8)).save(png)
+    read_floorplan(png, 0.05, max_pixels=1000)
