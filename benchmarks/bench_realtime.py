@@ -6,7 +6,7 @@
 
 Each (plan, laser noise, seed) is run with rbpf (the thesis's GMapping settings): with instant
 SLAM (today's default) and with `realtime.speed` = each --speed (worker.slam.realtime; 0.35 is
-LAPTOP_2018_SPEED, the thesis's computer by single-thread benchmarks). Rows are appended to
+THESIS_PC_SPEED, the thesis's computer by single-thread benchmarks). Rows are appended to
 --out as they finish (rows already there are skipped, so a stopped batch resumes). The table:
 per plan and noise, each mode's mean over seeds of the run's mean B translational error, its
 mean std and max, success (completed runs), scans dropped, mean latency and the SLAM's busy
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from worker.pipeline import run_one  # noqa: E402
 from worker.run_params import RunParams  # noqa: E402
-from worker.slam.realtime_params import LAPTOP_2018_SPEED  # noqa: E402
+from worker.slam.realtime_params import THESIS_PC_SPEED  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
 # thesis Table 6.4 (mean, std, max translational error [m]) and Table 6.3 (successes of 10)
@@ -101,22 +101,72 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def overlap(plan: str, seed: int, speed: float, time_limit: float, rounds: int) -> None:
+    """One emulated run timed with the held-back update in a worker thread and in place,
+    alternately (the same run: checked), and how much of the worker's time the run's thread
+    did not wait for."""
+    from worker.slam import realtime
+
+    made = []
+
+    class Recorded(realtime.RealtimeSlam):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self)
+
+    realtime.RealtimeSlam = Recorded  # the pipeline takes the class from the module at run time
+    world = load_world(ROOT / "worlds" / "bormann" / f"{plan}.yaml")
+    data = {
+        "algorithm": "rbpf",
+        "realtime": {"speed": speed},
+        "explore": {"time_limit": time_limit},
+    }
+    docs = set()
+    for r in range(rounds):
+        for background in (True, False) if r % 2 == 0 else (False, True):
+            realtime.BACKGROUND = background
+            t0 = time.perf_counter()
+            s = run_one(world, RunParams.from_json(data), seed).summary
+            wall = time.perf_counter() - t0
+            doc = s.to_dict()
+            doc.pop("timings")
+            docs.add(json.dumps(doc, sort_keys=True))
+            rt = made[-1]
+            print(f"round {r + 1} {'thread ' if background else 'in place'}: {wall:6.1f} s wall, "
+                  f"updates {rt.work_wall_s:6.1f} s in the worker, waited {rt.wait_wall_s:6.1f} "
+                  f"s; {time.strftime('%H:%M', time.gmtime())} UTC, load "
+                  f"{os.getloadavg()[0]:.1f}", flush=True)  # fmt: skip
+    print(f"the same run every time: {len(docs) == 1}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plans", nargs="+", default=["office_a", "lab_c_scan"])
     parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.3])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
-    parser.add_argument("--speed", type=float, nargs="+", default=[LAPTOP_2018_SPEED])
+    parser.add_argument("--speed", type=float, nargs="+", default=[THESIS_PC_SPEED])
     parser.add_argument("--time-limit", type=float, default=1800.0)
     parser.add_argument("--out", type=Path, default=Path("realtime.jsonl"))
     parser.add_argument("--table-only", action="store_true")
+    parser.add_argument("--no-instant", action="store_true", help="emulated runs only")
+    parser.add_argument(
+        "--overlap",
+        type=int,
+        metavar="ROUNDS",
+        default=0,
+        help="time the first plan, seed and speed with the update in a worker thread and in "
+        "place, ROUNDS times each (and nothing else)",
+    )
     args = parser.parse_args()
+    if args.overlap:
+        overlap(args.plans[0], args.seeds[0], args.speed[0], args.time_limit, args.overlap)
+        return
     done = [json.loads(x) for x in args.out.read_text().splitlines()] if args.out.exists() else []
     have = {(r["plan"], r["noise"], r["seed"], r["speed"]) for r in done}
     for seed in args.seeds:
         for plan in args.plans:
             for noise in args.noise:
-                for speed in (None, *args.speed):
+                for speed in args.speed if args.no_instant else (None, *args.speed):
                     if args.table_only or (plan, noise, seed, speed) in have:
                         continue
                     row = run_row(plan, noise, seed, speed, args.time_limit)

@@ -20,6 +20,7 @@ the update, and only waited for when something reads the map before the publicat
 
 from __future__ import annotations
 
+import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -39,6 +40,9 @@ RBPF_C1 = 1.289e-6  # [s] per particle x used beam x (iterations + 1)
 ODOM_C0 = 1.043e-4  # [s]
 ODOM_C1 = 8.899e-7  # [s] per beam
 _EPS = 1e-9  # [s] time stamps on the 0.1 s grid compare with this slack
+# whether a split update runs in a worker thread when the caller does not say (the same run
+# either way; benchmarks/bench_realtime.py --overlap times both)
+BACKGROUND = True
 
 
 def update_cost_s(slam, n_beams: int) -> float:
@@ -78,15 +82,20 @@ class RealtimeStats:
 class RealtimeSlam:
     """`inner` with ROS's timing; the SlamAlgorithm interface (worker.slam.base)."""
 
-    def __init__(self, inner, params: RealtimeParams, n_beams: int, background: bool = True):
+    def __init__(self, inner, params: RealtimeParams, n_beams: int, background: bool | None = None):
         """background: compute a split update (`advance` / `update`) in a worker thread (False:
-        in place; the same run either way)."""
+        in place; the same run either way; None: BACKGROUND)."""
+        background = BACKGROUND if background is None else background
         if params.fixed_latency_s is None:
             update_cost_s(inner, n_beams)  # refuses an algorithm without a cost model
         self._inner = inner
         self._split = background and hasattr(inner, "advance") and hasattr(inner, "update")
         self._pool: ThreadPoolExecutor | None = None
         self._job: Future | None = None  # the update in flight (in the worker thread)
+        # [s] wall time of the worker's updates, and of the run's thread waiting for them (not
+        # in the summary: the run does not depend on them)
+        self.work_wall_s = 0.0
+        self.wait_wall_s = 0.0
         self.name = inner.name
         self.params = params
         self._n_beams = n_beams
@@ -163,18 +172,24 @@ class RealtimeSlam:
     def _work(self, ranges: np.ndarray, grid: Future) -> None:
         """The worker thread: the map before the update (for a read while it is held back; the
         algorithm's own cache when the map was read since its last update), then the update."""
+        t0 = time.perf_counter()
         try:
             grid.set_result(self._inner.occupancy())
         except BaseException as exc:  # the reader sees it, and so does the join
             grid.set_exception(exc)
             raise
         self._inner.update(ranges)
+        self.work_wall_s += time.perf_counter() - t0
 
     def _join(self) -> None:
         """Wait for the update in flight (its error raised here, in the run's thread)."""
         job, self._job = self._job, None
         if job is not None:
-            job.result()
+            t0 = time.perf_counter()
+            try:
+                job.result()
+            finally:
+                self.wait_wall_s += time.perf_counter() - t0
 
     def _snapshot(self, with_map: bool = True) -> tuple[np.ndarray, np.ndarray, object]:
         """(estimate, the odometry it was made at, map) published now, before the inner
