@@ -140,6 +140,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SPEED",
         help="--against: this tree's runs under real-time SLAM emulation at SPEED",
     )
+    ap.add_argument(
+        "--other-realtime",
+        type=float,
+        default=None,
+        metavar="SPEED",
+        help="--against: the other tree's runs under real-time emulation at SPEED",
+    )
     return ap
 
 
@@ -164,8 +171,10 @@ def _side_by_side(args: argparse.Namespace) -> None:
     print(f"side by side: this = {ROOT}, other = {other}; {args.slam}, seed {args.seed}, {world}")
     if args.this_slam:
         print(f"this tree's runs with slam settings {json.dumps(args.this_slam)}")
-    if args.this_realtime is not None:
-        print(f"this tree's runs under real-time SLAM emulation, speed {args.this_realtime}")
+    for name in ("this", "other"):
+        if getattr(args, f"{name}_realtime") is not None:
+            speed = getattr(args, f"{name}_realtime")
+            print(f"{name} tree's runs under real-time SLAM emulation, speed {speed}")
     ratios = []
     for r in range(args.rounds):
         order = list(trees) if r % 2 == 0 else list(reversed(trees))
@@ -182,8 +191,8 @@ def _side_by_side(args: argparse.Namespace) -> None:
                 cmd += ["--threads", str(threads)]
             if slam:
                 cmd += ["--slam-params", json.dumps(slam)]
-            if name == "this" and args.this_realtime is not None:
-                cmd += ["--realtime", str(args.this_realtime)]
+            if getattr(args, f"{name}_realtime") is not None:
+                cmd += ["--realtime", str(getattr(args, f"{name}_realtime"))]
             out = subprocess.run(cmd, capture_output=True, text=True, cwd=tree)
             if out.returncode != 0:
                 sys.exit(f"{name} ({tree}) failed ({out.returncode}):\n{out.stderr[-2000:]}")

@@ -131,7 +131,13 @@ def main() -> None:
     parser.add_argument("--sim-time", type=float, default=60.0, help="[s] each simulated run")
     parser.add_argument("--out", type=Path, default=Path("third_party.jsonl"))
     parser.add_argument("--table-only", action="store_true")
+    parser.add_argument("--mrpt-timeout-per-scan", type=float, default=None, metavar="S",
+                        help="MRPT wall-time limit per scan (a loaded machine)")  # fmt: skip
     args = parser.parse_args()
+    if args.mrpt_timeout_per_scan is not None:
+        from worker.slam.mrpt import slam as mrpt_slam
+
+        mrpt_slam.TIMEOUT_PER_SCAN_S = args.mrpt_timeout_per_scan
     done = [json.loads(x) for x in args.out.read_text().splitlines()] if args.out.exists() else []
     have = {(r["kind"], r["log"], r["seed"]) for r in done}
     jobs = [("real", n, s) for s in args.seeds for n in args.logs]

@@ -19,7 +19,7 @@ from worker.slam.map_kernels import PATCH
 NO_BOX = (PATCH, -1, PATCH, -1)  # [row min, row max, col min, col max] of a patch's seen cells
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refresh_patches(visits, hits, table, ids, dirty, dense, boxes, changed):
     """Reassemble the table cells (ty, tx) that are dirty or whose pool id differs from ids.
 
@@ -60,7 +60,7 @@ def refresh_patches(visits, hits, table, ids, dirty, dense, boxes, changed):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dense_hits(hits, table):
     """(TH*32, TW*32) float32 end-point counts of one particle's map, 0 where none."""
     th, tw = table.shape
@@ -74,7 +74,7 @@ def dense_hits(hits, table):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dense_prob(visits, hits, table):
     """(TH*32, TW*32) float32 hits / visits of one particle's map, NaN where never visited
     (the whole map at once: the reference `refresh_patches` must agree with)."""

@@ -26,7 +26,7 @@ OCCUPIED, FULL = 0, 1  # bit-mask planes of `bits`
 FULLNESS = 0.1  # GMapping's m_fullnessThreshold on hits / visits
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table, tx, ty, dirty):
     """Patch id that this particle may write at table cell (tx, ty); -1 if the pool is full.
     A patch allocated there marks the cell in `dirty` (TH, TW) bool."""
@@ -54,7 +54,7 @@ def _writable_patch(visits, hits, mean, bits, counts, free_stack, n_free, table,
     return new
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _update_bits(visits, hits, bits, e, ly, lx):
     """Refresh the OCCUPIED / FULL bits of cell (ly, lx) of patch e after a write."""
     h = hits[e, ly, lx]
@@ -70,7 +70,7 @@ def _update_bits(visits, hits, bits, e, ly, lx):
         bits[e, FULL, ly] &= ~bit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _beam_end(x, y, c, s, cos_ai, sin_ai, d, res):
     """(hx, hy, x1, y1): the end point [m] of a beam of length d from (x, y) with heading
     cos / sin (c, s) and beam angle cos / sin (cos_ai, sin_ai), and its cell."""
@@ -79,7 +79,7 @@ def _beam_end(x, y, c, s, cos_ai, sin_ai, d, res):
     return hx, hy, int(np.floor(hx / res)), int(np.floor(hy / res))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _register_one(
     visits,
     hits,
@@ -186,7 +186,7 @@ def _register_one(
     return dropped
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def register_scans(
     visits,
     hits,
@@ -245,7 +245,7 @@ def register_scans(
     return todo.shape[0], dropped
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _line_patches(mark, out, n, tx0, ty0, a0, b0, a1, b1, swap):
     """Add to out[:n] (marking them in `mark`) the table cells of the patches a Bresenham
     line from cell (a0, b0) to (a1, b1) may touch (a the major axis; swap: a is y); returns
@@ -277,7 +277,7 @@ def _line_patches(mark, out, n, tx0, ty0, a0, b0, a1, b1, swap):
     return n
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def scan_patches(
     shape, tpx0, tpy0, poses, ranges, cos_a, sin_a, res, usable_range, max_range, todo
 ):
@@ -308,7 +308,7 @@ def scan_patches(
     return lists, counts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def claim_patches(
     visits, hits, mean, bits, counts, free_stack, n_free, tables, lists, n_listed, need, todo,
     start, dirty,
@@ -340,7 +340,7 @@ def claim_patches(
     return todo.shape[0]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def register_claimed(
     visits, hits, mean, bits, counts, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, res,
     usable_range, max_range, todo, dirty,

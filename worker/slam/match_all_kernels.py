@@ -9,7 +9,7 @@ from numba import njit, prange
 from worker.slam.match_kernels import C_MINIMUM_SCORE, optimize, prepare_beams
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _match_particle(p, out, scores, likes, mean, bits, tables, tpx0, tpy0, poses, beams, cfg):
     """Improved proposal of particle p: write its pose, score and log-likelihood at [p]."""
     refined, sc, like, _, start_like = optimize(
@@ -24,7 +24,7 @@ def _match_particle(p, out, scores, likes, mean, bits, tables, tpx0, tpy0, poses
     scores[p] = sc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def scan_match_all(mean, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
     """The improved proposal for every particle (GMapping GridSlamProcessor::scanMatch).
 
@@ -42,7 +42,7 @@ def scan_match_all(mean, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, 
     return out, scores, likes
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def scan_match_all_parallel(mean, bits, tables, tpx0, tpy0, poses, ranges, cos_a, sin_a, cfg):
     """scan_match_all with the particles spread over numba's threads; the same result (each
     particle reads the shared maps and writes only its own row)."""

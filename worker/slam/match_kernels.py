@@ -93,14 +93,14 @@ def _ctz(typingctx, x):
     return sig, codegen
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def exp_neg_upper(x):
     """An upper bound of exp(-x) for x >= 0, without exp: the Taylor polynomial to x^2 below
     1 (the series alternates), 1 / (1 + x) above (e^x >= 1 + x)."""
     return 1.0 - x + 0.5 * x * x if x < 1.0 else 1.0 / (1.0 + x)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def prepare_beams(ranges, cos_a, sin_a, cfg):
     """(M, 4) [hx, hy, fx, fy] robot frame [m]: end point and free point of each used beam.
 
@@ -125,7 +125,7 @@ def prepare_beams(ranges, cos_a, sin_a, cfg):
     return out[:m].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _score(
     mean, bits, table, tpx0, tpy0, x, y, theta, beams, order, cfg, bound, terms, dist2, cache, w
 ):
@@ -254,7 +254,7 @@ def _score(
     return score, like, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _new_cache(m, kernel):
     """The matching-cell cache of m beams: (key (M,), count (M,), points (M, K, 2) [m]) for the
     current pose, and two scratch slots of the same plus their lists of recorded beams.
@@ -272,7 +272,7 @@ def _new_cache(m, kernel):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _commit(cache, slot):
     """The pose scored into scratch `slot` becomes the current one: its entries are kept."""
     ckey, cn, cpts, skey, sn, spts, smiss, snmiss = cache
@@ -285,7 +285,7 @@ def _commit(cache, slot):
             cpts[i, r, 1] = spts[slot, i, r, 1]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     """(score, log-likelihood) of the prepared beams at pose (3,) in one particle's map."""
     order = np.arange(beams.shape[0])
@@ -296,7 +296,7 @@ def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     return sc, like
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _climb(mean, bits, table, tpx0, tpy0, beams, order, cfg, cache, dist2, state):
     """GMapping's hill climbing on `beams` (scored in `order`) from state = [x, y, theta,
     score, like, ldelta, adelta, refinement, last level], in place: the climb ends after a
@@ -353,7 +353,7 @@ def _climb(mean, bits, table, tpx0, tpy0, beams, order, cfg, cache, dist2, state
     state[5], state[6], state[7] = ldelta, adelta, refinement
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     """Hill climbing from pose (GMapping ScanMatcher::optimize): (pose (3,), score, like,
     score at the start, like at the start).

@@ -36,7 +36,7 @@ def sample_offsets(lrange: float, lstep: float, arange: float, astep: float) -> 
     return np.column_stack([gx.ravel(), gy.ravel(), gt.ravel()])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fit_particle(
     p, mus, covs, log_eta, mean, bits, tables, tpx0, tpy0, modes, priors, infos, beams, offsets,
     steps, shifts, cfg,
@@ -115,7 +115,7 @@ def _fit_particle(
     log_eta[p] = top + math.log(total)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit_proposals(
     mean, bits, tables, tpx0, tpy0, modes, priors, infos, ranges, cos_a, sin_a, offsets, steps,
     shifts, cfg,
@@ -141,7 +141,7 @@ def fit_proposals(
     return mus, covs, log_eta
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def fit_proposals_parallel(
     mean, bits, tables, tpx0, tpy0, modes, priors, infos, ranges, cos_a, sin_a, offsets, steps,
     shifts, cfg,

@@ -122,6 +122,13 @@ class RbpfSlam:
         self.lineage = Lineage()  # every particle's path, for the final trajectory
 
     def process(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray) -> bool:
+        ranges = self.advance(t, pose_odom, ranges_m)
+        return ranges is not None and self.update(ranges)
+
+    def advance(self, t: float, pose_odom: np.ndarray, ranges_m: np.ndarray):
+        """`process`'s cheap first half: move the particles to this scan, and gate. The scan's
+        ranges when it is an update (then `update(ranges)` makes it), else None. (The real-time
+        wrapper runs the two halves apart: worker.slam.realtime.)"""
         t, raw, ranges = check_scan(t, pose_odom, ranges_m, self._n_beams)
         p = self.params
         self.lineage.scan(raw)
@@ -146,7 +153,13 @@ class RbpfSlam:
         self._raw_last = raw
         self._pose_odom = raw
         if not self._gate.step(t, pose, self._sparse):
-            return False
+            return None
+        return ranges
+
+    def update(self, ranges: np.ndarray) -> bool:
+        """`process`'s second half on a scan `advance` gated through: match, weigh, resample,
+        register (True)."""
+        raw = self._raw_last
         if self.updates > 0:
             self._proposal_and_weights(ranges, self._pred if self._sparse else None)
             if self._sparse:

@@ -8,12 +8,14 @@ from dataclasses import dataclass
 
 from worker.errors import InputError
 
-# The thesis's computer against the cost model's calibration machine: the speed at which a
-# 40-particle update of the thesis's laser (541 beams, GMapping's 5 iterations) takes 0.5 s,
-# "a good part of a second" as issue 51 puts it (0.173 s modelled at speed 1). An assumption,
-# not a measurement: the thesis ran on a Core2 Quad Q9400 (2008) and reports GMapping at
-# about 40 % CPU on average (its section 6.2). A user gives their own computer's factor.
-LAPTOP_2018_SPEED = 0.35
+# The thesis's computer against the cost model's calibration machine (a 2.6 GHz Xeon cloud
+# VM): the thesis ran on a Core2 Quad Q9400 at 2.66 GHz (its section 6.3.1; issue 51's "2018
+# laptop" is the thesis's academic year). Published single-thread scores put such a Penryn
+# core at 0.29-0.37 of a Skylake-class core (docs/howto/realtime.md, with sources), so at
+# equal work per particle x beam an update there takes about 1 / 0.35 as long: 0.50 s for
+# the thesis's 40-particle update (0.173 s modelled at speed 1). The upper end of the range
+# the thesis's own account allows (GMapping rarely saturating the CPU) is 1.0; see the page.
+THESIS_PC_SPEED = 0.35
 # the algorithms with a cost model (worker.slam.realtime.update_cost_s); the others run under
 # the option only with a fixed latency
 MODELLED = ("rbpf", "odometry")

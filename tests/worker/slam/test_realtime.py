@@ -4,6 +4,7 @@ robot drives on while the SLAM is busy, and zero latency = the bare algorithm bi
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -136,3 +137,71 @@ def test_cost_model_and_params_refuse_what_they_cannot_time():
 
     with pytest.raises(InputError, match="no real-time cost model"):
         update_cost_s(Unknown(), 10)
+
+
+@pytest.mark.parametrize("latency", [0.05, 0.25, 0.7])
+def test_the_update_in_a_worker_thread_gives_the_run_made_in_place(latency):
+    # rbpf splits its update (advance / update): in a worker thread, joined at publication,
+    # every pose, correction, map read and count is the one the update made in place gives
+    angles = LASER.angles
+    params = SlamParams(particles=10, linear_update=0.15, angular_update=0.05)
+    poses = [np.array([1.0 + 0.06 * k, 2.0 + 0.015 * k, 0.025 * k]) for k in range(90)]
+    runs = {}
+    for background in (True, False):
+        rt = RealtimeSlam(
+            make_slam("rbpf", LASER, params, np.random.default_rng(7)),
+            RealtimeParams(fixed_latency_s=latency), LASER.n_beams, background=background,
+        )  # fmt: skip
+        seen = []
+        for k, p in enumerate(poses):
+            out = rt.process(k * DT, p, box_scan(p, angles))
+            seen.append((out, rt.pose_estimate().tobytes(), rt.T_map_odom().tobytes()))
+            if k % 3 == 0:  # the map the navigation reads, mid-update or not
+                seen.append(rt.occupancy().prob.tobytes())
+        seen.append(rt.occupancy_with_hits().prob.tobytes())
+        rt.close()
+        runs[background] = (seen, rt.stats)
+    assert runs[True][0] == runs[False][0]
+    assert runs[True][1] == runs[False][1]
+    assert runs[True][1].dropped > 0 or latency < DT
+
+
+class SlowSplit(EveryScan):
+    """EveryScan split in two; `update` waits until the test lets it finish."""
+
+    def __init__(self):
+        super().__init__()
+        self.release = threading.Event()
+        self.finished = threading.Event()
+
+    def advance(self, t, pose_odom, ranges_m):
+        self.odom = np.asarray(pose_odom, dtype=float)
+        self.fed.append(t)
+        return ranges_m
+
+    def update(self, ranges):
+        assert self.release.wait(10.0)
+        self.k += 1
+        self.finished.set()
+        return True
+
+
+def test_the_held_back_update_runs_beside_the_caller_and_is_joined_at_publication():
+    inner = SlowSplit()
+    rt = RealtimeSlam(inner, RealtimeParams(fixed_latency_s=0.25), LASER.n_beams)
+    odom = np.zeros(3)
+    ranges = np.full(LASER.n_beams, 3.0)
+    # scan 0 starts the update and returns while it is still being computed: the caller drives
+    # on (scans 1 and 2 dropped) on the snapshot from before it, map and pose
+    rt.process(0.0, odom, ranges)
+    rt.process(0.1, odom, ranges)
+    rt.process(0.2, odom, ranges)
+    assert not inner.finished.is_set() and inner.k == 0
+    np.testing.assert_array_equal(rt.pose_estimate(), odom)
+    assert rt.occupancy() == ("map", 0)
+    inner.release.set()
+    # its publication time (0.3 s) joins it: published, and the next update started
+    assert rt.process(0.3, odom, ranges) is True
+    assert inner.finished.is_set() and rt.stats.dropped == 2
+    rt.close()
+    assert inner.k == 2
