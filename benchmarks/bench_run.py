@@ -84,13 +84,19 @@ def main() -> None:
         t2 = time.perf_counter()
         # written a second time, traced (tracemalloc slows it), for its memory only
         _, parts["report"] = traced_peak(lambda: write_report(result, Path(tmp) / "traced"))
+    _print_run(world.name, args, result, (t0, t1, t2), parts)
+
+
+def _print_run(name: str, args: argparse.Namespace, result, times, parts) -> None:
+    """One run's real-time factors, peak memory (whole and per component) and stage shares."""
+    t0, t1, t2 = times
     s = result.summary
     t = s.timings
     total = t2 - t0
     nav, slam, sim = t.navigation_wall_s, t.slam_wall_s, t.simulation_wall_s
     other = t.explore_wall_s - nav - slam - sim
     print(
-        f"{world.name}, seed {args.seed}, {args.slam}, {args.slam_threads} scan-matching "
+        f"{name}, seed {args.seed}, {args.slam}, {args.slam_threads} scan-matching "
         f"thread(s): {s.outcome}"
         f"{' (' + s.reason + ')' if s.reason else ''}, coverage {s.coverage:.1%}, "
         f"{t.sim_time_s:.0f} s simulated"
