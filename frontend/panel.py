@@ -136,6 +136,11 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
         lines.append(f"pose error now: **{et:.3f} m**, **{math.degrees(er):.1f}°** (unaligned)")
     if p.get("note"):
         lines.append(p["note"])
+    rt = p.get("realtime") or (
+        summary.realtime.model_dump() if summary and summary.realtime else None
+    )
+    if rt:
+        lines.append(realtime_line(rt))
     if summary:
         lines.append(f"outcome **{summary.outcome}** ({summary.stop})")
         b = summary.relation("B")
@@ -146,6 +151,20 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
                 f"rot **{rot.mean:.4f} ± {rot.std:.4f} rad** ({tr.n} relations)"
             )
     return "\n\n".join(lines)
+
+
+def realtime_line(rt: dict[str, Any]) -> str:
+    """One line on what a real-time SLAM (worker.slam.realtime) kept up with: its computer's
+    speed factor (or fixed latency), updates made, scans dropped of those the laser gave, and
+    the update latency's mean and maximum."""
+    fixed = rt.get("fixed_latency_s")
+    mode = f"latency fixed at {fixed:g} s" if fixed is not None else f"computer x{rt['speed']:g}"
+    share = rt["scans_dropped"] / rt["scans"] if rt["scans"] else 0.0
+    return (
+        f"real-time SLAM ({mode}): **{rt['updates']:,}** updates, "
+        f"**{rt['scans_dropped']:,}** of {rt['scans']:,} scans dropped ({100 * share:.0f} %), "
+        f"latency {rt['latency_mean_s']:.3f} s mean, {rt['latency_max_s']:.3f} s max"
+    )
 
 
 def replay_figures(fin: Any, t: float) -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 One JSON object per message on `channel(run_id)` = `mapqual:run:<id>`:
   progress  the light figures the database stores too (`progress_payload`: simulated time,
-            coverage, poses, ...)
+            coverage, poses, ...; under real-time SLAM emulation also `realtime`: updates,
+            scans dropped and latencies so far)
   seq       message counter of this run
   and, only while somebody listens (PUBLISH answers with the number of listeners):
   path      {"i0": index of the first point sent, "gt": [[x, y], ...], "est": [[x, y], ...]}:
@@ -50,7 +51,15 @@ def progress_payload(p: RunProgress) -> dict[str, Any]:
         "status": p.status,
         "goals_reached": p.goals_reached,
         "rtf": round(p.rtf, 2),
+        **({} if p.realtime is None else {"realtime": _realtime_figures(p.realtime)}),
     }
+
+
+def _realtime_figures(rt: dict[str, Any]) -> dict[str, Any]:
+    """A real-time run's counters so far (worker.slam.realtime), latencies to the ms."""
+    out = {k: rt[k] for k in ("speed", "fixed_latency_s", "scans", "updates", "scans_dropped")}
+    out.update({k: round(float(rt[k]), 3) for k in ("latency_mean_s", "latency_max_s")})
+    return out
 
 
 def map_codes(grid: Any) -> np.ndarray:

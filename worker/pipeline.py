@@ -69,6 +69,9 @@ class RunProgress:
     occupancy: Callable[[], Any] | None = None  # the current OccupancyGrid, read on demand
     beam_angles: np.ndarray | None = None  # (B,) [rad] of `ranges`, relative to the heading
     range_max: float = math.inf  # [m] readings at or past this are "no return"
+    # under real-time emulation, what the SLAM has kept up with so far (RealtimeSummary's
+    # fields: speed, fixed_latency_s, scans, updates, scans_dropped, latency_mean_s / _max_s)
+    realtime: dict | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,7 +171,7 @@ def run_one(
     # the progress reports for timeline.csv (without on_progress no coverage is measured)
     timeline = None if on_progress is None else Timeline()
     relay = None if timeline is None else timeline.tap(on_progress)
-    callback = None if relay is None else _progress_relay(relay, params, wall0)
+    callback = None if relay is None else _progress_relay(relay, params, wall0, rt)
     with _open_log(sim_log) as stream, closed_after(slam):
         writer = None
         if stream is not None:
@@ -233,10 +236,11 @@ def _map_score(world: World, params: RunParams, ex: ExplorationResult) -> MapSco
 
 
 def _progress_relay(
-    on_progress: Callable[[RunProgress], None], params: RunParams, wall0: float
+    on_progress: Callable[[RunProgress], None], params: RunParams, wall0: float, rt=None
 ) -> Callable[[ExploreProgress], None]:
     """The exploration's progress callback: each ExploreProgress passed on as a RunProgress
-    with the wall time since `wall0` and the laser's geometry."""
+    with the wall time since `wall0`, the laser's geometry and, under real-time emulation (`rt`,
+    a RealtimeSlam), its updates, dropped scans and latencies so far."""
     angles = params.sim.laser.angles
     range_max = params.sim.laser.range_max
 
@@ -259,6 +263,9 @@ def _progress_relay(
                 p.occupancy,
                 angles,
                 range_max,
+                None
+                if rt is None
+                else rt.stats.summary(rt.params.speed, rt.params.fixed_latency_s),
             )  # fmt: skip
         )
 

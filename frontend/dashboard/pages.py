@@ -301,6 +301,7 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
         "names": names,
         "errors_plot": "errors.png" in names,
         "map_score": summary.map_score if summary else None,  # issue 17: map vs floorplan
+        "realtime": summary.realtime if summary else None,  # issue 51: real-time SLAM
         "overlay_plot": "map_overlay.png" in names,
         "viewer": viewer_link,
         "pct": round(100 * float((run.progress or {}).get("coverage", 0.0))),

@@ -223,10 +223,12 @@ def _print_summary(s: RunSummary, run_id: int, report_dir: str) -> None:
         )
     console = Console()
     console.print(table)
+    rtf = t.real_time_factor  # under 10 (an emulated SLAM is often under 1): with tenths
+    rtf_text = f"{rtf:.1f}" if rtf < 10 else f"{rtf:.0f}"
     console.print(
         f"outcome [bold]{outcome}[/bold] — {s.stop_detail}; coverage {s.coverage:.1%}; "
         f"path {s.path_length_m:.0f} m; {t.sim_time_s:.0f} s simulated in "
-        f"{t.wall_time_s:.1f} s (x{t.real_time_factor:.0f} real time)"
+        f"{t.wall_time_s:.1f} s (x{rtf_text} real time)"
     )
     rt = s.realtime
     if rt is not None:
