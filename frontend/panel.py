@@ -136,11 +136,10 @@ def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
         lines.append(f"pose error now: **{et:.3f} m**, **{math.degrees(er):.1f}°** (unaligned)")
     if p.get("note"):
         lines.append(p["note"])
-    rt = p.get("realtime") or (
-        summary.realtime.model_dump() if summary and summary.realtime else None
-    )
-    if rt:
-        lines.append(realtime_line(rt))
+    if p.get("realtime"):  # live: the counters so far
+        lines.append(realtime_line(p["realtime"]))
+    elif summary is not None and summary.realtime is not None:  # replay: the run's totals
+        lines.append(realtime_line(summary.realtime.model_dump()) + " (whole run)")
     if summary:
         lines.append(f"outcome **{summary.outcome}** ({summary.stop})")
         b = summary.relation("B")

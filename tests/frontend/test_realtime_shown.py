@@ -83,6 +83,7 @@ def test_the_panel_of_a_finished_run_reads_its_summary(emulated):
     r = result.summary.realtime
     assert f"latency fixed at {LATENCY_S:g} s" in text
     assert f"**{r.updates:,}** updates, **{r.scans_dropped:,}** of {r.scans:,} scans" in text
+    assert text.count("real-time SLAM") == 1 and "max (whole run)" in text
 
 
 def test_the_job_page_shows_the_runs_realtime_figures(emulated, tmp_path):
