@@ -16,6 +16,7 @@ from worker.batch.paired import batch_paired_rows
 from worker.batch.state import now_iso
 from worker.batch.tables import (
     ERROR_COLUMNS,
+    REASONS,
     error_rows,
     is_good,
     outcome_of,
@@ -142,15 +143,7 @@ def write_html(
 ) -> Path:
     """report.html in `out`, readable offline: every image is embedded in the page."""
     success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good"]
-    success_cols += [
-        "incomplete",
-        "failed",
-        "collision",
-        "stuck",
-        "time_limit",
-        "slam_diverged",
-        "error",
-    ]
+    success_cols += ["incomplete", "failed", *REASONS]
     page = _template().render(
         info=info,
         finished=len(records),

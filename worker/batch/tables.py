@@ -12,14 +12,22 @@ from typing import Any
 import numpy as np
 
 from worker.report.summary import RelationErrorsSummary, RelationKind, RunSummary
-from worker.status import RecordStatus, RunOutcome
+from worker.status import RecordStatus, RunOutcome, RunReason
 
 # Thesis 6.3.4: a map is visually bad above these mean B errors.
 GOOD_T = 1.0  # [m]
 GOOD_R = 0.03  # [rad]
 KINDS = (("B", "b"), ("A", "a"), ("SM", "sm"))
 STATS = ("mean", "std", "min", "max")
-REASONS = ("collision", "stuck", "time_limit", "slam_diverged", "error")
+# success.csv's failure columns: stop reasons, then the runs that raised; slam_failed (external
+# SLAM programs only) counts among "failed" alone, as success.csv has always been written
+REASONS: tuple[RunReason | RecordStatus, ...] = (
+    RunReason.COLLISION,
+    RunReason.STUCK,
+    RunReason.TIME_LIMIT,
+    RunReason.SLAM_DIVERGED,
+    RecordStatus.ERROR,
+)
 ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES", "CI95")
 RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
 # runs.csv's map-versus-floorplan columns (issue 17): column <- summary.map_score field
@@ -37,11 +45,11 @@ def summary_of(rec: dict[str, Any]) -> RunSummary | None:
     return rec["summary"] if rec["status"] == RecordStatus.DONE else None
 
 
-def outcome_of(rec: dict[str, Any]) -> tuple[str, str | None]:
+def outcome_of(rec: dict[str, Any]) -> tuple[RunOutcome, RunReason | RecordStatus | None]:
     """(outcome, reason): a run that raised counts as failed with reason "error"."""
     s = summary_of(rec)
     if s is None:
-        return RunOutcome.FAILED, "error"
+        return RunOutcome.FAILED, RecordStatus.ERROR
     return s.outcome, s.reason
 
 
