@@ -75,8 +75,8 @@ def _timed(world, params, seed: int):
 def _startup_s(laser) -> tuple[float, float]:
     """[s] (wall, CPU) from nothing to the twin's first answer (spawn, imports, handshake, the
     first scan), then bye: the one-time part of the protocol's cost."""
-    from worker.slam.base import make_slam
     from worker.slam.params import SlamParams
+    from worker.slam.registry import make_slam
 
     ext = _params(TWIN, 1.0).slam
     t0, c0 = time.perf_counter(), _cpu_s()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -21,9 +21,6 @@ from frontend.panel import (
     title_html,
     top_down,
 )
-
-if TYPE_CHECKING:
-    from frontend.viewer import ViewerApp
 
 NEED_LINK = (
     "**No run to show.** This viewer opens a run only through the *open viewer* link on the "
@@ -42,8 +39,8 @@ LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan",
 class RunView:
     """The GUI and scene of one connected client."""
 
-    def __init__(self, app: ViewerApp, client: Any, user_id: int):
-        self.app, self.client, self.scene = app, client, client.scene
+    def __init__(self, client: Any, user_id: int):
+        self.client, self.scene = client, client.scene
         self.user_id = user_id  # whom the link was made for (access is checked again as it runs)
         self.lock = threading.RLock()
         self.run_id: int | None = None

@@ -90,7 +90,7 @@ class ViewerApp:
             log.exception("viewer: could not check client %s's link", client.client_id)
             self._refuse(client, "the link could not be checked", "unavailable")
             return
-        view = RunView(self, client, user_id)
+        view = RunView(client, user_id)
         with self._lock:
             self.views[client.client_id] = view
         self.show(view, run_id)

@@ -16,6 +16,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from worker.evaluate.ate import AteResult, absolute_trajectory_error
+from worker.evaluate.coverage import reachable_free
 from worker.evaluate.map_score import MapScore, MapScoreParams, score_map, start_alignment
 from worker.evaluate.metric import RelationErrors, evaluate_relations
 from worker.evaluate.relations import (
@@ -26,7 +27,6 @@ from worker.evaluate.relations import (
     relations_SM,
 )
 from worker.evaluate.trajectory import Trajectory
-from worker.explore.coverage import reachable_free
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
 from worker.report.summary import RunSummary
 from worker.report.timeline import Timeline

@@ -13,16 +13,9 @@ from typing import Any
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template
 
 from worker.batch.paired import batch_paired_rows
+from worker.batch.records import is_good, outcome_of, summary_of
 from worker.batch.state import now_iso
-from worker.batch.tables import (
-    ERROR_COLUMNS,
-    REASONS,
-    error_rows,
-    is_good,
-    outcome_of,
-    success_rows,
-    summary_of,
-)
+from worker.batch.tables import ERROR_COLUMNS, REASONS, error_rows, success_rows
 from worker.batch.thesis import findings, side_by_side
 from worker.batch.validity import validity
 from worker.status import RecordStatus, RunOutcome

@@ -168,7 +168,7 @@ def group_label(world: str, noise: float | None = None) -> str:
 def batch_samples(records: Iterable[dict[str, Any]]) -> list[Sample]:
     """The scores of a batch's completed runs with B relations (its records as the report
     reads them)."""
-    from worker.batch.tables import outcome_of, relation_stats
+    from worker.batch.records import outcome_of, relation_stats
     from worker.status import RunOutcome
 
     out = []

@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.batch.tables import GOOD_R, GOOD_T, error_rows, is_good, outcome_of, relation_stats
+from worker.batch.records import GOOD_R, GOOD_T, is_good, outcome_of, relation_stats
+from worker.batch.tables import error_rows
 from worker.status import RunOutcome
 
 AXES = (("translation", "m", GOOD_T), ("rotation", "rad", GOOD_R))

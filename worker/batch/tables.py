@@ -11,12 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from worker.report.summary import RelationErrorsSummary, RelationKind, RunSummary
+from worker.batch.records import is_good, outcome_of, relation_stats, summary_of
+from worker.batch.thesis import THESIS_COLUMNS, side_by_side
 from worker.status import RecordStatus, RunOutcome, RunReason
 
-# Thesis 6.3.4: a map is visually bad above these mean B errors.
-GOOD_T = 1.0  # [m]
-GOOD_R = 0.03  # [rad]
 KINDS = (("B", "b"), ("A", "a"), ("SM", "sm"))
 STATS = ("mean", "std", "min", "max")
 # success.csv's failure columns: stop reasons, then the runs that raised; slam_failed (external
@@ -38,36 +36,6 @@ MAP_COLUMNS = (
     ("map_wall_coverage", "wall_coverage"),
     ("map_free_share", "free_share"),
 )
-
-
-def summary_of(rec: dict[str, Any]) -> RunSummary | None:
-    """The run's summary; None for a run that raised."""
-    return rec["summary"] if rec["status"] == RecordStatus.DONE else None
-
-
-def outcome_of(rec: dict[str, Any]) -> tuple[RunOutcome, RunReason | RecordStatus | None]:
-    """(outcome, reason): a run that raised counts as failed with reason "error"."""
-    s = summary_of(rec)
-    if s is None:
-        return RunOutcome.FAILED, RecordStatus.ERROR
-    return s.outcome, s.reason
-
-
-def relation_stats(rec: dict[str, Any], kind: RelationKind = "B") -> RelationErrorsSummary | None:
-    """The run's {translation, rotation, skipped} figures of relation `kind`, if evaluated."""
-    s = summary_of(rec)
-    return None if s is None else s.relation(kind)
-
-
-def is_good(rec: dict[str, Any]) -> bool:
-    """Completed, with mean B errors under the thesis's visually-good thresholds."""
-    b = relation_stats(rec)
-    return (
-        outcome_of(rec)[0] == RunOutcome.COMPLETED
-        and b is not None
-        and b.translation.mean <= GOOD_T
-        and b.rotation.mean <= GOOD_R
-    )
 
 
 def run_row(rec: dict[str, Any]) -> dict[str, Any]:
@@ -199,8 +167,6 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]
 
 def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
     """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv and thesis.csv in `out`."""
-    from worker.batch.thesis import THESIS_COLUMNS, side_by_side  # it imports this module
-
     runs = [run_row(r) for r in records]
     success = success_rows(records)
     run_cols = list(runs[0]) if runs else list(RUN_LABELS)

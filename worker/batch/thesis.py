@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import mannwhitneyu
 
-from worker.batch.tables import is_good, outcome_of, relation_stats
+from worker.batch.records import is_good, outcome_of, relation_stats
 from worker.status import RunOutcome
 
 TABLES = Path(__file__).with_name("thesis_tables.json")

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.batch.tables import GOOD_T, relation_stats, summary_of
+from worker.batch.records import GOOD_T, relation_stats, summary_of
 
 # (label, map_score field): the scores ranked against the B errors
 SCORES = (("wall distance", "distance_m"), ("precision", "precision"), ("recall", "recall"))

@@ -10,7 +10,7 @@ from typing import Protocol
 import numpy as np
 from scipy import ndimage
 
-from worker.explore.coverage import align_map_to_world
+from worker.evaluate.coverage import align_map_to_world
 from worker.explore.params import ExploreParams
 from worker.status import RunOutcome, RunReason
 

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from worker.explore.coverage import reachable_free, seen_free, unseen_regions
+from worker.evaluate.coverage import reachable_free, seen_free, unseen_regions
 from worker.explore.loop import judge_outcome
 from worker.explore.params import ExploreParams
 from worker.explore.stop_rules import StopReason
