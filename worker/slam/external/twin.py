@@ -24,7 +24,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import msgpack  # noqa: E402
 import numpy as np  # noqa: E402
 
-from worker.params import from_dict  # noqa: E402
+from worker.param_io import from_dict  # noqa: E402
 from worker.slam.base import beam_angles, beam_limits  # noqa: E402
 from worker.slam.external import protocol as proto  # noqa: E402
 from worker.slam.external.kernels import changed_box, changed_cells  # noqa: E402
