@@ -35,6 +35,7 @@ from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
 from worker.slam import registry
 from worker.slam.base import closed_after
+from worker.slam.grid import OccupancyGrid
 from worker.status import RunOutcome
 from worker.world.world import World
 
@@ -66,7 +67,7 @@ class RunProgress:
     goal_xy: np.ndarray | None = None  # (2,) [m] the current frontier goal
     plan: np.ndarray | None = None  # (K, 2) [m] the global plan
     ranges: np.ndarray | None = None  # (B,) [m] the latest scan
-    occupancy: Callable[[], Any] | None = None  # the current OccupancyGrid, read on demand
+    occupancy: Callable[[], OccupancyGrid] | None = None  # the current map, read on demand
     beam_angles: np.ndarray | None = None  # (B,) [rad] of `ranges`, relative to the heading
     range_max: float = math.inf  # [m] readings at or past this are "no return"
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.batch.records import is_good, outcome_of, relation_stats, summary_of
+from worker.batch.records import BatchRecord, is_good, outcome_of, relation_stats, summary_of
 from worker.batch.thesis import THESIS_COLUMNS, side_by_side
 from worker.status import RecordStatus, RunOutcome, RunReason
 
@@ -38,7 +38,7 @@ MAP_COLUMNS = (
 )
 
 
-def run_row(rec: dict[str, Any]) -> dict[str, Any]:
+def run_row(rec: BatchRecord) -> dict[str, Any]:
     """One runs.csv row."""
     outcome, reason = outcome_of(rec)
     s = summary_of(rec)
@@ -68,15 +68,15 @@ def run_row(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def _conditions(records: Sequence[dict[str, Any]]) -> dict[tuple, list[dict[str, Any]]]:
+def _conditions(records: Sequence[BatchRecord]) -> dict[tuple, list[BatchRecord]]:
     """Records by (world, slam, noise), in order of first appearance."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple, list[BatchRecord]] = {}
     for rec in records:
         groups.setdefault((rec["world"], rec["slam"], rec["noise"]), []).append(rec)
     return groups
 
 
-def environment_label(records: Sequence[dict[str, Any]], world: str, slam: str, noise: float):
+def environment_label(records: Sequence[BatchRecord], world: str, slam: str, noise: float):
     """The world's name, with the SLAM algorithm and noise level when the batch varies them."""
     parts = [world]
     if len({r["slam"] for r in records}) > 1:
@@ -86,7 +86,7 @@ def environment_label(records: Sequence[dict[str, Any]], world: str, slam: str, 
     return " ".join(parts)
 
 
-def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def success_rows(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """Per world and condition: runs, completed, good, and failures by reason."""
     rows = []
     for (world, slam, noise), recs in _conditions(records).items():
@@ -104,7 +104,7 @@ def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, Any]]:
+def error_rows(records: Sequence[BatchRecord], axis: str) -> list[dict[str, Any]]:
     """Thesis Tables 6.4 (axis "translation") and 6.5 ("rotation"): per environment, each B
     statistic averaged over the completed runs; environments with none are left out. CI95 is
     the average of the runs' 95 % half-widths (over the runs that have one; else None)."""
@@ -126,7 +126,7 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
     return rows
 
 
-def map_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def map_rows(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """maps.csv: per environment, the map-versus-floorplan scores averaged over the completed
     runs that have one (a score null in a run is left out of its mean)."""
     rows = []
@@ -165,7 +165,7 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]
     return path
 
 
-def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
+def write_tables(records: Sequence[BatchRecord], out: Path) -> dict[str, Path]:
     """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv and thesis.csv in `out`."""
     runs = [run_row(r) for r in records]
     success = success_rows(records)
