@@ -44,8 +44,9 @@ def limit_self(limits: dict[str, int]) -> None:
 def run(req: dict[str, Any]) -> dict[str, Any]:
     """The task's outcome as the result's JSON (every failure a one-line reason)."""
     from backend.sandbox_tasks import TASKS
+    from worker.decompress_budget import set_budget
     from worker.errors import InputError
-    from worker.export.bounded import bound_bag_readers, set_budget
+    from worker.export.bounded import bound_bag_readers
     from worker.world.image_io import ImageTooLarge
 
     set_budget(int(req["unpacked_bytes"]))

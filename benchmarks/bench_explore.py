@@ -34,8 +34,8 @@ from worker.explore.loop import ExploreParams, explore  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
 from worker.sim.simulator import Simulator  # noqa: E402
 from worker.slam import registry  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
 WORLDS = ROOT / "worlds"

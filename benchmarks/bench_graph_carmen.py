@@ -32,11 +32,11 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.bench_reallogs import DATA, LOGS, b_errors  # noqa: E402
 from worker.evaluate.trajectory import Trajectory  # noqa: E402
-from worker.params import from_dict, load_params_file  # noqa: E402
+from worker.param_io import from_dict, load_params_file  # noqa: E402
 from worker.sim.carmen import read_laser_log  # noqa: E402
 from worker.sim.drift import DriftParams, drifting_problem, log_slice  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams, with_defaults_for  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 
 
 def bench_log(name: str, args: argparse.Namespace) -> dict[str, float]:

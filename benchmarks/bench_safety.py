@@ -35,11 +35,11 @@ sys.path.insert(0, str(ROOT))
 
 from worker.explore.loop import Exploration, ExploreParams  # noqa: E402
 from worker.explore.safety import front_clearance, median_ranges  # noqa: E402
-from worker.params import load_params_file  # noqa: E402
+from worker.param_io import load_params_file  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
 from worker.sim.simulator import Simulator, add_range_noise  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))

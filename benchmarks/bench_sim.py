@@ -20,8 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.sim.laser import LaserSpec  # noqa: E402
-from worker.sim.raycast import cast_scans, cast_scans_skip, jump_map  # noqa: E402
 from worker.world import load_world  # noqa: E402
+from worker.world.raycast import cast_scans, cast_scans_skip, jump_map  # noqa: E402
 
 
 def best_rate(fn, n_scans: int, repeats: int = 3) -> tuple[float, float]:

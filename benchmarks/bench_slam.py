@@ -41,8 +41,8 @@ sys.path.insert(0, str(ROOT))
 
 from worker.sim.carmen import read_laser_log  # noqa: E402
 from worker.sim.run import run_simulation  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 from worker.world import load_world  # noqa: E402
 
 

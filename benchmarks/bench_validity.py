@@ -171,8 +171,8 @@ def save_map(path: Path, ex: Any) -> None:
 
 def rescore(npz: Path, world_path: Path, p: Any, cache: dict[str, Any]) -> dict[str, Any]:
     """The map score of a stored map, computed again (as worker.pipeline scores a run)."""
+    from worker.evaluate.coverage import reachable_free
     from worker.evaluate.map_score import score_map, start_alignment
-    from worker.explore.coverage import reachable_free
     from worker.explore.params import ExploreParams
     from worker.slam.grid import OccupancyGrid
     from worker.world.loader import load_world

@@ -29,8 +29,8 @@ from benchmarks.bench_reallogs import DATA, LOGS  # noqa: E402
 from worker.sim.carmen import read_laser_log  # noqa: E402
 from worker.sim.drift import DriftParams, drifting_problem, log_slice  # noqa: E402
 from worker.sim.laser import LaserSpec  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 
 
 def update_cpu(

@@ -30,8 +30,8 @@ sys.path.insert(0, str(ROOT))
 
 from worker.explore.loop import ExploreParams, ExploreProgress, explore  # noqa: E402
 from worker.sim.simulator import SimParams, Simulator  # noqa: E402
-from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
 # (world, slam, seed, time limit [s], other ExploreParams): furniture worlds exercise the

@@ -4,11 +4,14 @@ tiles, growing paths, robot markers, scan, goal and plan. Each sends only what c
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from worker.live_wire import FREE, OCCUPIED
+
+if TYPE_CHECKING:
+    import viser
 
 TILE = 128  # [cells] side of a SLAM map tile: a patch re-sends only the tiles it touches
 MAX_CHUNKS = 40  # path chunks before they are merged into one node
@@ -37,7 +40,9 @@ MAP_OCC_RGB = np.array([20, 40, 140])
 class Floorplan:
     """The world's floorplan as a grey image plane (walls dark grey, free light grey)."""
 
-    def __init__(self, scene: Any, name: str, occ: np.ndarray, resolution: float, origin):
+    def __init__(
+        self, scene: viser.SceneApi, name: str, occ: np.ndarray, resolution: float, origin
+    ):
         h, w = occ.shape
         self.occ, self.resolution = occ, float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
@@ -74,12 +79,12 @@ class MapTiles:
     sorted before the floorplan would hide the floorplan under its see-through cells.
     """
 
-    def __init__(self, scene: Any, name: str, visible: bool = True):
+    def __init__(self, scene: viser.SceneApi, name: str, visible: bool = True):
         self.scene, self.name = scene, name
         self.visible = visible
         self.floor: Floorplan | None = None
         self.floor_on = True
-        self.tiles: dict[tuple[int, int], Any] = {}
+        self.tiles: dict[tuple[int, int], viser.ImageHandle] = {}
         self.key: tuple | None = None
         self._last: tuple | None = None  # (codes, resolution, origin) last shown
 
@@ -161,11 +166,13 @@ class PathLayer:
     """A polyline that grows: new points become a new line node (only they are sent); every
     MAX_CHUNKS chunks are merged into one node so the scene stays small."""
 
-    def __init__(self, scene: Any, name: str, rgb, thickness: float, visible: bool = True):
+    def __init__(
+        self, scene: viser.SceneApi, name: str, rgb, thickness: float, visible: bool = True
+    ):
         self.scene, self.name, self.rgb, self.thickness = scene, name, rgb, thickness
         self.visible = visible
         self.points = np.empty((0, 2))
-        self.nodes: list[Any] = []
+        self.nodes: list[viser.LineSegmentsHandle] = []
         self._serial = 0
 
     def set(self, points: np.ndarray) -> None:
@@ -186,7 +193,7 @@ class PathLayer:
         if len(self.points) - start >= 2:
             self.nodes.append(self._node(self.points[start:]))
 
-    def _node(self, pts: np.ndarray) -> Any:
+    def _node(self, pts: np.ndarray) -> viser.LineSegmentsHandle:
         self._serial += 1
         return self.scene.add_line_segments(
             f"{self.name}/c{self._serial}", _segments(pts, Z_PATH), self.rgb,
@@ -211,7 +218,9 @@ class PathLayer:
 class Robot:
     """A robot pose as a flat triangle pointing along its heading."""
 
-    def __init__(self, scene: Any, name: str, rgb, size: float = 0.45, visible: bool = True):
+    def __init__(
+        self, scene: viser.SceneApi, name: str, rgb, size: float = 0.45, visible: bool = True
+    ):
         verts = np.array([[size, 0, 0], [-size / 2, size / 2, 0], [-size / 2, -size / 2, 0]])
         self.node = scene.add_mesh_simple(
             name, verts.astype(np.float32), np.array([[0, 1, 2]], dtype=np.uint32), color=rgb,
@@ -234,7 +243,7 @@ class Robot:
 class Markers:
     """The latest scan (points), the frontier goal (a point) and the global plan (a line)."""
 
-    def __init__(self, scene: Any, name: str, scan_on: bool = True, nav_on: bool = True):
+    def __init__(self, scene: viser.SceneApi, name: str, scan_on: bool = True, nav_on: bool = True):
         self.scene, self.name = scene, name
         self.scan = scene.add_point_cloud(
             f"{name}/scan", np.zeros((1, 3), np.float32), SCAN_RGB, point_size=0.08,
@@ -244,7 +253,7 @@ class Markers:
             f"{name}/goal", np.zeros((1, 3), np.float32), NAV_GOAL_RGB, point_size=0.45,
             visible=False, point_shape="diamond",
         )  # fmt: skip
-        self.plan: Any = None
+        self.plan: viser.LineSegmentsHandle | None = None
         self.scan_on, self.nav_on = scan_on, nav_on
         self.has_scan = self.has_goal = False
 

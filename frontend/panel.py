@@ -6,9 +6,10 @@ from __future__ import annotations
 import html
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from frontend.layers import (
     EST_RGB,
@@ -21,6 +22,12 @@ from frontend.layers import (
     NAV_PLAN_RGB,
     SCAN_RGB,
 )
+
+if TYPE_CHECKING:
+    import viser
+
+    from frontend.live import FinishedRun, RunInfo
+    from worker.report.summary import RunSummary
 
 # viser 1.1.1, the newest release (2026-12-06), has a perspective camera only: its client's
 # <Canvas> is made without react-three-fiber's `orthographic` flag, its camera controls read
@@ -79,14 +86,14 @@ def title_html(title: str) -> str:
     return f'<img src="data:," alt="" style="display:none" onerror="{html.escape(js)}">'
 
 
-def run_title(info: Any) -> str:
+def run_title(info: RunInfo | None) -> str:
     """The tab's title of a run: what it is, so tabs of several runs tell themselves apart."""
     if info is None:
         return "mapqual viewer"
     return f"Run #{info.id} · {info.world} · {info.slam} · seed {info.seed} — mapqual"
 
 
-def pose_error(gt: Any, est: Any) -> tuple[float, float]:
+def pose_error(gt: ArrayLike, est: ArrayLike) -> tuple[float, float]:
     """Translational [m] and absolute rotational [rad] difference of two poses (x, y, theta):
     the estimate against the ground truth in the frame both are drawn in, without alignment."""
     dx, dy = float(est[0]) - float(gt[0]), float(est[1]) - float(gt[1])
@@ -94,7 +101,9 @@ def pose_error(gt: Any, est: Any) -> tuple[float, float]:
     return math.hypot(dx, dy), abs(dth)
 
 
-def top_down(camera: Any, centre: tuple[float, float], size: tuple[float, float]) -> None:
+def top_down(
+    camera: viser.CameraHandle, centre: tuple[float, float], size: tuple[float, float]
+) -> None:
     """Look straight down on a `size` = (width, height) [m] area around `centre`, x right and
     y up on the screen, the whole area in view."""
     half = 0.55 * max(size[0], size[1], 1.0)
@@ -105,7 +114,7 @@ def top_down(camera: Any, centre: tuple[float, float], size: tuple[float, float]
     camera.look_at = (centre[0], centre[1], 0.0)
 
 
-def follow(camera: Any, x: float, y: float) -> None:
+def follow(camera: viser.CameraHandle, x: float, y: float) -> None:
     """Move the camera sideways (keeping its height and angle) so it looks at (x, y)."""
     look = np.asarray(camera.look_at, dtype=float)
     shift = np.array([x - look[0], y - look[1], 0.0])
@@ -113,7 +122,7 @@ def follow(camera: Any, x: float, y: float) -> None:
         camera.position = np.asarray(camera.position, dtype=float) + shift  # look_at moves too
 
 
-def metrics_markdown(info: Any, p: dict[str, Any], summary: Any) -> str:
+def metrics_markdown(info: RunInfo | None, p: dict[str, Any], summary: RunSummary | None) -> str:
     """The metrics panel at the timeline's moment: run, simulated time, coverage, what the
     navigation is doing, pose error against the ground truth, real-time factor (live); a note
     (`p["note"]`: looking back, or why a replay has no coverage over time); outcome and B
@@ -166,7 +175,7 @@ def realtime_line(rt: dict[str, Any]) -> str:
     )
 
 
-def replay_figures(fin: Any, t: float) -> dict[str, Any]:
+def replay_figures(fin: FinishedRun, t: float) -> dict[str, Any]:
     """A replay's figures at simulated time `t` from the run's stored timeline (a
     `frontend.live.FinishedRun`'s): coverage, status and goals of the last progress report by
     then; without a stored timeline a note says so, beside the final coverage."""

@@ -23,7 +23,7 @@ from frontend.panel import (
 )
 
 if TYPE_CHECKING:
-    from frontend.viewer import ViewerApp
+    import viser
 
 NEED_LINK = (
     "**No run to show.** This viewer opens a run only through the *open viewer* link on the "
@@ -42,8 +42,8 @@ LAYERS = ("floorplan", "SLAM map", "ground truth", "estimate", "robots", "scan",
 class RunView:
     """The GUI and scene of one connected client."""
 
-    def __init__(self, app: ViewerApp, client: Any, user_id: int):
-        self.app, self.client, self.scene = app, client, client.scene
+    def __init__(self, client: viser.ClientHandle, user_id: int):
+        self.client, self.scene = client, client.scene
         self.user_id = user_id  # whom the link was made for (access is checked again as it runs)
         self.lock = threading.RLock()
         self.run_id: int | None = None
@@ -59,7 +59,7 @@ class RunView:
         self._layers: dict[str, Any] = {}
 
     # --- GUI ------------------------------------------------------------------------------
-    def _build_gui(self, gui: Any) -> None:
+    def _build_gui(self, gui: viser.GuiApi) -> None:
         # no run chooser: a link opens one run, and that is all this client may see
         self.title = gui.add_html(title_html(run_title(None)))
         self._folders = [gui.add_folder("Metrics")]
@@ -321,7 +321,7 @@ class RunView:
             self.playing = not self.playing
             self._sync_replay_gui()
 
-    def _on_slider(self, event: Any) -> None:
+    def _on_slider(self, event: viser.GuiEvent) -> None:
         with self.lock:
             if self.mode == "replay":
                 self._render_at(float(self.slider.value))
@@ -388,6 +388,6 @@ class RunView:
             }
 
 
-def refuse(client: Any, note: Note) -> None:
+def refuse(client: viser.ClientHandle, note: Note) -> None:
     """A client without a valid link: a note on its panel, and nothing of any run."""
     client.gui.add_markdown(NOTES[note])

@@ -15,13 +15,16 @@ import queue
 import re
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING
 
 from backend.db.session import session_scope
 from backend.viewer_tokens import InvalidToken, authorise, check_access, signing_key
 from frontend.live import LiveRun, load_finished, load_floorplan, run_info, run_status
 from frontend.view import Note, RunView, refuse
 from worker.status import RunStatus
+
+if TYPE_CHECKING:
+    import viser
 
 log = logging.getLogger("mapqual.viewer")
 _RUN_PATH = re.compile(r"^/run/(\d{1,18})/([^/]*)/?$")
@@ -79,7 +82,7 @@ class ViewerApp:
             th.start()
 
     # --- clients --------------------------------------------------------------------------
-    def _connect(self, client: Any) -> None:
+    def _connect(self, client: viser.ClientHandle) -> None:
         try:
             run_id, user_id = self._authorise(client)
         except InvalidToken as exc:
@@ -90,17 +93,17 @@ class ViewerApp:
             log.exception("viewer: could not check client %s's link", client.client_id)
             self._refuse(client, "the link could not be checked", "unavailable")
             return
-        view = RunView(self, client, user_id)
+        view = RunView(client, user_id)
         with self._lock:
             self.views[client.client_id] = view
         self.show(view, run_id)
 
-    def _refuse(self, client: Any, reason: str, note: Note) -> None:
+    def _refuse(self, client: viser.ClientHandle, reason: str, note: Note) -> None:
         with self._lock:
             self.refused[client.client_id] = reason
         refuse(client, note)
 
-    def _authorise(self, client: Any) -> tuple[int, int]:
+    def _authorise(self, client: viser.ClientHandle) -> tuple[int, int]:
         """The run the client's link names and the user it was made for; InvalidToken unless
         the link's token is valid for that run and the user may still see it."""
         # viser 1.1.1 keeps each client's websocket connection here; its request has the path
@@ -115,7 +118,7 @@ class ViewerApp:
             grant = authorise(s, self.key, run_id, m.group(2))
         return run_id, grant.user_id
 
-    def _disconnect(self, client: Any) -> None:
+    def _disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
             self.refused.pop(client.client_id, None)
             view = self.views.pop(client.client_id, None)

@@ -16,6 +16,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from worker.evaluate.ate import AteResult, absolute_trajectory_error
+from worker.evaluate.coverage import reachable_free
 from worker.evaluate.map_score import MapScore, MapScoreParams, score_map, start_alignment
 from worker.evaluate.metric import RelationErrors, evaluate_relations
 from worker.evaluate.relations import (
@@ -26,7 +27,6 @@ from worker.evaluate.relations import (
     relations_SM,
 )
 from worker.evaluate.trajectory import Trajectory
-from worker.explore.coverage import reachable_free
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
 from worker.report.summary import RunSummary
 from worker.report.timeline import Timeline
@@ -35,6 +35,7 @@ from worker.sim.carmen import CarmenWriter
 from worker.sim.simulator import Simulator
 from worker.slam import registry
 from worker.slam.base import closed_after
+from worker.slam.grid import OccupancyGrid
 from worker.status import RunOutcome
 from worker.world.world import World
 
@@ -66,7 +67,7 @@ class RunProgress:
     goal_xy: np.ndarray | None = None  # (2,) [m] the current frontier goal
     plan: np.ndarray | None = None  # (K, 2) [m] the global plan
     ranges: np.ndarray | None = None  # (B,) [m] the latest scan
-    occupancy: Callable[[], Any] | None = None  # the current OccupancyGrid, read on demand
+    occupancy: Callable[[], OccupancyGrid] | None = None  # the current map, read on demand
     beam_angles: np.ndarray | None = None  # (B,) [rad] of `ranges`, relative to the heading
     range_max: float = math.inf  # [m] readings at or past this are "no return"
     # under real-time emulation, what the SLAM has kept up with so far (RealtimeSummary's

@@ -15,7 +15,7 @@ from pydantic import AfterValidator, Field
 from worker.errors import InputError
 from worker.evaluate.params import AParams, BParams, SMParams
 from worker.explore.params import ExploreParams
-from worker.params import adapter, from_dict, to_dict
+from worker.param_io import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
 from worker.slam import registry
 from worker.slam.params import SlamParams, with_defaults_for

@@ -1,4 +1,4 @@
-"""The vocabularies of a run's and a job's life: statuses, outcomes, batch record states.
+"""The vocabularies of a run's and a job's life: statuses, outcomes, stop reasons, records.
 
 One `StrEnum` each, in a module that imports nothing of mapqual's (no numba, no database), so
 that the API, the dashboard, the viewer, the CLI and the batch tables all compare against the
@@ -43,6 +43,25 @@ class RunOutcome(StrEnum):
     INCOMPLETE = "incomplete"
 
 
+class RunReason(StrEnum):
+    """Why a run's exploration stopped: the stop rule that fired (the summary's `stop`, and its
+    `reason` when the run failed). The first two complete a run, the others fail it."""
+
+    NO_FRONTIER = "no_frontier"  # no reachable frontier left
+    MAP_UNCHANGED = "map_unchanged"  # two map snapshots a period apart differ by little
+    COLLISION = "collision"  # the simulator reports a contact
+    STUCK = "stuck"  # goals given up in a row, or the robot stopped moving
+    TIME_LIMIT = "time_limit"  # the simulated time limit reached
+    SLAM_DIVERGED = "slam_diverged"  # the SLAM pose too far from the ground truth
+    SLAM_FAILED = "slam_failed"  # the SLAM program crashed, stalled or broke its protocol
+
+    @property
+    def outcome(self) -> RunOutcome:
+        """completed for the rules that find nothing left to explore, else failed (a run the
+        loop then finds incomplete is decided from its map, not from this)."""
+        return RunOutcome.COMPLETED if self in COMPLETED_REASONS else RunOutcome.FAILED
+
+
 class WorldStatus(StrEnum):
     """Where an uploaded world stands: analysed off the request thread, then ready or not."""
 
@@ -53,7 +72,7 @@ class WorldStatus(StrEnum):
 
 class RecordStatus(StrEnum):
     """A batch record's state: the pipeline finished the run (whatever its outcome), or the
-    run raised (the tables count it as failed with reason "error")."""
+    run raised (the tables count it as failed with reason `RecordStatus.ERROR`, "error")."""
 
     DONE = "done"
     ERROR = "error"
@@ -63,3 +82,5 @@ class RecordStatus(StrEnum):
 ACTIVE_RUN = frozenset({RunStatus.QUEUED, RunStatus.RUNNING})
 ACTIVE_JOB = frozenset({JobStatus.QUEUED, JobStatus.RUNNING})
 FINISHED_RUN = frozenset({RunStatus.DONE, RunStatus.FAILED, RunStatus.CANCELLED})
+# the stop reasons of a completed exploration
+COMPLETED_REASONS = frozenset({RunReason.NO_FRONTIER, RunReason.MAP_UNCHANGED})

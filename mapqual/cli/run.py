@@ -34,7 +34,7 @@ def build_params(
     realtime: float | None = None,
 ):
     """RunParams from SPEC defaults, then the --params file, then the options."""
-    from worker.params import load_params_file
+    from worker.param_io import load_params_file
     from worker.run_params import RunParams
 
     data = load_params_file(params_file) if params_file is not None else {}

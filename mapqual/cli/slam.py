@@ -82,7 +82,7 @@ def slam(
 
 def _slam_params(params_file: Path | None, options: dict[str, Any]) -> Any:
     """SlamParams from the defaults, then the --params file, then the options given."""
-    from worker.params import from_dict, load_params_file
+    from worker.param_io import from_dict, load_params_file
     from worker.slam.params import SlamParams
 
     given: dict[str, Any] = {}
@@ -101,7 +101,7 @@ def _run(
     import numpy as np
 
     from worker.evaluate.trajio import write_carmen, write_tum
-    from worker.params import to_dict
+    from worker.param_io import to_dict
     from worker.sim.carmen import read_laser_log
     from worker.slam.run import run_slam
 

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 from mapqual.reference.api import api_page
 from mapqual.reference.cli import cli_page
-from mapqual.reference.params import params_page
+from mapqual.reference.parameters import params_page
 from mapqual.reference.settings import settings_page
 from mapqual.reference.summary import summary_page
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 import inspect
 import json
 import typing
@@ -45,6 +46,12 @@ def _models_in(hint: object) -> list[type[BaseModel]]:
     return [m for a in typing.get_args(hint) for m in _models_in(a)]
 
 
+def _enums_in(hint: object) -> list[type[enum.Enum]]:
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return [hint]
+    return [e for a in typing.get_args(hint) for e in _enums_in(a)]
+
+
 def _table(model: type[BaseModel]) -> str:
     comments = field_comments(model)
     rows = ["| field | type | unit | meaning |", "| --- | --- | --- | --- |"]
@@ -53,6 +60,10 @@ def _table(model: type[BaseModel]) -> str:
         kind = str(info.annotation).replace("typing.", "").replace("NoneType", "None")
         for m in _models_in(info.annotation):
             kind = kind.replace(f"{m.__module__}.{m.__name__}", m.__name__)
+        for e in _enums_in(info.annotation):  # a vocabulary of worker.status: its strings
+            values = f"{e.__name__} ({', '.join(m.value for m in e)})"
+            kind = kind.replace(f"<enum '{e.__name__}'>", values)
+            kind = kind.replace(f"{e.__module__}.{e.__name__}", values)
         kind = kind.replace("<class '", "").replace("'>", "")
         rows.append(f"| `{info.alias or name}` | {cell(kind)} | {cell(unit)} | {cell(meaning)} |")
     return "\n".join(rows)

@@ -96,12 +96,8 @@ def _live_scene(site, run_id: int) -> dict:
     return _wait(ready, LIVE_TIMEOUT_S, f"the viewer's live scene of run {run_id}")
 
 
-def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, artifacts):
-    context = _new_context(browser)
-    page = context.new_page()
-    _sign_in(page, site)
-    world_id = _upload_world(page, site, tmp_path, artifacts)
-
+def _submit_one_run(page, site, world_id: int) -> tuple[int, int]:
+    """Submit a job of one 90 s rbpf run on the world from the jobs page: (job id, run id)."""
     page.goto(site.url + "/")
     page.select_option('select[name="world_id"]', str(world_id))
     page.fill('input[name="runs"]', "1")
@@ -110,7 +106,25 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     page.click('button:has-text("Submit")')
     page.wait_for_url(re.compile(r".*/jobs/\d+$"))
     job_id = int(page.url.rsplit("/", 1)[1])
-    run_id = int(page.locator("tr[data-run]").first.get_attribute("data-run"))
+    return job_id, int(page.locator("tr[data-run]").first.get_attribute("data-run"))
+
+
+def _replay_from_the_start(viewer, site, run_id: int, replay: dict) -> None:
+    """Play at the end starts the replay over: the time slider runs and the paths regrow."""
+    view = next(v for v in site.viewer.views.values() if v.run_id == run_id)
+    end = view.slider.max
+    viewer.get_by_role("button", name="Play").click()
+    _wait(lambda: view.playing and 0 < view.slider.value < end, 30, "the replay to play")
+    assert view.describe()["gt_points"] < replay["gt_points"]
+    _wait(lambda: view.slider.value > 3.0, 30, "the replay to advance")
+
+
+def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, artifacts):
+    context = _new_context(browser)
+    page = context.new_page()
+    _sign_in(page, site)
+    world_id = _upload_world(page, site, tmp_path, artifacts)
+    job_id, run_id = _submit_one_run(page, site, world_id)
 
     # the run page's link opens the viewer on this run while it is live
     running = f'tr[data-run="{run_id}"][data-status="running"]'
@@ -154,13 +168,7 @@ def test_upload_submit_watch_live_and_browse_results(browser, site, tmp_path, ar
     assert replay["run"] == run_id and replay["gt_points"] > scene["gt_points"]
     time.sleep(1.0)
     _shoot(viewer, artifacts / "viewer-replay.png")
-    # Play at the end starts the replay over: the time slider runs and the paths regrow
-    view = next(v for v in site.viewer.views.values() if v.run_id == run_id)
-    end = view.slider.max
-    viewer.get_by_role("button", name="Play").click()
-    _wait(lambda: view.playing and 0 < view.slider.value < end, 30, "the replay to play")
-    assert view.describe()["gt_points"] < replay["gt_points"]
-    _wait(lambda: view.slider.value > 3.0, 30, "the replay to advance")
+    _replay_from_the_start(viewer, site, run_id, replay)
 
     page.goto(site.url + "/compare")
     assert page.locator("#compare-table tbody tr").count() == 1

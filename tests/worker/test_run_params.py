@@ -165,7 +165,7 @@ def test_the_schema_is_inline_and_every_key_optional():
 
 def test_params_import_no_numba():
     code = (
-        "import sys, worker.run_params, worker.params, worker.slam.registry;"
+        "import sys, worker.run_params, worker.param_io, worker.slam.registry;"
         "worker.run_params.RunParams.from_json({'slam': {'particles': 3}});"
         "worker.run_params.run_params_schema();"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'llvmlite')))"

@@ -13,7 +13,7 @@ from typing import Any
 import yaml
 
 from worker.errors import InputError
-from worker.params import load_params_file
+from worker.param_io import load_params_file
 from worker.run_params import RunParams
 from worker.slam import registry
 from worker.world.catalogue import CATALOGUE_SUFFIXES, default_worlds_dir, find_worlds

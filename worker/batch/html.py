@@ -13,15 +13,9 @@ from typing import Any
 from jinja2 import Environment, PackageLoader, StrictUndefined, Template
 
 from worker.batch.paired import batch_paired_rows
+from worker.batch.records import BatchRecord, is_good, outcome_of, summary_of
 from worker.batch.state import now_iso
-from worker.batch.tables import (
-    ERROR_COLUMNS,
-    error_rows,
-    is_good,
-    outcome_of,
-    success_rows,
-    summary_of,
-)
+from worker.batch.tables import ERROR_COLUMNS, REASONS, error_rows, success_rows
 from worker.batch.thesis import findings, side_by_side
 from worker.batch.validity import validity
 from worker.status import RecordStatus, RunOutcome
@@ -80,7 +74,7 @@ def _template() -> Template:
     return env.get_template("report.html")
 
 
-def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
+def _run_row(r: BatchRecord, out: Path) -> dict[str, Any]:
     """One line of the runs table: labels, outcome, coverage, B means, B count, sim time."""
     outcome, reason = outcome_of(r)
     s = summary_of(r)
@@ -99,7 +93,7 @@ def _run_row(r: dict[str, Any], out: Path) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _map_link(r: dict[str, Any], out: Path) -> str | None:
+def _map_link(r: BatchRecord, out: Path) -> str | None:
     """The run's map.png relative to the batch's folder: its report's file on this disk, or
     (object storage) a copy fetched into OUT/maps/; None when it cannot be had."""
     from worker.storage import StorageError, run_files
@@ -124,7 +118,7 @@ def _figure(name: str, path: Path | None) -> dict[str, Any]:
     return {"name": name, "data": data, "caption": CAPTIONS[name], "missing": MISSING[name]}
 
 
-def _validity(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Any] | None:
+def _validity(records: Sequence[BatchRecord], out: Path) -> dict[str, Any] | None:
     """The validity section with its scatter plot embedded (None: too few scored runs)."""
     v = validity(records, out)
     if v is not None:
@@ -134,7 +128,7 @@ def _validity(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Any] | 
 
 
 def write_html(
-    records: Sequence[dict[str, Any]],
+    records: Sequence[BatchRecord],
     figures: dict[str, Path | None],
     out: Path,
     info: dict[str, Any],
@@ -142,15 +136,7 @@ def write_html(
 ) -> Path:
     """report.html in `out`, readable offline: every image is embedded in the page."""
     success_cols = ["world", "variant", "noise", "slam", "runs", "completed", "good"]
-    success_cols += [
-        "incomplete",
-        "failed",
-        "collision",
-        "stuck",
-        "time_limit",
-        "slam_diverged",
-        "error",
-    ]
+    success_cols += ["incomplete", "failed", *REASONS]
     page = _template().render(
         info=info,
         finished=len(records),

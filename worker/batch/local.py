@@ -9,13 +9,21 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from worker.batch.experiment import RunSpec
 from worker.batch.pool import PoolMessage, run_pool
+from worker.batch.records import BatchRecord
 from worker.batch.state import BatchDir, record_of
 from worker.report.summary import RunSummary
 from worker.status import RecordStatus
+
+if TYPE_CHECKING:
+    from worker.pipeline import RunProgress
+    from worker.world.world import World
+
+# a run's progress as the batch display takes it: (t [s] simulated, coverage [0, 1])
+ProgressFn = Callable[[tuple[float, float]], None]
 
 PROGRESS_EVERY_S = 2.0  # [s] wall time between progress messages from a running run
 SIM_LOG_GZ = "sim.log.gz"  # a run's full CARMEN log in its folder, with --sim-log
@@ -46,7 +54,7 @@ class Event:
 
     kind: str  # start | progress | finish
     spec: RunSpec
-    record: dict[str, Any] | None = None  # finish
+    record: BatchRecord | None = None  # finish
     t: float = 0.0  # [s] simulated time so far (progress)
     coverage: float = 0.0  # progress
 
@@ -77,19 +85,19 @@ class NullSink:
 
 
 @lru_cache(maxsize=8)
-def load_cached(path: str, allow_outside: bool = False) -> Any:
+def load_cached(path: str, allow_outside: bool = False) -> World:
     """The world of a floorplan file, loaded once per worker process."""
     from worker.world.loader import load_world
 
     return load_world(Path(path), allow_outside=allow_outside)
 
 
-def throttled(progress: Callable[[Any], None]) -> Callable[[Any], None]:
+def throttled(progress: ProgressFn) -> Callable[[RunProgress], None]:
     """A pipeline progress callback that passes (t [s], coverage) to `progress` at most once
     every PROGRESS_EVERY_S of wall time."""
     last = [0.0]
 
-    def on_progress(p: Any) -> None:
+    def on_progress(p: RunProgress) -> None:
         now = time.monotonic()
         if now - last[0] >= PROGRESS_EVERY_S:
             last[0] = now
@@ -98,7 +106,7 @@ def throttled(progress: Callable[[Any], None]) -> Callable[[Any], None]:
     return on_progress
 
 
-def execute(task: Task, progress: Callable[[Any], None]) -> RunOutput:
+def execute(task: Task, progress: ProgressFn) -> RunOutput:
     """One run in a worker process with no database: `run_one`, then its report folder."""
     from worker.pipeline import run_one
     from worker.report.folder import write_report
@@ -123,7 +131,7 @@ def run_local(
     *,
     sim_log: bool = False,
     allow_outside: bool = False,
-    fn: Callable[[Task, Callable[[Any], None]], RunOutput] = execute,
+    fn: Callable[[Task, ProgressFn], RunOutput] = execute,
 ) -> None:
     """Run `specs` (the unfinished runs) in `workers` processes. Each run is persisted to the
     sink, then recorded in OUT; an error fails that run only. Interrupted, the runs in flight
@@ -165,7 +173,7 @@ def run_local(
         raise
 
 
-def _finish(bdir: BatchDir, spec: RunSpec, record: dict[str, Any], on_event) -> None:
+def _finish(bdir: BatchDir, spec: RunSpec, record: BatchRecord, on_event) -> None:
     bdir.write_record(record)
     bdir.journal(RecordStatus(record["status"]), spec.key)
     on_event(Event("finish", spec, record=record))

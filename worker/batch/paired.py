@@ -19,10 +19,13 @@ from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
+
+if TYPE_CHECKING:
+    from worker.batch.records import BatchRecord
 
 CONFIDENCE = 0.95  # [1] of the intervals
 ALL = "ALL"  # the group of the pooled rows
@@ -165,10 +168,10 @@ def group_label(world: str, noise: float | None = None) -> str:
     return f"{world}, noise {noise:g} m" if noise else world
 
 
-def batch_samples(records: Iterable[dict[str, Any]]) -> list[Sample]:
+def batch_samples(records: Iterable[BatchRecord]) -> list[Sample]:
     """The scores of a batch's completed runs with B relations (its records as the report
     reads them)."""
-    from worker.batch.tables import outcome_of, relation_stats
+    from worker.batch.records import outcome_of, relation_stats
     from worker.status import RunOutcome
 
     out = []
@@ -181,6 +184,6 @@ def batch_samples(records: Iterable[dict[str, Any]]) -> list[Sample]:
     return out
 
 
-def batch_paired_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+def batch_paired_rows(records: Iterable[BatchRecord]) -> list[dict[str, Any]]:
     """The paired comparison of a batch as table rows (empty with one algorithm)."""
     return [d.as_row() for d in paired_diffs(batch_samples(records))]

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from worker.batch.tables import GOOD_R, GOOD_T, error_rows, is_good, outcome_of, relation_stats
+from worker.batch.records import GOOD_R, GOOD_T, BatchRecord, is_good, outcome_of, relation_stats
+from worker.batch.tables import error_rows
 from worker.status import RunOutcome
 
 AXES = (("translation", "m", GOOD_T), ("rotation", "rad", GOOD_R))
@@ -25,7 +25,7 @@ def _plt():
     return plt
 
 
-def errors_by_world(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
+def errors_by_world(records: Sequence[BatchRecord], path: Path) -> Path | None:
     """Per environment: mean B error with its standard deviation as an error bar (left axis)
     and the max error as a line (right axis), averaged over completed runs."""
     rows = {axis: error_rows(records, axis) for axis, _, _ in AXES}
@@ -58,7 +58,7 @@ def errors_by_world(records: Sequence[dict[str, Any]], path: Path) -> Path | Non
     return path
 
 
-def _mean_std(recs: Sequence[dict[str, Any]], axis: str) -> tuple[float, float, int]:
+def _mean_std(recs: Sequence[BatchRecord], axis: str) -> tuple[float, float, int]:
     """Average over completed runs of each run's mean and std B error, and how many runs."""
     stats = [
         getattr(b, axis)
@@ -74,7 +74,7 @@ def _mean_std(recs: Sequence[dict[str, Any]], axis: str) -> tuple[float, float, 
     )
 
 
-def furniture(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
+def furniture(records: Sequence[BatchRecord], path: Path) -> Path | None:
     """Environments present in both variants (at the lowest noise): mean B error ± std."""
     low = min((r["noise"] for r in records), default=0.0)
     pairs: dict[str, dict[str, list]] = {}
@@ -111,7 +111,7 @@ def furniture(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     return path
 
 
-def noise(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
+def noise(records: Sequence[BatchRecord], path: Path) -> Path | None:
     """For each world and algorithm run at several noise levels: share of completed runs, and
     mean B translational and rotational error of the completed runs, against the noise."""
     series: dict[tuple[str, str], dict[float, list]] = {}
@@ -150,7 +150,7 @@ def noise(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     return path
 
 
-def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
+def a_vs_b(records: Sequence[BatchRecord], path: Path) -> Path | None:
     """Each run's mean A error against its mean B error, good runs apart from bad ones: A
     relations (local consistency) barely separate them, B relations do (thesis 6.1)."""
     pts = [(r, a, b) for r in records if (a := relation_stats(r, "A")) and (b := relation_stats(r))]
@@ -190,7 +190,7 @@ def a_vs_b(records: Sequence[dict[str, Any]], path: Path) -> Path | None:
     return path
 
 
-def _bad(rec: dict[str, Any]) -> bool:
+def _bad(rec: BatchRecord) -> bool:
     return outcome_of(rec)[0] == RunOutcome.COMPLETED and not is_good(rec)
 
 
@@ -202,7 +202,7 @@ FIGURES = {
 }
 
 
-def write_plots(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path | None]:
+def write_plots(records: Sequence[BatchRecord], out: Path) -> dict[str, Path | None]:
     """Every figure the records allow (None where the batch has no data for it)."""
     result = {}
     for name, fn in FIGURES.items():

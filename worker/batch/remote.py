@@ -10,6 +10,7 @@ from typing import Any, Protocol
 
 from worker.batch.experiment import RunSpec
 from worker.batch.local import Event
+from worker.batch.records import BatchRecord
 from worker.batch.state import BatchDir, record_of
 from worker.report.summary import RunSummary
 from worker.status import ACTIVE_RUN, RecordStatus, RunStatus
@@ -38,7 +39,7 @@ class RunQueue(Protocol):
     def send(self, run_id: int, requeue: bool) -> None: ...
 
 
-def record_from_run(spec: RunSpec, run: RunState, ids: dict[str, Any]) -> dict[str, Any] | None:
+def record_from_run(spec: RunSpec, run: RunState, ids: dict[str, Any]) -> BatchRecord | None:
     """The OUT record of a run the database holds as finished, or None while it is not."""
     if run.status == RunStatus.DONE:
         return record_of(

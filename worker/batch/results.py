@@ -4,16 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from worker.batch.html import write_html
 from worker.batch.plots import write_plots
+from worker.batch.records import BatchRecord
 from worker.batch.state import BatchDir
 from worker.batch.tables import write_tables
 
 
 def write_results(
-    records: Sequence[dict[str, Any]], bdir: BatchDir, expected: int
+    records: Sequence[BatchRecord], bdir: BatchDir, expected: int
 ) -> dict[str, Path | None]:
     """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv, the figures and
     report.html of the finished runs (`expected`: how many runs the batch has in all)."""

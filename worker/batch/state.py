@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from worker.batch.experiment import RunSpec
+from worker.batch.records import BatchRecord
 from worker.errors import InputError
 from worker.report.summary import RunSummary
 from worker.status import RecordStatus
@@ -43,7 +44,7 @@ def record_of(
     run_id: int | None = None,
     job_id: int | None = None,
     report_dir: str | None = None,
-) -> dict[str, Any]:
+) -> BatchRecord:
     """A finished run's record: its labels, and its summary or the error that stopped it.
 
     `status` is `RecordStatus.DONE` when the pipeline finished the run (whatever the
@@ -137,7 +138,7 @@ class BatchDir:
         d.mkdir(parents=True)
         return d
 
-    def load_records(self, keys: Iterable[str]) -> dict[str, dict[str, Any]]:
+    def load_records(self, keys: Iterable[str]) -> dict[str, BatchRecord]:
         """The records that exist among `keys` (a run without one is not finished)."""
         out = {}
         for key in keys:
@@ -148,7 +149,7 @@ class BatchDir:
                 out[key] = record
         return out
 
-    def write_record(self, record: dict[str, Any]) -> None:
+    def write_record(self, record: BatchRecord) -> None:
         """Mark a run finished (atomically; the last thing written for a run)."""
         d = self.run_dir(record["key"])
         d.mkdir(parents=True, exist_ok=True)

@@ -11,15 +11,21 @@ from typing import Any
 
 import numpy as np
 
-from worker.report.summary import RelationErrorsSummary, RelationKind, RunSummary
-from worker.status import RecordStatus, RunOutcome
+from worker.batch.records import BatchRecord, is_good, outcome_of, relation_stats, summary_of
+from worker.batch.thesis import THESIS_COLUMNS, side_by_side
+from worker.status import RecordStatus, RunOutcome, RunReason
 
-# Thesis 6.3.4: a map is visually bad above these mean B errors.
-GOOD_T = 1.0  # [m]
-GOOD_R = 0.03  # [rad]
 KINDS = (("B", "b"), ("A", "a"), ("SM", "sm"))
 STATS = ("mean", "std", "min", "max")
-REASONS = ("collision", "stuck", "time_limit", "slam_diverged", "error")
+# success.csv's failure columns: stop reasons, then the runs that raised; slam_failed (external
+# SLAM programs only) counts among "failed" alone, as success.csv has always been written
+REASONS: tuple[RunReason | RecordStatus, ...] = (
+    RunReason.COLLISION,
+    RunReason.STUCK,
+    RunReason.TIME_LIMIT,
+    RunReason.SLAM_DIVERGED,
+    RecordStatus.ERROR,
+)
 ERROR_COLUMNS = ("ENVIRONMENT", "MEAN", "STD", "MIN", "MAX", "NUMMEASURES", "CI95")
 RUN_LABELS = ("world", "variant", "noise", "slam", "seed")
 # runs.csv's map-versus-floorplan columns (issue 17): column <- summary.map_score field
@@ -32,37 +38,7 @@ MAP_COLUMNS = (
 )
 
 
-def summary_of(rec: dict[str, Any]) -> RunSummary | None:
-    """The run's summary; None for a run that raised."""
-    return rec["summary"] if rec["status"] == RecordStatus.DONE else None
-
-
-def outcome_of(rec: dict[str, Any]) -> tuple[str, str | None]:
-    """(outcome, reason): a run that raised counts as failed with reason "error"."""
-    s = summary_of(rec)
-    if s is None:
-        return RunOutcome.FAILED, "error"
-    return s.outcome, s.reason
-
-
-def relation_stats(rec: dict[str, Any], kind: RelationKind = "B") -> RelationErrorsSummary | None:
-    """The run's {translation, rotation, skipped} figures of relation `kind`, if evaluated."""
-    s = summary_of(rec)
-    return None if s is None else s.relation(kind)
-
-
-def is_good(rec: dict[str, Any]) -> bool:
-    """Completed, with mean B errors under the thesis's visually-good thresholds."""
-    b = relation_stats(rec)
-    return (
-        outcome_of(rec)[0] == RunOutcome.COMPLETED
-        and b is not None
-        and b.translation.mean <= GOOD_T
-        and b.rotation.mean <= GOOD_R
-    )
-
-
-def run_row(rec: dict[str, Any]) -> dict[str, Any]:
+def run_row(rec: BatchRecord) -> dict[str, Any]:
     """One runs.csv row."""
     outcome, reason = outcome_of(rec)
     s = summary_of(rec)
@@ -92,15 +68,15 @@ def run_row(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def _conditions(records: Sequence[dict[str, Any]]) -> dict[tuple, list[dict[str, Any]]]:
+def _conditions(records: Sequence[BatchRecord]) -> dict[tuple, list[BatchRecord]]:
     """Records by (world, slam, noise), in order of first appearance."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple, list[BatchRecord]] = {}
     for rec in records:
         groups.setdefault((rec["world"], rec["slam"], rec["noise"]), []).append(rec)
     return groups
 
 
-def environment_label(records: Sequence[dict[str, Any]], world: str, slam: str, noise: float):
+def environment_label(records: Sequence[BatchRecord], world: str, slam: str, noise: float):
     """The world's name, with the SLAM algorithm and noise level when the batch varies them."""
     parts = [world]
     if len({r["slam"] for r in records}) > 1:
@@ -110,7 +86,7 @@ def environment_label(records: Sequence[dict[str, Any]], world: str, slam: str, 
     return " ".join(parts)
 
 
-def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def success_rows(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """Per world and condition: runs, completed, good, and failures by reason."""
     rows = []
     for (world, slam, noise), recs in _conditions(records).items():
@@ -128,7 +104,7 @@ def success_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, Any]]:
+def error_rows(records: Sequence[BatchRecord], axis: str) -> list[dict[str, Any]]:
     """Thesis Tables 6.4 (axis "translation") and 6.5 ("rotation"): per environment, each B
     statistic averaged over the completed runs; environments with none are left out. CI95 is
     the average of the runs' 95 % half-widths (over the runs that have one; else None)."""
@@ -150,7 +126,7 @@ def error_rows(records: Sequence[dict[str, Any]], axis: str) -> list[dict[str, A
     return rows
 
 
-def map_rows(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def map_rows(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """maps.csv: per environment, the map-versus-floorplan scores averaged over the completed
     runs that have one (a score null in a run is left out of its mean)."""
     rows = []
@@ -189,10 +165,8 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str]
     return path
 
 
-def write_tables(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Path]:
+def write_tables(records: Sequence[BatchRecord], out: Path) -> dict[str, Path]:
     """runs.csv, success.csv, translation.csv, rotation.csv, maps.csv and thesis.csv in `out`."""
-    from worker.batch.thesis import THESIS_COLUMNS, side_by_side  # it imports this module
-
     runs = [run_row(r) for r in records]
     success = success_rows(records)
     run_cols = list(runs[0]) if runs else list(RUN_LABELS)

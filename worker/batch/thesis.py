@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import mannwhitneyu
 
-from worker.batch.tables import is_good, outcome_of, relation_stats
+from worker.batch.records import BatchRecord, is_good, outcome_of, relation_stats
 from worker.status import RunOutcome
 
 TABLES = Path(__file__).with_name("thesis_tables.json")
@@ -67,7 +67,7 @@ def thesis_row(world: str) -> ThesisRow | None:
 
 
 def _ours(
-    recs: Sequence[dict[str, Any]], axis: str, completed: bool = True
+    recs: Sequence[BatchRecord], axis: str, completed: bool = True
 ) -> dict[str, float | None]:
     """Mean, std, max and n of B `axis` averaged over the completed runs (as Tables 6.4, 6.5),
     or with `completed` False over every run with B relations."""
@@ -79,16 +79,16 @@ def _ours(
     return {k: float(np.mean([getattr(s, k) for s in stats])) if stats else None for k in STATS}
 
 
-def _by(records: Sequence[dict[str, Any]], noise: bool = False) -> dict[tuple, list]:
+def _by(records: Sequence[BatchRecord], noise: bool = False) -> dict[tuple, list]:
     """Records by (world, slam) or, with `noise`, (world, slam, noise), in first order."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple, list[BatchRecord]] = {}
     for r in records:
         key = (r["world"], r["slam"], r["noise"]) if noise else (r["world"], r["slam"])
         groups.setdefault(key, []).append(r)
     return groups
 
 
-def side_by_side(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def side_by_side(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """Per world (without laser noise) that the thesis has and algorithm: our good runs of
     all, the thesis's successes of 10, and B mean / std / max / N, ours beside the thesis's;
     `ratio_t` is our mean translational error over the thesis's, `far` beyond 2x either way."""
@@ -112,7 +112,7 @@ def side_by_side(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def _mean_t(recs: Sequence[dict[str, Any]], completed: bool = True) -> float | None:
+def _mean_t(recs: Sequence[BatchRecord], completed: bool = True) -> float | None:
     return _ours(recs, "translation", completed)["mean"]
 
 
@@ -125,7 +125,7 @@ def _finding(claim: str, verdicts: list[bool], evidence: list[str], none: str) -
     return {"claim": claim, "holds": holds, "evidence": head + "; ".join(evidence)}
 
 
-def furniture_finding(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def furniture_finding(records: Sequence[BatchRecord]) -> dict[str, Any]:
     """Thesis 6.3.2: the same plan with furniture has a larger mean B error."""
     pairs: dict[tuple, dict[str, float]] = {}
     quiet = [r for r in records if r["noise"] == 0.0]
@@ -141,7 +141,7 @@ def furniture_finding(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return _finding(claim, verdicts, evidence, "no plan with completed runs in both variants")
 
 
-def noise_findings(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def noise_findings(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """Thesis 6.3.3: more laser noise, fewer successes and a larger mean B error; the error
     over every run with B relations, as Figs. 6.5 and 6.6 average "the runs" (at 0.3 m the
     thesis had one success in ten)."""
@@ -172,7 +172,7 @@ def auc(bad: Sequence[float], good: Sequence[float]) -> float:
     return float(mannwhitneyu(bad, good).statistic) / (len(bad) * len(good))
 
 
-def a_finding(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def a_finding(records: Sequence[BatchRecord]) -> dict[str, Any]:
     """Thesis 6.2: A relations barely separate good from bad maps. The AUC of the runs' mean A
     error between visually good and bad completed runs (good: B under 1 m and 0.03 rad) is
     below 0.75 when it holds; 0.5 is no separation at all."""
@@ -198,6 +198,6 @@ def a_finding(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return {"claim": claim, "holds": a_auc < SEPARATES, "evidence": evidence}
 
 
-def findings(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def findings(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """The thesis's findings, each with whether it holds on `records` and the figures."""
     return [furniture_finding(records), *noise_findings(records), a_finding(records)]

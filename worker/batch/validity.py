@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.batch.tables import GOOD_T, relation_stats, summary_of
+from worker.batch.records import GOOD_T, BatchRecord, relation_stats, summary_of
 
 # (label, map_score field): the scores ranked against the B errors
 SCORES = (("wall distance", "distance_m"), ("precision", "precision"), ("recall", "recall"))
@@ -19,7 +19,7 @@ MIN_RUNS = 3  # Spearman's rho needs at least this many runs
 PLOT = "validity.png"
 
 
-def points(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def points(records: Sequence[BatchRecord]) -> list[dict[str, Any]]:
     """One point per run with B relations and a map score: its noise, slam, errors, scores."""
     out = []
     for rec in records:
@@ -100,7 +100,7 @@ def scatter(pts: Sequence[dict[str, Any]], path: Path) -> Path | None:
     return path
 
 
-def validity(records: Sequence[dict[str, Any]], out: Path) -> dict[str, Any] | None:
+def validity(records: Sequence[BatchRecord], out: Path) -> dict[str, Any] | None:
     """The report's validity section (rho table, scatter plot written to OUT), None when fewer
     than MIN_RUNS runs have both B errors and a map score."""
     pts = points(records)

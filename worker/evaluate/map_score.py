@@ -23,7 +23,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from worker.evaluate import map_score_kernels as k
-from worker.explore.coverage import coverage
+from worker.evaluate.coverage import coverage
 
 WALLS = ("density", "ridge", "front", "occupied")
 
@@ -151,7 +151,7 @@ def score_map(
     """Score `grid` (a worker.slam.grid.OccupancyGrid, map frame) against the world.
 
     occ, reachable: `(H, W) bool` world grids (obstacle; reachable free space, as
-    worker.explore.coverage.reachable_free gives it); T0: T_world_map to start ICP from.
+    worker.evaluate.coverage.reachable_free gives it); T0: T_world_map to start ICP from.
     """
     world_origin = np.asarray(world_origin, dtype=np.float64)
     fp_walls = floorplan_walls(occ, reachable)

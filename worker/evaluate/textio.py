@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from worker.decompress_budget import spend, step
 from worker.errors import InputError, InputWarning
 
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -37,9 +38,7 @@ def _inflate(raw: bytes, path: Path) -> bytes:
     """gzip data (one or more members) inflated. A stream that ends early (a copy cut off)
     gives what it holds, with an InputWarning: the reader then finds a truncated last line.
     Inflated piece by piece, each counted against the process's decompression budget
-    (`worker.export.bounded`: unlimited unless the upload sandbox set one)."""
-    from worker.export.bounded import spend, step
-
+    (`worker.decompress_budget`: unlimited unless the upload sandbox set one)."""
     out = []
     while raw:
         inflater = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)

@@ -11,7 +11,7 @@ import numpy as np
 
 from worker.errors import SlamFailed
 from worker.evaluate import se2
-from worker.explore.coverage import (
+from worker.evaluate.coverage import (
     ReachCells,
     align_map_to_world,
     reachable_free,

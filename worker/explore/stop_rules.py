@@ -5,23 +5,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 from scipy import ndimage
 
-from worker.explore.coverage import align_map_to_world
+from worker.evaluate.coverage import align_map_to_world
 from worker.explore.params import ExploreParams
-from worker.status import RunOutcome
+from worker.status import RunOutcome, RunReason
 
 Outcome = RunOutcome  # completed | failed
-# completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
-# "slam_diverged" | "slam_failed" (the SLAM program crashed, stalled or broke its protocol)
-Reason = Literal[
-    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged",
-    "slam_failed",
-]  # fmt: skip
-COMPLETED_REASONS: tuple[Reason, ...] = ("no_frontier", "map_unchanged")
+Reason = RunReason  # completed: no_frontier, map_unchanged; failed: the others
 
 # map_saver's grey levels: the thesis compared the saved map images pixel by pixel
 _OCCUPIED, _FREE, _UNKNOWN = 0, 254, 205
@@ -175,7 +169,7 @@ class StopReason:
 
     @property
     def outcome(self) -> Outcome:
-        return RunOutcome.COMPLETED if self.reason in COMPLETED_REASONS else RunOutcome.FAILED
+        return RunReason(self.reason).outcome
 
 
 @dataclass(frozen=True)
@@ -211,7 +205,9 @@ class CollisionRule:
         if len(s.collisions) <= self.n_before:
             return None
         c = s.collisions[self.n_before]
-        return StopReason("collision", f"hit an obstacle at t={c.t:.1f} s, ({c.x:.2f}, {c.y:.2f})")
+        return StopReason(
+            RunReason.COLLISION, f"hit an obstacle at t={c.t:.1f} s, ({c.x:.2f}, {c.y:.2f})"
+        )
 
 
 class DivergenceRule:
@@ -228,7 +224,7 @@ class DivergenceRule:
         if _pose_error(self.T0, s.pose_est, s.pose_gt) <= self.limit:
             return None
         return StopReason(
-            "slam_diverged", f"SLAM pose more than {self.limit:g} m off at t={s.t:.1f} s"
+            RunReason.SLAM_DIVERGED, f"SLAM pose more than {self.limit:g} m off at t={s.t:.1f} s"
         )
 
 
@@ -241,7 +237,7 @@ class GoalFailuresRule:
     def check(self, s: LoopState) -> StopReason | None:
         if s.goal_failures < self.limit:
             return None
-        return StopReason("stuck", f"{self.limit} goals given up in a row")
+        return StopReason(RunReason.STUCK, f"{self.limit} goals given up in a row")
 
 
 class NoFrontierRule:
@@ -258,7 +254,7 @@ class NoFrontierRule:
         elif self.since is None:
             self.since = s.t
         elif s.t - self.since >= self.hold - 1e-9:
-            return StopReason("no_frontier", "no reachable frontier left")
+            return StopReason(RunReason.NO_FRONTIER, "no reachable frontier left")
         return None
 
 
@@ -275,7 +271,9 @@ class NotMovingRule:
         if np.hypot(*(s.pose_gt[:2] - self.ref_xy)) > self.distance:
             self.ref_xy, self.ref_t = s.pose_gt[:2].copy(), s.t
         elif s.t - self.ref_t >= self.timeout:
-            return StopReason("stuck", f"moved less than {self.distance:g} m in {self.timeout:g} s")
+            return StopReason(
+                RunReason.STUCK, f"moved less than {self.distance:g} m in {self.timeout:g} s"
+            )
         return None
 
 
@@ -307,7 +305,7 @@ class MapUnchangedRule:
         detail = rule.describe()
         if self.held:
             detail += f" (waited {self.held} time(s) for a goal chosen since the last snapshot)"
-        return StopReason("map_unchanged", detail)
+        return StopReason(RunReason.MAP_UNCHANGED, detail)
 
 
 class TimeLimitRule:
@@ -319,7 +317,7 @@ class TimeLimitRule:
     def check(self, s: LoopState) -> StopReason | None:
         if s.t + s.dt <= self.limit + 1e-9:
             return None
-        return StopReason("time_limit", f"time limit {self.limit:g} s reached")
+        return StopReason(RunReason.TIME_LIMIT, f"time limit {self.limit:g} s reached")
 
 
 def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> list[StopRule]:

@@ -1,11 +1,12 @@
-"""Decompression that counts what it produces: a process-wide budget of output bytes, and the
-bag readers' decompressors (rosbag1 bz2/lz4 chunks, MCAP lz4/zstd chunks) bounded by it.
+"""The bag readers' decompressors (rosbag1 bz2/lz4 chunks, MCAP lz4/zstd chunks) bounded by the
+process's budget of decompressed bytes.
 
 A compressed chunk declares its size, but a forged one may declare 16 bytes and hold 1.5 GB
 of zeros; the readers decompress it in one call without a bound. Here every decompression is
 a stream stopped one byte past what is left of the budget, so memory and CPU stay bounded by
-the budget whatever the file declares. The budget is unlimited (None) unless set: the CLI on a
-user's own files is not held back; the sandbox that reads uploads sets it (`set_budget`).
+the budget whatever the file declares. The budget (`worker.decompress_budget`) is unlimited
+(None) unless set: the CLI on a user's own files is not held back; the sandbox that reads
+uploads sets it (`set_budget`).
 """
 
 from __future__ import annotations
@@ -14,39 +15,8 @@ import bz2
 from collections.abc import Callable
 from typing import Any
 
+from worker.decompress_budget import spend, step
 from worker.errors import InputError
-
-
-class _Budget:
-    """Bytes decompression may still produce in this process (None: unlimited)."""
-
-    left: int | None = None
-    limit: int | None = None
-
-
-_BUDGET = _Budget()
-
-
-def set_budget(limit: int | None) -> None:
-    """From now on, all bounded decompression in this process produces at most `limit` bytes."""
-    _BUDGET.left = _BUDGET.limit = limit
-
-
-def budget_left() -> int | None:
-    """What is left of the budget [bytes] (None: unlimited)."""
-    return _BUDGET.left
-
-
-def spend(n: int) -> None:
-    """Count `n` bytes produced; InputError past the budget."""
-    if _BUDGET.left is None:
-        return
-    _BUDGET.left -= n
-    if _BUDGET.left < 0:
-        raise InputError(
-            f"the upload decompresses to more than {_BUDGET.limit} bytes in all "
-            "(setting upload_unpacked_mb, environment MAPQUAL_UPLOAD_UNPACKED_MB)"
-        )
 
 
 def bounded(factory: Callable[[], Any], data: bytes, what: str, size: int | None = None) -> bytes:
@@ -75,17 +45,6 @@ def bounded(factory: Callable[[], Any], data: bytes, what: str, size: int | None
         rest = dec.unused_data
         if not rest:
             return b"".join(parts)
-
-
-def step(total: int = 0, cap: int | None = None) -> int:
-    """How much the next call may produce: 1 MiB, or one byte past the budget or the cap."""
-    step = 1 << 20
-    left = budget_left()
-    if left is not None:
-        step = min(step, left + 1)
-    if cap is not None:
-        step = min(step, cap - total + 1)
-    return max(step, 1)
 
 
 def _zstd() -> Any:

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from worker.world.world import World
 
 # How a cache computes a prediction: (what `get` was given, the algorithm, the model) -> it.
-Compute = Callable[[Callable[[], Any], str, dict[str, Any]], dict]
+Compute = Callable[[Callable[[], "World"], str, dict[str, Any]], dict]
 
 
 def predict_world(world: World, slam: str = "rbpf", model: dict[str, Any] | None = None) -> dict:
@@ -30,7 +30,7 @@ def predict_world(world: World, slam: str = "rbpf", model: dict[str, Any] | None
     return {"world": world.name, **p.as_dict()}
 
 
-def _in_process(world_of: Callable[[], Any], slam: str, model: dict[str, Any]) -> dict:
+def _in_process(world_of: Callable[[], World], slam: str, model: dict[str, Any]) -> dict:
     return predict_world(world_of(), slam, model)
 
 
@@ -59,7 +59,7 @@ class PredictionCache:
                 self._model = load_model()
             return self._model
 
-    def get(self, key: tuple, world_of: Callable[[], Any], slam: str) -> dict:
+    def get(self, key: tuple, world_of: Callable[[], World], slam: str) -> dict:
         """The prediction cached under (key, slam), else computed from `world_of()` (once,
         whoever else asks meanwhile); InputError, cached too, when none can be made."""
         model = self.model()
@@ -79,7 +79,7 @@ class PredictionCache:
         return _outcome(flight.result())
 
     def _compute(
-        self, full: tuple, world_of: Callable[[], Any], slam: str, model: dict[str, Any]
+        self, full: tuple, world_of: Callable[[], World], slam: str, model: dict[str, Any]
     ) -> tuple[bool, Any]:
         try:
             out: tuple[bool, Any] = (True, self._compute_one(world_of, slam, model))

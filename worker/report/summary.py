@@ -18,16 +18,10 @@ from typing import Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer
 
+from worker.status import RunOutcome, RunReason
+
 SCHEMA_VERSION: Final = 1
 
-Outcome = Literal["completed", "failed", "incomplete"]
-# completed: "no_frontier" | "map_unchanged"; failed: "collision" | "stuck" | "time_limit" |
-# "slam_diverged" | "slam_failed" (the stop rules of worker.explore.loop, which a test keeps in
-# step with these)
-Reason = Literal[
-    "no_frontier", "map_unchanged", "collision", "stuck", "time_limit", "slam_diverged",
-    "slam_failed",
-]  # fmt: skip
 RelationKind = Literal["B", "A", "SM"]
 
 
@@ -183,9 +177,11 @@ class RunSummary(_Part):
     timings, the run's parameters and the versions of the code."""
 
     schema_version: Literal[1] = Field(default=SCHEMA_VERSION, description="absent means 1")
-    outcome: Outcome
-    reason: Reason | None  # why it failed; null when completed
-    stop: Reason  # the stop rule that ended the exploration
+    # what the exploration achieved; it and the reasons are worker.status's vocabulary, which
+    # the stop rules, batch tables and pages read too (members are the strings stored)
+    outcome: RunOutcome
+    reason: RunReason | None  # why it failed; null when completed
+    stop: RunReason  # the stop rule that ended the exploration
     stop_detail: str  # one human-readable line
     coverage: float  # [0, 1] reachable free area the final map marks free
     world: str

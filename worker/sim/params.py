@@ -6,9 +6,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from worker.errors import InputError
+from worker.robot import FOOTPRINT_M
 from worker.sim.laser import LaserSpec
-
-FOOTPRINT_M = 0.4  # [m] side of the square robot footprint (Pioneer 3-AT class)
 
 
 @dataclass(frozen=True)

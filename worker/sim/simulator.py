@@ -12,8 +12,8 @@ from worker.evaluate.se2_scalar import wrap_fold
 from worker.sim import odometry
 from worker.sim.collision import advance, footprint_collides
 from worker.sim.params import SimParams
-from worker.sim.raycast import cast_scan_skip, jump_map
 from worker.world.analysis import clearance_map
+from worker.world.raycast import cast_scan_skip, jump_map
 from worker.world.world import World
 
 

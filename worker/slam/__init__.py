@@ -1,1 +1,1 @@
-"""SLAM behind one interface: `make_slam(name, laser, params, rng)`, names in `registry`."""
+"""SLAM behind one interface (`base`): `registry.make_slam(name, laser, params, rng)`."""

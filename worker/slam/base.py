@@ -1,5 +1,5 @@
-"""The SLAM interface every algorithm implements, and `make_slam` to make one by its name in
-`worker.slam.registry`."""
+"""The SLAM interface every algorithm implements (`worker.slam.registry.make_slam` makes one by
+its name), and the beam geometry they share."""
 
 from __future__ import annotations
 
@@ -10,11 +10,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from worker.errors import InputError
-from worker.slam import registry
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams
-
-SlamName = str  # a name in worker.slam.registry ("rbpf", "odometry", ...)
 
 
 class LaserGeometry(Protocol):
@@ -74,22 +71,6 @@ def beam_limits(laser: LaserGeometry, params: SlamParams) -> tuple[float, float]
     min(maxUrange, maxRange)."""
     max_range = float(laser.range_max) - 0.01 if params.max_range is None else params.max_range
     return max_range, min(params.max_urange, max_range)
-
-
-def make_slam(
-    name: SlamName,
-    laser: LaserGeometry,
-    params: SlamParams | None = None,
-    rng: np.random.Generator | None = None,
-) -> SlamAlgorithm:
-    """The SLAM algorithm `name` (one of `registry.names()`) for this laser.
-
-    params: None = the thesis defaults; rng: the run's generator (None = seed 0).
-    """
-    entry = registry.get(name)  # InputError naming the choices
-    params = SlamParams() if params is None else params
-    rng = np.random.default_rng(0) if rng is None else rng
-    return entry.factory(laser, params, rng)
 
 
 @contextmanager

@@ -32,12 +32,12 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from worker.slam.map_kernels import FULL, OCCUPIED, PATCH, PATCH_BITS, PATCH_MASK
+from worker.slam.match_cache_kernels import MAX_CACHED_KERNEL, commit_cache, new_cache
 
 NULL_LIKELIHOOD = -0.5  # GMapping's nullLikelihood: a beam with no match
 FREE_CELL_RATIO = math.sqrt(2.0)  # GMapping's freeCellRatio: free point this many cells back
 MAX_KERNEL = 15  # [cells] a window row must fit in two patches
 _SLACK = 1e-6  # abort margin: far above the rounding of a sum of <= 1e5 terms <= 1
-MAX_CACHED_KERNEL = 2  # [cells] the cell cache keeps up to (2k+1)^2 points per beam
 
 # layout of the `cfg` array the kernels take (one float64 array instead of eleven arguments)
 CFG_FIELDS = (
@@ -137,7 +137,7 @@ def _score(
     the same order, so the score is the same to the last bit.
     terms: (M,) gets each beam's score term when complete (pass an empty array to skip).
     dist2: (M,) scratch for each beam's squared distance (inf: no match).
-    cache: see _new_cache; a beam whose key matches the committed entry reuses its points,
+    cache: see new_cache; a beam whose key matches the committed entry reuses its points,
     the others are scored on the map and recorded in scratch slot w. One flat loop (no
     calls): this is the innermost loop of the whole filter.
     """
@@ -255,43 +255,12 @@ def _score(
 
 
 @njit(cache=True, nogil=True)
-def _new_cache(m, kernel):
-    """The matching-cell cache of m beams: (key (M,), count (M,), points (M, K, 2) [m]) for the
-    current pose, and two scratch slots of the same plus their lists of recorded beams.
-    K = (2 kernel + 1)^2; K = 0 (no caching) for kernels above MAX_CACHED_KERNEL."""
-    k = (2 * kernel + 1) ** 2 if kernel <= MAX_CACHED_KERNEL else 0
-    return (
-        np.full(m, -1, dtype=np.int64),
-        np.zeros(m, dtype=np.int64),
-        np.empty((m, k, 2)),
-        np.full((2, m), -1, dtype=np.int64),
-        np.zeros((2, m), dtype=np.int64),
-        np.empty((2, m, k, 2)),
-        np.empty((2, m), dtype=np.int64),
-        np.zeros(2, dtype=np.int64),
-    )
-
-
-@njit(cache=True, nogil=True)
-def _commit(cache, slot):
-    """The pose scored into scratch `slot` becomes the current one: its entries are kept."""
-    ckey, cn, cpts, skey, sn, spts, smiss, snmiss = cache
-    for q in range(snmiss[slot]):
-        i = smiss[slot, q]
-        ckey[i] = skey[slot, i]
-        cn[i] = sn[slot, i]
-        for r in range(sn[slot, i]):
-            cpts[i, r, 0] = spts[slot, i, r, 0]
-            cpts[i, r, 1] = spts[slot, i, r, 1]
-
-
-@njit(cache=True, nogil=True)
 def score_and_likelihood(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     """(score, log-likelihood) of the prepared beams at pose (3,) in one particle's map."""
     order = np.arange(beams.shape[0])
     sc, like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, order, cfg, -np.inf,
-        np.empty(0), np.empty(beams.shape[0]), _new_cache(0, MAX_CACHED_KERNEL + 1), 0,
+        np.empty(0), np.empty(beams.shape[0]), new_cache(0, MAX_CACHED_KERNEL + 1), 0,
     )  # fmt: skip
     return sc, like
 
@@ -344,7 +313,7 @@ def _climb(mean, bits, table, tpx0, tpy0, beams, order, cfg, cache, dist2, state
                 chosen = move
                 slot = w
         if chosen >= 0:
-            _commit(cache, slot)
+            commit_cache(cache, slot)
         bx, by, bt = nx, ny, nt
         came_by = chosen
         if not (cur > best or refinement < last):
@@ -376,12 +345,12 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
     terms = np.empty(m)
     dist2 = np.empty(m)
     natural = np.arange(m)
-    cache = _new_cache(m, kernel)
+    cache = new_cache(m, kernel)
     cur, cur_like, _ = _score(
         mean, bits, table, tpx0, tpy0, pose[0], pose[1], pose[2], beams, natural, cfg, -np.inf,
         terms, dist2, cache, 0,
     )  # fmt: skip
-    _commit(cache, 0)
+    commit_cache(cache, 0)
     start_score, start_like = cur, cur_like
     state = np.array([pose[0], pose[1], pose[2], cur, cur_like, lstep, astep, 0.0, iterations])
     if skip > 0 and levels > 0:
@@ -393,7 +362,7 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
             state[3] += terms[k * (skip + 1)]
         state[8] = levels - 1
         _climb(
-            mean, bits, table, tpx0, tpy0, sub, order, cfg, _new_cache(ms, kernel),
+            mean, bits, table, tpx0, tpy0, sub, order, cfg, new_cache(ms, kernel),
             np.empty(ms), state,
         )  # fmt: skip
         # all beams from here, at the next step size
@@ -401,7 +370,7 @@ def optimize(mean, bits, table, tpx0, tpy0, pose, beams, cfg):
             mean, bits, table, tpx0, tpy0, state[0], state[1], state[2], beams, natural, cfg,
             -np.inf, terms, dist2, cache, 0,
         )  # fmt: skip
-        _commit(cache, 0)
+        commit_cache(cache, 0)
         state[5] *= 0.5
         state[6] *= 0.5
         state[7] = levels

@@ -56,7 +56,7 @@ class SlamParams:
 
     Defaults: the thesis settings (particles 40, angularUpdate 0.25, maxUrange 30) and
     GMapping's defaults elsewhere (slam_gmapping 1.x). The odometry baseline uses only the
-    map and update-gating fields. JSON: `worker.params.to_dict` / `from_dict`.
+    map and update-gating fields. JSON: `worker.param_io.to_dict` / `from_dict`.
     """
 
     particles: int = 40  # number of particles (thesis: 40; GMapping default 30)

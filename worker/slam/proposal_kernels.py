@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit, prange
 
 from worker.evaluate.se2_scalar import wrap
-from worker.slam.match_kernels import MAX_CACHED_KERNEL, _new_cache, _score, prepare_beams
+from worker.slam.match_cache_kernels import MAX_CACHED_KERNEL, new_cache
+from worker.slam.match_kernels import _score, prepare_beams
 
 
 def sample_offsets(lrange: float, lstep: float, arange: float, astep: float) -> np.ndarray:
@@ -53,7 +54,7 @@ def _fit_particle(
     order = np.arange(m)
     dist2 = np.empty(m)
     none = np.empty(0)
-    cache = _new_cache(0, MAX_CACHED_KERNEL + 1)  # no cell cache: every pose scored whole
+    cache = new_cache(0, MAX_CACHED_KERNEL + 1)  # no cell cache: every pose scored whole
     log_tau = np.empty(k)
     w = np.empty(k)
     info = infos[p]

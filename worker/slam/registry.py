@@ -1,7 +1,8 @@
 """The one list of SLAM algorithms a run may use: name -> factory, description and kind.
 
-Light on purpose (no kernels are imported until a factory is called): the CLI's choices, the
-API's enum, the dashboard's form and the batch's validation are all read from here. Adding an
+`make_slam(name, laser, params, rng)` makes one. Light on purpose (no kernels are imported until
+a factory is called): the CLI's choices, the API's enum, the dashboard's form and the batch's
+validation are all read from here. Adding an
 algorithm is one `register(...)` call; the factory imports its own module when it is called.
 Installed packages add in-process algorithms through the `mapqual.slam` entry points group
 (`load_plugins`); programs in other languages run as "external" (worker.slam.external).
@@ -15,17 +16,18 @@ from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from typing import TYPE_CHECKING, Literal
 
+import numpy as np
+
 from worker.errors import InputError
 from worker.slam.params import SlamParams
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from worker.slam.base import LaserGeometry, SlamAlgorithm
 
 log = logging.getLogger("mapqual.slam")
 ENTRY_POINTS_GROUP = "mapqual.slam"
 
+SlamName = str  # a registered name ("rbpf", "odometry", ...)
 SlamKind = Literal["slam", "baseline", "oracle"]
 SlamFactory = Callable[["LaserGeometry", SlamParams, "np.random.Generator"], "SlamAlgorithm"]
 
@@ -87,6 +89,22 @@ def get(name: str) -> SlamEntry:
     if entry is None:
         raise InputError(f"unknown SLAM algorithm {name!r}; choose one of: {', '.join(names())}")
     return entry
+
+
+def make_slam(
+    name: SlamName,
+    laser: LaserGeometry,
+    params: SlamParams | None = None,
+    rng: np.random.Generator | None = None,
+) -> SlamAlgorithm:
+    """The SLAM algorithm `name` (one of `names()`) for this laser.
+
+    params: None = the thesis defaults; rng: the run's generator (None = seed 0).
+    """
+    entry = get(name)  # InputError naming the choices
+    params = SlamParams() if params is None else params
+    rng = np.random.default_rng(0) if rng is None else rng
+    return entry.factory(laser, params, rng)
 
 
 def check_name(name: str) -> str:

@@ -10,9 +10,10 @@ import numpy as np
 
 from worker.errors import InputError
 from worker.evaluate.trajectory import Trajectory
-from worker.slam.base import LaserGeometry, SlamName, closed_after, make_slam
+from worker.slam.base import LaserGeometry, closed_after
 from worker.slam.grid import OccupancyGrid
 from worker.slam.params import SlamParams, with_defaults_for
+from worker.slam.registry import SlamName, make_slam
 
 
 @dataclass(frozen=True, eq=False)

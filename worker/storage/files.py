@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from worker.storage import Storage, StorageError, join
+from worker.storage.interface import Storage, StorageError, join
 
 
 @dataclass

@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 from typing import BinaryIO
 
-from worker.storage import Storage, StorageError
+from worker.storage.interface import Storage, StorageError
 
 
 class LocalStorage(Storage):

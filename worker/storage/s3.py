@@ -11,7 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from worker.storage import CHUNK, Storage, StorageError, join
+from worker.storage.interface import CHUNK, Storage, StorageError, join
 
 UPLOAD_THREADS = 8  # files of a report sent at once (most are small: latency, not bandwidth)
 _LOCK = threading.Lock()

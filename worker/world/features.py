@@ -232,9 +232,9 @@ def _room_fields(shapes: fk.RoomShapes, params: FeatureParams) -> dict[str, floa
 def _openness(work: np.ndarray, clear: np.ndarray, work_res: float, params: FeatureParams) -> float:
     """Mean area [m^2] seen by a full-circle laser of laser_range_m from sample points of the
     work grid's free cells where the robot fits (deterministic: drawn with params.seed)."""
-    from worker.sim.params import FOOTPRINT_M
-    from worker.sim.raycast import cast_scans
+    from worker.robot import FOOTPRINT_M
     from worker.world.analysis import footprint_radius
+    from worker.world.raycast import cast_scans
 
     iy, ix = np.nonzero(work & (clear >= footprint_radius(FOOTPRINT_M)))
     if iy.size == 0:

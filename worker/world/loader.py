@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from worker.errors import InputError
-from worker.sim.params import FOOTPRINT_M
+from worker.robot import FOOTPRINT_M
 from worker.world.floorplan import Floorplan
 from worker.world.image_io import MAX_PIXELS, read_grey
 from worker.world.refs import (

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from worker.errors import InputError
-from worker.sim.params import FOOTPRINT_M
+from worker.robot import FOOTPRINT_M
 from worker.world import analysis
 
 RESOLUTION_MIN = 0.005  # [m/cell] exclusive

@@ -418,13 +418,13 @@ def _approach_beside_a_deep_jamb(x0_cell: int, noise_seeds=range(5)):
     """The robot 0.3 m north of the door's axis, level with the nearest pre-door point and
     heading for the door, on the plan a navfn plan takes (diagonally to the door, then
     along its axis). Drives `_drive_through` and, along the way, reads what a laser at the
-    true pose sees (ray cast on the map, `worker.sim.raycast`): the safety controller's
+    true pose sees (ray cast on the map, `worker.world.raycast`): the safety controller's
     front clearance of every forward motion of the approach, noise-free, and how often the
     controller (median of 3) would stop a forward motion on that laser with 0.1 m range
     noise (one count per seed in `noise_seeds`; the motion is not changed)."""
     from worker.explore.safety import SafetyController, front_clearance
     from worker.sim.laser import LaserSpec
-    from worker.sim.raycast import cast_scan
+    from worker.world.raycast import cast_scan
 
     prob = _deep_jamb_map(x0_cell)
     occ = prob > 0.5

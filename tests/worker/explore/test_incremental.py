@@ -95,7 +95,7 @@ def test_frontier_updates_equal_frontiers_found_from_scratch(edits):
 
 
 def test_live_coverage_counts_the_reachable_cells_on_free_map_cells():
-    from worker.explore.coverage import ReachCells
+    from worker.evaluate.coverage import ReachCells
 
     # a 10 x 10 world, all reachable; the map (same grid) free in its left half only
     reach = np.ones((10, 10), dtype=bool)

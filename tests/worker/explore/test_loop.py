@@ -10,8 +10,8 @@ import pytest
 from worker.explore.loop import ExploreParams, explore
 from worker.sim.params import SimParams
 from worker.sim.simulator import Simulator
-from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 from worker.world.loader import load_world
 from worker.world.world import World
 

@@ -10,8 +10,8 @@ from worker.explore.nav_state import TRANSITIONS, NavState
 from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
 from worker.sim.simulator import SimParams, Simulator
-from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 from worker.world.world import World
 
 RES = 0.05

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from worker.explore.coverage import reachable_free, seen_free, unseen_regions
+from worker.evaluate.coverage import reachable_free, seen_free, unseen_regions
 from worker.explore.loop import judge_outcome
 from worker.explore.params import ExploreParams
 from worker.explore.stop_rules import StopReason
@@ -88,7 +88,7 @@ def test_seen_free_maps_the_slam_grid_through_the_alignment():
 
 def test_the_outcome_vocabulary_reaches_the_summary_and_the_tables():
     assert RunOutcome("incomplete") == RunOutcome.INCOMPLETE
-    assert "incomplete" in summary.Outcome.__args__
+    assert summary.RunSummary.model_fields["outcome"].annotation is RunOutcome
 
 
 def test_success_table_counts_incomplete_runs_apart_from_completed_and_failed():

@@ -6,7 +6,7 @@ import pytest
 
 from worker.errors import InputError
 from worker.explore.params import ExploreParams
-from worker.params import from_dict
+from worker.param_io import from_dict
 
 
 @pytest.mark.parametrize(

@@ -62,11 +62,27 @@ def test_relation_is_none_for_a_kind_not_evaluated_or_with_no_relation():
 
 def test_the_outcomes_and_reasons_are_the_exploration_loops():
     from worker.explore import loop
-    from worker.report import summary
-    from worker.status import RunOutcome
+    from worker.status import RunOutcome, RunReason
 
-    assert get_args(summary.Outcome) == tuple(o.value for o in RunOutcome)
-    assert get_args(summary.Reason) == get_args(loop.Reason)
+    fields = RunSummary.model_fields
+    assert fields["outcome"].annotation is RunOutcome is loop.Outcome
+    assert fields["stop"].annotation is RunReason is loop.Reason
+    assert get_args(fields["reason"].annotation) == (RunReason, type(None))
+
+
+def test_stored_outcomes_and_reasons_load_as_members_and_write_back_as_the_same_strings():
+    from worker.status import RunOutcome, RunReason
+
+    doc = json.loads(EXAMPLE.read_text())
+    for outcome, reason, stop in [("completed", None, "map_unchanged"),
+                                  ("failed", "slam_failed", "slam_failed"),
+                                  ("incomplete", None, "no_frontier")]:  # fmt: skip
+        doc.update(outcome=outcome, reason=reason, stop=stop)
+        s = RunSummary.load(doc)
+        assert s.outcome is RunOutcome(outcome) and s.stop is RunReason(stop)
+        assert json.loads(s.to_json_text()) == doc
+    with pytest.raises(ValueError):
+        RunSummary.load({**doc, "stop": "error"})  # a batch record's state, no stop reason
 
 
 def test_the_module_imports_neither_numpy_nor_numba():

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from worker.slam.assembly import dense_prob
-from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
 from worker.slam.patchmap import PATCH, PatchMaps
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.base import make_slam
 from worker.slam.keyposes import Lineage, between_keys
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

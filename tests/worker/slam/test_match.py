@@ -9,7 +9,6 @@ import math
 import numpy as np
 import pytest
 
-from worker.slam.base import make_slam
 from worker.slam.match_kernels import (
     exp_neg_upper,
     match_config,
@@ -18,6 +17,7 @@ from worker.slam.match_kernels import (
     score_and_likelihood,
 )
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

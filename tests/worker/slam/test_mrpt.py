@@ -16,9 +16,9 @@ from tests.worker.slam.helpers import box_scan
 from worker.errors import InputError
 from worker.evaluate.se2 import compose
 from worker.sim.laser import LaserSpec
-from worker.slam.base import make_slam
 from worker.slam.mrpt.programs import configure
 from worker.slam.mrpt.rawlog import write_rawlog
+from worker.slam.registry import make_slam
 from worker.slam.run import run_slam
 
 LASER = LaserSpec(

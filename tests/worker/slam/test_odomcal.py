@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.base import make_slam
 from worker.slam.odomcal import OdomCalibration, ScaleEstimate
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

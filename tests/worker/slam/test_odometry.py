@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from worker.errors import InputError
-from worker.slam.base import SlamAlgorithm, make_slam
+from worker.slam.base import SlamAlgorithm
 from worker.slam.gating import UpdateGate
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 
-from worker.slam.base import make_slam
 from worker.slam.match_kernels import match_config, prepare_beams, score_and_likelihood
 from worker.slam.params import SlamParams
 from worker.slam.proposal_kernels import fit_proposals, fit_proposals_parallel, sample_offsets
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

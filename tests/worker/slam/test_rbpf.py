@@ -7,8 +7,9 @@ import pytest
 
 from worker.errors import InputError
 from worker.evaluate.se2 import compose, relative
-from worker.slam.base import SlamAlgorithm, make_slam
+from worker.slam.base import SlamAlgorithm
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

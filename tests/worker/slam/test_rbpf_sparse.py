@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.slam.base import make_slam
 from worker.slam.gating import UpdateGate
 from worker.slam.params import SampledProposal, SlamParams
+from worker.slam.registry import make_slam
 
 from .helpers import Laser, box_scan
 

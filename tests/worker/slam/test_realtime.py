@@ -12,10 +12,10 @@ import pytest
 from tests.worker.slam.helpers import Laser, box_scan
 from worker.errors import InputError
 from worker.evaluate.se2 import compose
-from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
 from worker.slam.realtime import RBPF_C0, RBPF_C1, RealtimeSlam, update_cost_s
 from worker.slam.realtime_params import RealtimeParams
+from worker.slam.registry import make_slam
 
 LASER = Laser(n_beams=181, angle_min=-math.pi / 2, angle_increment=math.pi / 180)
 DT = 0.1

@@ -6,8 +6,8 @@ import pytest
 
 from worker.errors import InputError
 from worker.slam import registry
-from worker.slam.base import make_slam
 from worker.slam.odometry import OdometrySlam
+from worker.slam.registry import make_slam
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from worker.errors import InputError, SlamFailed
-from worker.params import to_dict
+from worker.param_io import to_dict
 from worker.slam.base import LaserGeometry
 from worker.slam.external import protocol as proto
 from worker.slam.external.mapmsg import read_map

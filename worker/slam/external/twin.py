@@ -24,12 +24,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import msgpack  # noqa: E402
 import numpy as np  # noqa: E402
 
-from worker.params import from_dict  # noqa: E402
-from worker.slam.base import beam_angles, beam_limits, make_slam  # noqa: E402
+from worker.param_io import from_dict  # noqa: E402
+from worker.slam.base import beam_angles, beam_limits  # noqa: E402
 from worker.slam.external import protocol as proto  # noqa: E402
 from worker.slam.external.kernels import changed_box, changed_cells  # noqa: E402
 from worker.slam.external.mapmsg import placed  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
+from worker.slam.registry import make_slam  # noqa: E402
 
 # algorithms whose scans between updates change nothing but the pose (T_map_odom (+) odom):
 # the twin lets mapqual gate them (rbpf draws its motion model at every scan, graph SLAM keeps

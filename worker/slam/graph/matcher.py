@@ -117,16 +117,29 @@ class PointMap:
             self.grid, ox, oy, self.res, points, coarse, 0.5 * self.res, step, 3,
             prior, dpen, apen, window * self.res + 1e-9, n_ang * step + 1e-9,
         )  # fmt: skip
-        if self._tree is not None:
-            fine, info = icp_point_to_line(
-                points, pose, self._tree, self._normals, ICP_MAX_DIST, ICP_PRIOR_SIGMA
-            )
-            # trust ICP within a cell and an angular step of the grid's answer only
-            if np.hypot(*(fine[:2] - pose[:2])) < self.res and abs(fine[2] - pose[2]) < step:
-                pose = fine
-                if prior_information is not None:
-                    pose = fuse_with_prior(pose, info, prior, prior_information)
-        return MatchResult(pose, float(score))
+        return MatchResult(self._polish(points, pose, step, prior, prior_information), float(score))
+
+    def _polish(
+        self,
+        points: np.ndarray,
+        pose: np.ndarray,
+        step: float,
+        prior: np.ndarray,
+        prior_information: np.ndarray | None,
+    ) -> np.ndarray:
+        """The grid's pose (3,) polished by point-to-line ICP against the map's points (when
+        it keeps normals), fused with the prior when its information is given."""
+        if self._tree is None:
+            return pose
+        fine, info = icp_point_to_line(
+            points, pose, self._tree, self._normals, ICP_MAX_DIST, ICP_PRIOR_SIGMA
+        )
+        # trust ICP within a cell and an angular step of the grid's answer only
+        if np.hypot(*(fine[:2] - pose[:2])) < self.res and abs(fine[2] - pose[2]) < step:
+            pose = fine
+            if prior_information is not None:
+                pose = fuse_with_prior(pose, info, prior, prior_information)
+        return pose
 
 
 def icp_point_to_line(
@@ -240,3 +253,10 @@ def _clip_bounds(pts: np.ndarray, bounds: tuple[float, float, float, float]):
     x0, y0 = max(bounds[0], lo[0]), max(bounds[1], lo[1])
     x1, y1 = min(bounds[2], hi[0]), min(bounds[3], hi[1])
     return (x0, y0, max(x0, x1), max(y0, y1))
+
+
+def prior_chi2(pose: np.ndarray, prior: np.ndarray, sigma: tuple[float, float, float]) -> float:
+    """chi^2 of `pose` (3,) against `prior` (3,) under independent `sigma` [m, m, rad]."""
+    d = pose - prior
+    d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
+    return float((np.square(d) / np.square(sigma)).sum())

@@ -208,3 +208,12 @@ def loop_min_score(correction: float, lin: float, g: GraphSlamParams) -> float:
     share = 1.0 if lin <= 0 else min(1.0, (correction / lin) ** 2)
     fine, wide = g.loop_match_minimum_response_fine, g.loop_match_minimum_response_wide
     return fine + share * (wide - fine)
+
+
+def shift_direction(pose: np.ndarray, rival: np.ndarray, max_rotation: float) -> float | None:
+    """[rad] the direction from a match's pose to its rival's, in the match's frame (the
+    axis a corridor leaves free), or None when the rival is turned by more than
+    max_rotation [rad]: not a shift."""
+    if abs(math.remainder(float(rival[2] - pose[2]), 2.0 * math.pi)) > max_rotation:
+        return None
+    return math.atan2(rival[1] - pose[1], rival[0] - pose[0]) - float(pose[2])

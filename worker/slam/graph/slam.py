@@ -11,7 +11,7 @@ from worker.slam.gating import UpdateGate, check_scan
 from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.mapping import NodeMap, scan_reach
 from worker.slam.graph.match_kernels import point_normals, scan_points
-from worker.slam.graph.matcher import MatchResult, opposed_share, point_map_around
+from worker.slam.graph.matcher import MatchResult, opposed_share, point_map_around, prior_chi2
 from worker.slam.graph.nodes import (
     EdgeList,
     LoopClosure,
@@ -19,6 +19,7 @@ from worker.slam.graph.nodes import (
     find_candidate,
     loop_min_score,
     search_window,
+    shift_direction,
 )
 from worker.slam.graph.optimize import edge_errors, optimize
 from worker.slam.graph.params import GraphSlamParams
@@ -113,7 +114,7 @@ class GraphSlam:
         if (
             gate > 0
             and match.score >= g.link_match_minimum_response_fine
-            and _chi2(match.pose, prior, odo_sigma) > gate
+            and prior_chi2(match.pose, prior, odo_sigma) > gate
         ):
             # the odometry rules this optimum out: the best match it allows instead, if
             # the scan fits there nearly as well (else the scan's evidence wins). The
@@ -124,7 +125,7 @@ class GraphSlam:
             for reach in (math.sqrt(gate), math.sqrt(gate / 3.0)):
                 window = (reach * odo_sigma[0], reach * odo_sigma[2])
                 near = self._link_match(local, pts, prior, None, info, window)
-                if _chi2(near.pose, prior, odo_sigma) <= gate:
+                if prior_chi2(near.pose, prior, odo_sigma) <= gate:
                     break
             if near.score >= g.loop_ambiguity_ratio * match.score:
                 self.gated_matches += 1
@@ -224,7 +225,7 @@ class GraphSlam:
         sigma = (g.loop_sigma_xy, g.loop_sigma_xy, g.loop_sigma_theta)
         frame = 0.0
         if other.score >= rival_bar:
-            frame = _shift_frame(match.pose, other.pose, g.loop_corridor_max_rotation)
+            frame = shift_direction(match.pose, other.pose, g.loop_corridor_max_rotation)
             if frame is None or g.loop_corridor_sigma <= 0:
                 self.ambiguous_closures += 1
                 return
@@ -390,22 +391,6 @@ class GraphSlam:
         return self.map.occupancy(with_hits=True)
 
 
-def _chi2(pose: np.ndarray, prior: np.ndarray, sigma: tuple[float, float, float]) -> float:
-    """chi^2 of `pose` (3,) against `prior` (3,) under independent `sigma` [m, m, rad]."""
-    d = pose - prior
-    d[2] = math.remainder(float(d[2]), 2.0 * math.pi)
-    return float((np.square(d) / np.square(sigma)).sum())
-
-
 def _inverse3(a: np.ndarray) -> np.ndarray:
     c, s = math.cos(a[2]), math.sin(a[2])
     return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
-
-
-def _shift_frame(pose: np.ndarray, rival: np.ndarray, max_rotation: float) -> float | None:
-    """[rad] the direction from a match's pose to its rival's, in the match's frame (the
-    axis a corridor leaves free), or None when the rival is turned by more than
-    max_rotation [rad]: not a shift."""
-    if abs(math.remainder(float(rival[2] - pose[2]), 2.0 * math.pi)) > max_rotation:
-        return None
-    return math.atan2(rival[1] - pose[1], rival[0] - pose[0]) - float(pose[2])

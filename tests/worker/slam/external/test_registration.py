@@ -12,8 +12,8 @@ from worker.errors import InputError
 from worker.run_params import RunParams
 from worker.sim.laser import LaserSpec
 from worker.slam import registry
-from worker.slam.base import make_slam
 from worker.slam.external.params import ExternalSlamParams
+from worker.slam.registry import make_slam
 
 
 @pytest.fixture

@@ -8,11 +8,11 @@ import pytest
 
 from tests.worker.slam.helpers import Laser, box_scan
 from worker.evaluate.se2 import relative, wrap_angle
-from worker.slam.base import make_slam
 from worker.slam.graph.final import relink_edges, two_sided_nodes
 from worker.slam.graph.optimize import Edges, optimize
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 LASER = Laser()
 BOX = (0.0, 0.0, 8.0, 5.0)  # [m] an 8 x 5 m room: its four walls fix x, y and the heading

@@ -8,10 +8,10 @@ import pytest
 
 from tests.worker.slam.graph.worlds import box_points, to_map
 from tests.worker.slam.helpers import Laser, box_scan
-from worker.slam.base import make_slam
 from worker.slam.graph.matcher import MatchResult, PointMap, angular_step
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 LASER = Laser()
 BOX = (0.0, 0.0, 8.0, 5.0)

@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 
 from worker.errors import InputError
-from worker.params import to_dict
+from worker.param_io import to_dict
 from worker.run_params import RunParams
 from worker.slam.graph.params import GraphSlamParams
 

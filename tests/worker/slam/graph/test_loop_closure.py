@@ -18,11 +18,11 @@ from tests.worker.slam.graph.worlds import (
     twin_rooms,
 )
 from worker.sim.laser import LaserSpec
-from worker.slam.base import make_slam
 from worker.slam.graph.mapping import NodeMap
 from worker.slam.graph.nodes import loop_min_score
 from worker.slam.graph.params import GraphSlamParams
 from worker.slam.params import SlamParams
+from worker.slam.registry import make_slam
 
 
 def _run(log: Log, params: SlamParams):

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from worker.sim.laser import LaserSpec
-from worker.sim.raycast import (
+from worker.world import World
+from worker.world.raycast import (
     cast_ray,
     cast_scan,
     cast_scan_skip,
@@ -16,7 +17,6 @@ from worker.sim.raycast import (
     cast_scans_skip,
     jump_map,
 )
-from worker.world import World
 
 RES = 0.05
 

@@ -9,7 +9,7 @@ from typing import Literal
 import pytest
 
 from worker.errors import InputError
-from worker.params import from_dict, load_params_file, to_dict
+from worker.param_io import from_dict, load_params_file, to_dict
 
 
 @dataclasses.dataclass(frozen=True)
