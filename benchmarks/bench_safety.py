@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from worker.explore.loop import Exploration, ExploreParams  # noqa: E402
+from worker.explore.params import explore_params  # noqa: E402
 from worker.explore.safety import front_clearance, median_ranges  # noqa: E402
 from worker.params import load_params_file  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
@@ -79,10 +80,10 @@ class _Moments:
 
 
 def _fires(ranges, angles, range_max, p: ExploreParams, sigma, median, k, n) -> bool:
-    half, lateral = p.footprint_half_m, p.footprint_padding
+    half, lateral = p.costmap.footprint_half_m, p.costmap.footprint_padding
     d, _ = front_clearance(median_ranges(ranges, median), angles, range_max, half, lateral,
                            k * sigma, n)  # fmt: skip
-    return d < p.safety_distance
+    return d < p.safety.safety_distance
 
 
 def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
@@ -93,7 +94,7 @@ def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
     oracle = args.slam == "oracle"
     slam = make_slam("odometry" if oracle else args.slam, sim_params.laser, SlamParams(), rng)
     extra = load_params_file(args.params).get("explore", {}) if args.params else {}
-    params = ExploreParams(time_limit=args.time_limit, **extra)
+    params = explore_params(time_limit=args.time_limit, **extra)
     loop = Exploration(world, sim, slam, params, oracle, None)
     moments = _Moments(sim)
     moments.wrap(loop.nav.safety)
@@ -146,7 +147,11 @@ def main() -> None:
             draw_rng = np.random.default_rng([seed, 7])
             for noisy, true in zip(moments.noisy, moments.true, strict=True):
                 d_true, _ = front_clearance(
-                    true, angles, laser.range_max, p.footprint_half_m, p.footprint_padding
+                    true,
+                    angles,
+                    laser.range_max,
+                    p.costmap.footprint_half_m,
+                    p.costmap.footprint_padding,
                 )
                 real = d_true < p.safety_distance
                 close = d_true < 0.1

@@ -185,7 +185,7 @@ def rescore(npz: Path, world_path: Path, p: Any, cache: dict[str, Any]) -> dict[
     key = f"reach {world_path} {start}"
     if key not in cache:
         cache[key] = reachable_free(world.occ, world.resolution, start,
-                                    ExploreParams().footprint_half_m)  # fmt: skip
+                                    ExploreParams().costmap.footprint_half_m)  # fmt: skip
     hits = d["hits"] if "hits" in d.files else None  # maps stored before the counts: none
     grid = OccupancyGrid(
         d["prob"], float(d["resolution"]), d["origin"], float(d["occ_thresh"]), hits

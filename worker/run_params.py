@@ -14,7 +14,7 @@ from pydantic import AfterValidator, Field
 
 from worker.errors import InputError
 from worker.evaluate.params import AParams, BParams, SMParams
-from worker.explore.params import ExploreParams
+from worker.explore.params import ExploreParams, nest_flat
 from worker.params import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
 from worker.slam import registry
@@ -42,8 +42,9 @@ class EvalParams:
 class RunParams:
     """Everything that determines a run besides the world and the seed; stored with each run.
 
-    The robot's size is set once, by `sim.footprint` [m]; the exploration's footprint_half_m
-    is derived from it here (it is stored, for the record, but cannot be set on its own).
+    The robot's size is set once, by `sim.footprint` [m]; the exploration's
+    costmap.footprint_half_m is derived from it here (it is stored, for the record, but cannot
+    be set on its own).
     """
 
     algorithm: Algorithm = "rbpf"  # a name in worker.slam.registry (oracle = ground truth)
@@ -58,7 +59,7 @@ class RunParams:
     def __post_init__(self) -> None:
         if not self.sim.footprint > 0:  # SimParams refuses it too; RunParams relies on it
             raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
-        if self.explore.footprint_half_m != 0.5 * self.sim.footprint:
+        if self.explore.costmap.footprint_half_m != 0.5 * self.sim.footprint:
             object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
         rt = self.realtime
         if rt is not None and rt.fixed_latency_s is None and self.algorithm not in MODELLED:
@@ -79,28 +80,41 @@ class RunParams:
     def from_json(cls, data: dict[str, Any]) -> RunParams:
         """Strictly validated: unknown keys, wrong types and bad values raise InputError.
 
-        A stored `explore.footprint_half_m` (every stored run has one) is accepted when it is
-        half of `sim.footprint`, the value it is derived from.
+        `explore` may be nested (`{"doors": {"door_align": true}}`, as `to_json` writes it) or
+        flat, as runs stored before the groups hold it (`{"door_align": true}`; see
+        `worker.explore.params.nest_flat`). A stored `explore.costmap.footprint_half_m`
+        (every stored run has one) is accepted when it is half of `sim.footprint`, the value
+        it is derived from.
         """
-        return from_dict(cls, _without_derived(data))
+        return from_dict(cls, _without_derived(_nested(data)))
+
+
+def _nested(data: Any) -> Any:
+    """`data` with a flat `explore` mapping (runs stored before the groups) nested."""
+    explore = data.get("explore") if isinstance(data, dict) else None
+    nested = nest_flat(explore)
+    return data if nested is explore else {**data, "explore": nested}
 
 
 def _without_derived(data: Any) -> Any:
-    """`data` without `explore.footprint_half_m`, once checked against `sim.footprint`."""
+    """`data` without `explore.costmap.footprint_half_m`, once checked against
+    `sim.footprint`."""
     explore = data.get("explore") if isinstance(data, dict) else None
-    if not (isinstance(explore, dict) and "footprint_half_m" in explore):
+    costmap = explore.get("costmap") if isinstance(explore, dict) else None
+    if not (isinstance(costmap, dict) and "footprint_half_m" in costmap):
         return data
     sim = data.get("sim")
     side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else FOOTPRINT_M
-    half = explore["footprint_half_m"]
+    half = costmap["footprint_half_m"]
     numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (side, half))
     if numbers and half != 0.5 * side or not numbers and isinstance(side, int | float):
         raise InputError(
-            f"explore.footprint_half_m ({half!r}) follows from sim.footprint ({side!r}): "
-            "set the robot's size with sim.footprint [m] alone"
+            f"explore.costmap.footprint_half_m ({half!r}) follows from sim.footprint "
+            f"({side!r}): set the robot's size with sim.footprint [m] alone"
         )
     data = copy.copy(data)
-    data["explore"] = {k: v for k, v in explore.items() if k != "footprint_half_m"}
+    costmap = {k: v for k, v in costmap.items() if k != "footprint_half_m"}
+    data["explore"] = {**explore, "costmap": costmap}
     return data
 
 
@@ -120,5 +134,6 @@ def run_params_schema() -> dict[str, Any]:
         return node
 
     out = inline(schema)
-    out["properties"]["explore"]["properties"].pop("footprint_half_m", None)
+    explore = out["properties"]["explore"]["properties"]
+    explore["costmap"]["properties"].pop("footprint_half_m", None)
     return out

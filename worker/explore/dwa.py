@@ -10,7 +10,7 @@ import numpy as np
 from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, DwaParams
 
 
 def drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int):
@@ -37,8 +37,10 @@ class Command:
 class DwaPlanner:
     """Scores forward-simulated (v, w) samples against the local costmap and the global path."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: DwaParams, costmap: CostmapParams):
+        """costmap: the footprint's settings (footprint_half_m, footprint_padding)."""
         self.params = params
+        self.half_m = costmap.footprint_half_m  # [m] the bare footprint's half side
         p = params
         prm = np.zeros(dk.N_PARAMS)
         prm[dk.P_DT] = 1.0 / p.controller_frequency
@@ -55,10 +57,10 @@ class DwaPlanner:
         prm[dk.P_GDIST] = p.gdist_scale
         prm[dk.P_OCCDIST] = p.occdist_scale
         prm[dk.P_LOOKAHEAD] = p.heading_lookahead
-        prm[dk.P_HALF] = p.footprint_half_m + p.footprint_padding
-        prm[dk.P_CIRC] = p.footprint_half_m * math.sqrt(2.0)
+        prm[dk.P_HALF] = costmap.footprint_half_m + costmap.footprint_padding
+        prm[dk.P_CIRC] = costmap.footprint_half_m * math.sqrt(2.0)
         prm[dk.P_ESCAPE_VX] = p.escape_vel
-        prm[dk.P_HALF_RAW] = p.footprint_half_m
+        prm[dk.P_HALF_RAW] = costmap.footprint_half_m
         self.prm = prm
         self._prm_unpadded = prm.copy()
         self.path_xy: np.ndarray | None = None
@@ -108,7 +110,7 @@ class DwaPlanner:
         # distances counted in cells, so distances in metres and the cost weight x resolution
         self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
         self._prm_unpadded[:] = self.prm
-        self._prm_unpadded[dk.P_HALF] = p.footprint_half_m
+        self._prm_unpadded[dk.P_HALF] = self.half_m
         n = local.cost.shape[0]
         if self._dist.shape[1:] != local.cost.shape:
             self._dist = np.empty((2, n, n), dtype=np.float32)

@@ -51,33 +51,41 @@ class Navigator:
         self.params = params
         self.angles = np.asarray(angles, dtype=float)
         self.range_max = float(range_max)
-        self.costmap = GlobalCostmap(params)
+        self.costmap = GlobalCostmap(params.costmap, params.doors.door_align)
         # narrow gaps the robot failed to pass: closed to both narrow fallbacks
         self.closed = ClosedGaps()
         # one set of map-sized Dijkstra buffers for the goal search and the planner (each
         # reads its results right after its own search): 16 bytes a cell less
         search = DijkstraSearch()
-        self.frontiers = FrontierSearch(params, self.closed, search)
-        self.planner = GlobalPlanner(params, self.closed, search)
-        self.dwa = DwaPlanner(params)
-        self.shim = HeadingShim(params)
-        self.door = DoorPass(params, range_noise)
-        median = params.safety_median_beams if range_noise > 0.0 else 1
-        self.safety = SafetyController(params, self.angles, self.range_max, median)
+        c, dwa, rec, safe = params.costmap, params.dwa, params.recovery, params.safety
+        self.frontiers = FrontierSearch(params.frontiers, params.planner, self.closed, search)
+        self.planner = GlobalPlanner(params.planner, self.closed, search)
+        self.dwa = DwaPlanner(dwa, c)
+        self.shim = HeadingShim(dwa, c, rec)
+        back_out_speed = rec.back_out_speed_ratio * dwa.escape_vel
+        self.door = DoorPass(
+            params.doors, c, dwa, back_out_speed, safe.safety_distance, range_noise
+        )
+        median = safe.safety_median_beams if range_noise > 0.0 else 1
+        self.safety = SafetyController(safe, c, dwa, self.angles, self.range_max, median)
         self.local: LocalCostmap | None = None
         self.stats = NavStats()
         self.state = NavState.WAITING
         self.pursuit: Pursuit | None = None
         self.retrace: Retrace | None = None
-        self.memory = FrontierMemory(params.blacklist_retries)
-        self._reopens_left = params.closed_gap_reopens  # ClosedGaps cleared when sealed in
-        self.trail = Trail(params)
+        self.memory = FrontierMemory(params.navigator.blacklist_retries)
+        self._reopens_left = (
+            params.navigator.closed_gap_reopens
+        )  # ClosedGaps cleared when sealed in
+        self.trail = Trail(rec)
         self._next_choice_t = 0.0  # [s] when to choose the frontier again
         # the local costmap was cleared since the DWA last found a legal command (any goal)
         self._recovered = False
         self._frontier_changed = False
         self._map_updated = False
-        self._half_fov = float(np.max(np.abs(self.angles))) - params.look_fov_margin  # [rad]
+        self._half_fov = (
+            float(np.max(np.abs(self.angles))) - params.frontiers.look_fov_margin
+        )  # [rad]
         self._beams_box: tuple[float, float, float, float] | None = None
         self._last_scan: tuple[np.ndarray, np.ndarray] | None = None  # (pose, ranges)
         self._planned_forward = False  # the last command: the local planner's, forwards
@@ -103,7 +111,7 @@ class Navigator:
             window = (b[0] - m, b[1] - m, b[2] + m, b[3] + m)
         self._beams_box = None
         scan = None
-        if self.params.obstacle_layer and self._last_scan is not None:
+        if self.params.costmap.obstacle_layer and self._last_scan is not None:
             scan = (*self._last_scan, self.angles, self.range_max)
         changed = self.costmap.update(prob, resolution, origin, window, scan)
         self.frontiers.update(self.costmap, changed)
@@ -111,7 +119,7 @@ class Navigator:
             self._frontier_changed = True
         self._map_updated = True
         if self.local is None:
-            self.local = LocalCostmap(self.params, resolution)
+            self.local = LocalCostmap(self.params.costmap, self.params.dwa, resolution)
             self._enter(NavState.IDLE)
 
     # --- control ---
@@ -131,7 +139,8 @@ class Navigator:
         if self.state is NavState.SAFETY:
             if self.safety.active(t):
                 vw = safe_override(
-                    self.params, self.local, self.dwa, pose, self.safety.check(t, ranges, 0.0),
+                    self.params.safety.safety_backoff_time, self.local, self.dwa, pose,
+                    self.safety.check(t, ranges, 0.0),
                     v0, w0,
                 )  # fmt: skip
                 return NavCommand(*vw, "safety")
@@ -154,7 +163,7 @@ class Navigator:
         if g.path is None or t >= g.next_plan_t:
             self._plan(t, pose)
         if g.path is None:
-            if t - g.plan_fail_since >= self.params.planner_patience:
+            if t - g.plan_fail_since >= self.params.navigator.planner_patience:
                 self._give_up(t, "no plan")
             return NavCommand(0.0, 0.0, "planning")
         return self._drive(t, pose, v0, w0, ranges)
@@ -164,8 +173,8 @@ class Navigator:
         heading shim when the plan lies behind, else the DWA; the safety controller has the
         last word on the DWA's and the door passage's forward commands."""
         g = self.pursuit
-        if self.params.trap_reach > 0.0:
-            out = self.trail.closed_behind(self.local, self.params.trap_reach)
+        if self.params.recovery.trap_reach > 0.0:
+            out = self.trail.closed_behind(self.local, self.params.recovery.trap_reach)
             if out is not None:
                 # the gap behind the robot is too narrow to drive back through: back out
                 # now, on the line it came in by, before it turns away from it (once)
@@ -176,7 +185,7 @@ class Navigator:
         # the DWA's arcs bring to a door too tight to enter at an angle
         shim = (
             self.door.command(pose, g.path, self.costmap, self.local)
-            if self.params.door_align or g.goal.squeeze
+            if self.params.doors.door_align or g.goal.squeeze
             else None
         )
         if shim is None:
@@ -205,7 +214,7 @@ class Navigator:
             self._finish(t, "reached")
             return NavCommand(0.0, 0.0, "aligning")
         if not cmd.legal:
-            vw = unwedge(self.params, self.local, self.costmap, pose)
+            vw = unwedge(self.params.recovery, self.params.dwa, self.local, self.costmap, pose)
             if vw is not None:
                 self._enter(NavState.ESCAPING)
                 return NavCommand(vw[0], vw[1], "recovering")
@@ -230,7 +239,8 @@ class Navigator:
         if override is None:
             return None
         self._enter(NavState.SAFETY)
-        vw = safe_override(self.params, self.local, self.dwa, pose, override, v0, w0, planned)
+        backoff = self.params.safety.safety_backoff_time
+        vw = safe_override(backoff, self.local, self.dwa, pose, override, v0, w0, planned)
         return NavCommand(*vw, "safety")
 
     def _dwa_command(self, pose: np.ndarray, v0: float, w0: float) -> Command:
@@ -289,7 +299,7 @@ class Navigator:
             self.pursuit is not None
             and self._frontier_changed
             and not self.frontiers.frontier_near(
-                self.costmap, self.pursuit.goal.frontier_xy, self.params.blacklist_radius
+                self.costmap, self.pursuit.goal.frontier_xy, self.params.frontiers.blacklist_radius
             )
         ):
             self._finish(t, "explored")
@@ -299,7 +309,7 @@ class Navigator:
         """Choose the frontier: keep the goal, switch to a clearly nearer one, or drop it."""
         p = self.params
         mem = self.memory
-        self._next_choice_t = t + p.frontier_period
+        self._next_choice_t = t + p.navigator.frontier_period
         new = self.frontiers.choose(self.costmap, pose[:2], mem.blacklist, mem.avoid())
         # before giving up on the building, give the blacklisted frontiers (and the closed
         # gaps) another chance
@@ -327,16 +337,16 @@ class Navigator:
             self._enter(NavState.EXHAUSTED)
             return
         if g is not None:
-            if np.hypot(*(new.goal_xy - g.goal.goal_xy)) <= p.same_goal_distance:
+            if np.hypot(*(new.goal_xy - g.goal.goal_xy)) <= p.navigator.same_goal_distance:
                 return  # same goal, keep its plan and progress timers
             # Switch only to a clearly nearer frontier: two about equally near ones must not
             # make the robot dither between them.
-            remaining = path_length(g.path) / self.costmap.resolution * p.neutral_cost
-            if g.path is None or new.travel_cost >= p.goal_switch_ratio * remaining:
+            remaining = path_length(g.path) / self.costmap.resolution * p.planner.neutral_cost
+            if g.path is None or new.travel_cost >= p.navigator.goal_switch_ratio * remaining:
                 return
             self._end_goal(t, "replaced", "a nearer frontier")
         # the frontier search's own path: the first plan
-        next_plan_t = t + 1.0 / p.planner_frequency
+        next_plan_t = t + 1.0 / p.navigator.planner_frequency
         self.pursuit = Pursuit(new, t, new.path_xy, next_plan_t, progress_t=t)
         self.door.new_goal()
         self.dwa.set_plan(new.path_xy)
@@ -345,7 +355,7 @@ class Navigator:
     def _look_through(self, pose: np.ndarray) -> FrontierGoal | None:
         """The last pass: a goal that looks at a frontier through a gap the robot cannot
         pass (`FrontierSearch.choose`, look_through), or None (or off)."""
-        if self.params.look_through_radius <= 0.0:
+        if self.params.frontiers.look_through_radius <= 0.0:
             return None
         mem = self.memory
         return self.frontiers.choose(
@@ -364,13 +374,13 @@ class Navigator:
 
     def _plan(self, t: float, pose: np.ndarray) -> None:
         g = self.pursuit
-        g.next_plan_t = t + 1.0 / self.params.planner_frequency
+        g.next_plan_t = t + 1.0 / self.params.navigator.planner_frequency
         path = self.planner.plan(self.costmap, pose[:2], g.goal.goal_xy, g.goal.squeeze)
         if path is None:
             self.stats.plan_failures += 1
             if g.plan_fail_since is None:
                 g.plan_fail_since = t
-            g.next_plan_t = t + 1.0 / self.params.controller_frequency
+            g.next_plan_t = t + 1.0 / self.params.dwa.controller_frequency
         else:
             g.plan_fail_since = None
         g.path = path
@@ -385,9 +395,9 @@ class Navigator:
             g.ctrl_fail_since = t
         self._enter(NavState.RECOVERING)
         elapsed = t - g.ctrl_fail_since
-        if elapsed >= self.params.controller_patience:
+        if elapsed >= self.params.navigator.controller_patience:
             self._give_up(t, "no legal command", pose)
-        elif not self._recovered and elapsed >= self.params.recovery_delay:
+        elif not self._recovered and elapsed >= self.params.recovery.recovery_delay:
             self._recovered = True
             self.stats.recoveries += 1
             self.local.clear()
@@ -403,7 +413,7 @@ class Navigator:
         a room's door given up at 950 s after 35 s of steady driving on a detour, the room
         never entered)."""
         g = self.pursuit
-        step = self.params.progress_step
+        step = self.params.navigator.progress_step
         gap = float(np.hypot(*(g.goal.goal_xy - pose[:2])))
         route = remaining_length(g.path, pose[:2])
         if gap < g.best_gap - step:
@@ -412,7 +422,7 @@ class Navigator:
         if route < g.best_route - step:
             g.best_route = route
             g.progress_t = t
-        return t - g.progress_t >= self.params.progress_timeout
+        return t - g.progress_t >= self.params.navigator.progress_timeout
 
     def _finish(self, t: float, status: str) -> None:
         """Goal done. A frontier still there after the robot arrived is approached from
@@ -420,9 +430,11 @@ class Navigator:
         map updates only after some motion, so one arrival is not enough to tell)."""
         p = self.params
         goal = self.pursuit.goal
-        f, r = goal.frontier_xy, p.blacklist_radius
+        f, r = goal.frontier_xy, p.frontiers.blacklist_radius
         if status == "reached" and self.frontiers.frontier_near(self.costmap, f, r):
-            self.memory.arrived(f, goal.goal_xy, r, p.blacklist_arrivals, goal.look_through)
+            self.memory.arrived(
+                f, goal.goal_xy, r, p.navigator.blacklist_arrivals, goal.look_through
+            )
         self.stats.consecutive_failures = 0
         self._end_goal(t, status)
 
@@ -433,7 +445,7 @@ class Navigator:
             target = self.trail.back_target(None if pose is None else pose[:2])
         if target is None:
             return
-        self.retrace = Retrace(target, t + self.params.retrace_time)
+        self.retrace = Retrace(target, t + self.params.recovery.retrace_time)
         self.stats.recoveries += 1
         self._enter(NavState.RETRACING)
 
@@ -441,13 +453,13 @@ class Navigator:
         """Reverse towards the retrace point; None: done (or blocked), back to the goal layer."""
         d = self.retrace.target - pose[:2]
         vw = None
-        if np.hypot(*d) < self.params.retrace_tolerance or t >= self.retrace.until:
+        if np.hypot(*d) < self.params.recovery.retrace_tolerance or t >= self.retrace.until:
             self.trail.cut_to(self.retrace.target)
         else:
             aim = self.retrace.target
-            if self.params.retrace_lookahead > 0.0:
-                aim = self.trail.carrot(pose[:2], aim, self.params.retrace_lookahead)
-            vw = back_out(self.params, self.local, pose, aim - pose[:2])
+            if self.params.recovery.retrace_lookahead > 0.0:
+                aim = self.trail.carrot(pose[:2], aim, self.params.recovery.retrace_lookahead)
+            vw = back_out(self.params.recovery, self.params.dwa, self.local, pose, aim - pose[:2])
         if vw is None:
             self.retrace = None
             self._enter(self._goal_layer_state())
@@ -460,7 +472,11 @@ class Navigator:
         g = self.pursuit
         if pose is not None and g.path is not None:
             self.closed.close(
-                self.costmap, self.params, g.path, pose[:2], self.params.closed_gap_radius
+                self.costmap,
+                self.params.planner,
+                g.path,
+                pose[:2],
+                self.params.planner.closed_gap_radius,
             )
         self._start_retrace(t, pose, out)
         self.memory.give_up(g.goal.frontier_xy, g.goal.look_through)

@@ -11,7 +11,7 @@ import numpy as np
 from scipy import ndimage
 
 from worker.explore.coverage import align_map_to_world
-from worker.explore.params import ExploreParams
+from worker.explore.params import StopParams
 from worker.status import RunOutcome
 
 Outcome = RunOutcome  # completed | failed
@@ -322,8 +322,11 @@ class TimeLimitRule:
         return StopReason("time_limit", f"time limit {self.limit:g} s reached")
 
 
-def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> list[StopRule]:
-    """The loop's stop rules in the order they are asked: the first to fire ends the run."""
+def default_rules(
+    p: StopParams, time_limit: float, start_xy: np.ndarray, n_collisions: int
+) -> list[StopRule]:
+    """The loop's stop rules in the order they are asked: the first to fire ends the run;
+    time_limit [s]: ExploreParams.time_limit (m)."""
     return [
         CollisionRule(n_collisions),
         DivergenceRule(p.slam_divergence),
@@ -338,7 +341,7 @@ def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> 
             change=p.snapshot_change,
             tolerance=p.snapshot_tolerance,
         ),  # fmt: skip
-        TimeLimitRule(p.time_limit),
+        TimeLimitRule(time_limit),
     ]
 
 
