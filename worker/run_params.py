@@ -43,8 +43,9 @@ class RunParams:
     """Everything that determines a run besides the world and the seed; stored with each run.
 
     The robot's size is set once, by `sim.footprint` [m]; the exploration's
-    costmap.footprint_half_m is derived from it here (it is stored, for the record, but cannot
-    be set on its own).
+    costmap.footprint_half_m follows from it (it is stored, for the record, but cannot be set
+    on its own): `from_json` fills it in, and a RunParams built in Python with another robot
+    size is given `ExploreParams.with_footprint(sim.footprint)`.
     """
 
     algorithm: Algorithm = "rbpf"  # a name in worker.slam.registry (oracle = ground truth)
@@ -59,8 +60,9 @@ class RunParams:
     def __post_init__(self) -> None:
         if not self.sim.footprint > 0:  # SimParams refuses it too; RunParams relies on it
             raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
-        if self.explore.costmap.footprint_half_m != 0.5 * self.sim.footprint:
-            object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
+        half = self.explore.costmap.footprint_half_m
+        if half != 0.5 * self.sim.footprint:
+            raise InputError(_footprint_message(half, self.sim.footprint))
         rt = self.realtime
         if rt is not None and rt.fixed_latency_s is None and self.algorithm not in MODELLED:
             raise InputError(
@@ -86,7 +88,7 @@ class RunParams:
         (every stored run has one) is accepted when it is half of `sim.footprint`, the value
         it is derived from.
         """
-        return from_dict(cls, _without_derived(_nested(data)))
+        return from_dict(cls, _with_derived(_nested(data)))
 
 
 def _nested(data: Any) -> Any:
@@ -96,26 +98,34 @@ def _nested(data: Any) -> Any:
     return data if nested is explore else {**data, "explore": nested}
 
 
-def _without_derived(data: Any) -> Any:
-    """`data` without `explore.costmap.footprint_half_m`, once checked against
-    `sim.footprint`."""
-    explore = data.get("explore") if isinstance(data, dict) else None
-    costmap = explore.get("costmap") if isinstance(explore, dict) else None
-    if not (isinstance(costmap, dict) and "footprint_half_m" in costmap):
+def _footprint_message(half: Any, side: Any) -> str:
+    return (
+        f"explore.costmap.footprint_half_m ({half!r}) follows from sim.footprint ({side!r}): "
+        "set the robot's size with sim.footprint [m] alone"
+    )
+
+
+def _with_derived(data: Any) -> Any:
+    """`data` with `explore.costmap.footprint_half_m` set to half of `sim.footprint` (a stored
+    one, every stored run has one, is checked against it first). Left as is when the mapping
+    or the footprint is malformed: the validation names that key."""
+    if not isinstance(data, dict):
         return data
-    sim = data.get("sim")
-    side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else FOOTPRINT_M
-    half = costmap["footprint_half_m"]
-    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (side, half))
-    if numbers and half != 0.5 * side or not numbers and isinstance(side, int | float):
-        raise InputError(
-            f"explore.costmap.footprint_half_m ({half!r}) follows from sim.footprint "
-            f"({side!r}): set the robot's size with sim.footprint [m] alone"
-        )
+    explore, sim = data.get("explore", {}), data.get("sim", {})
+    costmap = explore.get("costmap", {}) if isinstance(explore, dict) else None
+    side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else None
+    if not (isinstance(costmap, dict) and _is_number(side)):
+        return data
+    half = costmap.get("footprint_half_m", 0.5 * side)
+    if not _is_number(half) or half != 0.5 * side:
+        raise InputError(_footprint_message(half, side))
     data = copy.copy(data)
-    costmap = {k: v for k, v in costmap.items() if k != "footprint_half_m"}
-    data["explore"] = {**explore, "costmap": costmap}
+    data["explore"] = {**explore, "costmap": {**costmap, "footprint_half_m": 0.5 * side}}
     return data
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def run_params_schema() -> dict[str, Any]:

@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 
 from worker.errors import InputError
-from worker.explore.params import GROUPS
+from worker.explore.params import GROUPS, CostmapParams, ExploreParams
 from worker.run_params import RunParams, run_params_schema
+from worker.sim.params import SimParams
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "office_a" / "summary.json"
@@ -162,10 +163,13 @@ def test_the_footprint_is_set_once_and_the_exploration_follows():
             RunParams.from_json({"explore": explore})
     with pytest.raises(InputError, match="footprint must be > 0"):
         RunParams.from_json({"sim": {"footprint": 0.0}})
-    with pytest.raises(TypeError):  # not a parameter of its own
-        from worker.explore.params import CostmapParams
-
-        CostmapParams(footprint_half_m=0.3)
+    # built in Python: the exploration is given the robot's size, or the run is refused
+    sim = SimParams(footprint=0.5)
+    with pytest.raises(InputError, match="set the robot's size with sim.footprint"):
+        RunParams(sim=sim)
+    with pytest.raises(InputError, match="set the robot's size with sim.footprint"):
+        RunParams(explore=ExploreParams(costmap=CostmapParams(footprint_half_m=0.3)))
+    assert RunParams(sim=sim, explore=ExploreParams().with_footprint(0.5)) == p
 
 
 @pytest.mark.parametrize(

@@ -171,9 +171,7 @@ class DoorPass:
         c = self.costmap_params
         if self._local is None or self._local.resolution != costmap.resolution:
             padding = max(c.footprint_padding, self.params.door_margin)
-            grown = dataclasses.replace(c, footprint_padding=padding).with_footprint(
-                2.0 * c.footprint_half_m
-            )
+            grown = dataclasses.replace(c, footprint_padding=padding)
             self._local = LocalCostmap(grown, self.dwa, costmap.resolution)
         self._local.build(float(pose[0]), float(pose[1]), costmap, float(pose[2]), map_only=True)
         return self._local

@@ -35,8 +35,9 @@ class CostmapParams:
     rates), and for the footprint by every part that tests a pose or motion for collision."""
 
     # [m] half side of the square footprint: derived from the robot's one size setting,
-    # SimParams.footprint, by RunParams (`with_footprint`); not a parameter of its own
-    footprint_half_m: float = field(default=0.5 * FOOTPRINT_M, init=False)
+    # SimParams.footprint (RunParams.from_json fills it in, RunParams refuses another value);
+    # not a parameter of its own
+    footprint_half_m: float = 0.5 * FOOTPRINT_M
     # [m] added to the half side in the local planner's collision test (ROS footprint_padding)
     footprint_padding: float = 0.02
     inflation_radius: float = 2.25  # [m] inflation_layer.inflation_radius
@@ -70,9 +71,7 @@ class CostmapParams:
 
     def with_footprint(self, side_m: float) -> CostmapParams:
         """These settings for a square robot footprint of side `side_m` [m]."""
-        out = dataclasses.replace(self)
-        object.__setattr__(out, "footprint_half_m", 0.5 * side_m)
-        return out
+        return dataclasses.replace(self, footprint_half_m=0.5 * side_m)
 
 
 @dataclass(frozen=True)
@@ -383,9 +382,7 @@ class ExploreParams:
         prob = max(c.obstacle_min_prob, c.noisy_obstacle_min_prob)
         return dataclasses.replace(
             self,
-            costmap=dataclasses.replace(c, obstacle_min_prob=prob).with_footprint(
-                2.0 * c.footprint_half_m
-            ),
+            costmap=dataclasses.replace(c, obstacle_min_prob=prob),
             doors=dataclasses.replace(d, door_align=d.door_align or d.noisy_door_align),
             planner=dataclasses.replace(pl, narrow_margin=min(pl.narrow_margin, pl.squeeze_margin)),
         )
