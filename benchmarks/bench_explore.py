@@ -30,8 +30,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from worker.explore.flat_params import explore_params  # noqa: E402
 from worker.explore.loop import explore  # noqa: E402
-from worker.explore.params import explore_params  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
 from worker.sim.simulator import Simulator  # noqa: E402
 from worker.slam import registry  # noqa: E402

@@ -33,8 +33,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from worker.explore.flat_params import explore_params  # noqa: E402
 from worker.explore.loop import Exploration, ExploreParams  # noqa: E402
-from worker.explore.params import explore_params  # noqa: E402
 from worker.explore.safety import front_clearance, median_ranges  # noqa: E402
 from worker.params import load_params_file  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402

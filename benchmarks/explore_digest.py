@@ -28,8 +28,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from worker.explore.flat_params import explore_params  # noqa: E402
 from worker.explore.loop import ExploreProgress, explore  # noqa: E402
-from worker.explore.params import explore_params  # noqa: E402
 from worker.sim.simulator import SimParams, Simulator  # noqa: E402
 from worker.slam.base import make_slam  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402

@@ -14,7 +14,8 @@ from pydantic import AfterValidator, Field
 
 from worker.errors import InputError
 from worker.evaluate.params import AParams, BParams, SMParams
-from worker.explore.params import ExploreParams, nest_flat
+from worker.explore.flat_params import nest_flat
+from worker.explore.params import ExploreParams
 from worker.params import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
 from worker.slam import registry

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from worker.errors import InputError
-from worker.explore.params import GROUPS, CostmapParams, ExploreParams
+from worker.explore.flat_params import GROUPS
+from worker.explore.params import CostmapParams, ExploreParams
 from worker.run_params import RunParams, run_params_schema
 from worker.sim.params import SimParams
 

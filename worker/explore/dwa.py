@@ -111,12 +111,41 @@ class DwaPlanner:
         self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
         self._prm_unpadded[:] = self.prm
         self._prm_unpadded[dk.P_HALF] = self.half_m
+        path_dist, goal_dist = self._distances(pose, local, seeds, goal_cell)
+        goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        vx, vth, kind = self._best(pose, v0, w0, local, goal_gap, path_dist, goal_dist, no_forward)
+        self._track_oscillation(pose, kind, vth)
+        if kind < 0:
+            return Command(0.0, 0.0, False, "none")
+        return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
+
+    def command_or_scans_only(
+        self, pose: np.ndarray, v0: float, w0: float, local: LocalCostmap, costmap
+    ) -> Command:
+        """`command` towards the plan's end (no heading asked); with nothing legal, its
+        command on the scans alone (`local` rebuilt without the map from `costmap`, the
+        GlobalCostmap)."""
+        # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
+        # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
+        cmd = self.command(pose, v0, w0, local, None)
+        if not cmd.legal:
+            # the map's obstacles may sit a cell nearer than the real ones (rounded hits):
+            # with nothing legal, trust the scans alone, as the thesis's local costmap did
+            local.build(pose[0], pose[1], costmap, pose[2], use_map=False)
+            cmd = self.command(pose, v0, w0, local, None)
+            if cmd.kind in ("escape", "rotate"):
+                # not blind: backing up or turning sweeps what the laser does not see
+                cmd = Command(0.0, 0.0, False, "none")
+        return cmd
+
+    def _distances(self, pose, local: LocalCostmap, seeds, goal_cell):
+        """The distance maps `(n, n)` [m] to the path (`seeds`) and to the local goal, filled
+        only where a trajectory or the heading look-ahead can reach."""
         n = local.cost.shape[0]
         if self._dist.shape[1:] != local.cost.shape:
             self._dist = np.empty((2, n, n), dtype=np.float32)
             self._queue = np.empty(n * n, dtype=np.int64)
         path_dist, goal_dist = self._dist[0], self._dist[1]
-        # the distances are read only where a trajectory or the heading look-ahead can reach
         cy = int(math.floor((pose[1] - local.origin[1]) / local.resolution))
         cx = int(math.floor((pose[0] - local.origin[0]) / local.resolution))
         r = int(math.ceil(self._reach / local.resolution)) + 2
@@ -124,7 +153,12 @@ class DwaPlanner:
         dk.wavefront_into(
             goal_cell, local.cost, local.resolution, goal_dist, self._queue, cy, cx, r
         )
-        goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        return path_dist, goal_dist
+
+    def _best(self, pose, v0, w0, local: LocalCostmap, goal_gap, path_dist, goal_dist, no_forward):
+        """(vx, vth, kind) of the best trajectory: with the padded footprint, then the exact
+        one, then with the oscillation flags cleared; kind < 0: nothing legal."""
+        p = self.params
         passes = [(self.prm, False), (self._prm_unpadded, True)]
         if self._stuck_left or self._stuck_right:
             passes.append((None, True))  # nothing legal: the oscillation flags give way too
@@ -143,10 +177,7 @@ class DwaPlanner:
             )  # fmt: skip
             if kind >= 0:
                 break
-        self._track_oscillation(pose, kind, vth)
-        if kind < 0:
-            return Command(0.0, 0.0, False, "none")
-        return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
+        return vx, vth, kind
 
     def _track_oscillation(self, pose, kind: int, vth: float) -> None:
         """TrajectoryPlanner's oscillation flags: an in-place turn one way after one the other

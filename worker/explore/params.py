@@ -338,7 +338,7 @@ class ExploreParams:
     run's time budget, its progress reports and the harness's judgement of the outcome.
 
     Serialisable with `worker.params.to_dict`; read user values with `worker.params.from_dict`
-    (stored flat dicts of before the groups: `nest_flat`).
+    (stored flat dicts of before the groups: `flat_params.nest_flat`).
     """
 
     costmap: CostmapParams = field(default_factory=CostmapParams)
@@ -390,45 +390,3 @@ class ExploreParams:
     def with_footprint(self, side_m: float) -> ExploreParams:
         """These settings for a square robot footprint of side `side_m` [m]."""
         return dataclasses.replace(self, costmap=self.costmap.with_footprint(side_m))
-
-
-GROUPS: tuple[str, ...] = tuple(
-    f.name for f in fields(ExploreParams) if dataclasses.is_dataclass(f.default_factory)
-)
-
-
-def _group_of_flat_key() -> dict[str, str]:
-    hints = {f.name: f.default_factory for f in fields(ExploreParams) if f.name in GROUPS}
-    return {f.name: group for group, cls in hints.items() for f in fields(cls)}  # type: ignore[arg-type]
-
-
-FLAT_KEYS: dict[str, str] = _group_of_flat_key()  # flat key of before the groups -> its group
-
-
-def nest_flat(data: Any) -> Any:
-    """An `explore` mapping with the flat keys of before the groups (`{"door_align": true}`)
-    moved into their groups (`{"doors": {"door_align": true}}`); nested keys, the loop's own
-    and unknown keys stay where they are (an unknown key is refused when the mapping is read).
-    A key given both ways raises InputError."""
-    if not isinstance(data, dict) or not any(k in FLAT_KEYS for k in data):
-        return data
-    out = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items() if k not in FLAT_KEYS}
-    for key, value in data.items():
-        group = FLAT_KEYS.get(key)
-        if group is None:
-            continue
-        inner = out.setdefault(group, {})
-        if not isinstance(inner, dict):
-            continue  # refused when read: the group must be a mapping
-        if key in inner:
-            raise InputError(f"explore.{key} is given twice (flat and in explore.{group})")
-        inner[key] = value
-    return out
-
-
-def explore_params(**values: Any) -> ExploreParams:
-    """ExploreParams from keyword values, by group (`doors={"door_align": True}`) or flat as
-    before the groups (`door_align=True`), strictly checked as a parameter file is."""
-    from worker.params import from_dict
-
-    return from_dict(ExploreParams, nest_flat(values), "explore")

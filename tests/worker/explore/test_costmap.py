@@ -11,7 +11,8 @@ from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore import local_kernels as lk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.flat_params import explore_params
+from worker.explore.params import ExploreParams
 
 RES = 0.05
 

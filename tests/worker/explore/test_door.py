@@ -12,7 +12,8 @@ from worker.explore import door_kernels as dok
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.door import DoorPass
 from worker.explore.door_geometry import find_door, path_ahead
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.flat_params import explore_params
+from worker.explore.params import ExploreParams
 
 RES = 0.05
 WALL_X = 60  # the wall's cells: x in [3.0, 3.1) m (two cells thick)

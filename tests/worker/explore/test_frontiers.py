@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierSearch
 from worker.explore.navigator import Navigator
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.params import ExploreParams
 from worker.explore.planner import DijkstraSearch, GlobalPlanner, planner_blocked_cost
 
 RES = 0.05

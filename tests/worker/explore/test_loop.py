@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from worker.explore.flat_params import explore_params
 from worker.explore.loop import explore
-from worker.explore.params import explore_params
 from worker.sim.params import SimParams
 from worker.sim.simulator import Simulator
 from worker.slam.base import make_slam

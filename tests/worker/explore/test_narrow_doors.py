@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierSearch
 from worker.explore.navigator import Navigator
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner, narrow_params, planner_blocked_cost
 
 RES = 0.05

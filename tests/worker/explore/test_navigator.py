@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from tests.worker.explore.test_loop import _box, _cells
+from worker.explore.flat_params import explore_params
 from worker.explore.loop import Exploration
 from worker.explore.nav_state import TRANSITIONS, NavState
 from worker.explore.navigator import Navigator
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.params import ExploreParams
 from worker.sim.simulator import SimParams, Simulator
 from worker.slam.base import make_slam
 from worker.slam.params import SlamParams
@@ -223,7 +224,7 @@ def test_a_closed_gap_that_seals_the_robot_in_is_opened_when_nothing_else_is_lef
     cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
     assert nav.state is NavState.DRIVING and cmd.status != "no_frontier"
     assert nav.goal.goal_xy[0] > 6.0 and not nav.goal.look_through  # the corridor's end
-    assert len(nav.closed.points) == 0 and nav._reopens_left == 0
+    assert len(nav.closed.points) == 0 and nav.chooser._reopens_left == 0
 
 
 def _past_a_narrowed_gap(trap_reach: float) -> tuple[Navigator, np.ndarray]:

@@ -8,13 +8,8 @@ import dataclasses
 import pytest
 
 from worker.errors import InputError
-from worker.explore.params import (
-    FLAT_KEYS,
-    GROUPS,
-    ExploreParams,
-    explore_params,
-    nest_flat,
-)
+from worker.explore.flat_params import FLAT_KEYS, GROUPS, explore_params, nest_flat
+from worker.explore.params import ExploreParams
 from worker.params import from_dict
 
 

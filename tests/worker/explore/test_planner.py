@@ -9,7 +9,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra as sp_dijkstra
 
 from worker.explore.costmap import GlobalCostmap
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.flat_params import explore_params
+from worker.explore.params import ExploreParams
 from worker.explore.planner import DijkstraSearch, GlobalPlanner, path_length, planner_blocked_cost
 
 RES = 0.05

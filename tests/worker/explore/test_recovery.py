@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from worker.explore.flat_params import explore_params
 from worker.explore.navigator import Navigator
-from worker.explore.params import ExploreParams, explore_params
+from worker.explore.params import ExploreParams
 from worker.explore.recovery import Trail, back_out, square_gap
 
 RES = 0.05

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.worker.explore.test_loop import _dead_end_world, _run
-from worker.explore.params import explore_params
+from worker.explore.flat_params import explore_params
 from worker.explore.stop_rules import (
     CollisionRule,
     DivergenceRule,
