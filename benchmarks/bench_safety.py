@@ -104,7 +104,7 @@ def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
     return moments, loop.result(stop), params
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", default="office_d_furnitures,Freiburg79_scan")
     ap.add_argument("--seeds", default="1-3", help="A-B or A")
@@ -126,49 +126,57 @@ def main() -> None:
         raise SystemExit(2)
     a, _, b = args.seeds.partition("-")
     try:
-        seeds = range(int(a), int(b or a) + 1)
+        args.seed_range = range(int(a), int(b or a) + 1)
     except ValueError:
         print(f"bench_safety: --seeds must be A or A-B, not {args.seeds!r}", file=sys.stderr)
         raise SystemExit(2) from None
+    return args
+
+
+def _judge(moments: _Moments, p: ExploreParams, seed: int, args, tally, counts) -> None:
+    """Each rule's verdict on each moment of a run (its scans, or noisy draws of its true
+    ones), added to `tally` (per rule: stops, false stops, missed obstacles, missed within
+    0.1 m) and `counts` (moments, with an obstacle really in the way, within 0.1 m)."""
     laser = SimParams().laser
     angles = laser.angles
+    draw_rng = np.random.default_rng([seed, 7])
+    c = p.costmap
+    for noisy, true in zip(moments.noisy, moments.true, strict=True):
+        d_true, _ = front_clearance(
+            true, angles, laser.range_max, c.footprint_half_m, c.footprint_padding
+        )
+        real = d_true < p.safety.safety_distance
+        close = d_true < 0.1
+        scans = [noisy]
+        if args.drive_noise_free:  # the laser read it noise-free: noisy versions
+            scans = [
+                add_range_noise(true, args.noise, laser.range_max, draw_rng)
+                for _ in range(args.draws)
+            ]
+        for scan in scans:
+            counts += (1, real, close)
+            for rule, median, k, n in RULES:
+                fired = _fires(scan, angles, laser.range_max, p, args.noise, median, k, n)
+                tally[rule] += (fired, fired and not real, real and not fired,
+                                close and not fired)  # fmt: skip
+
+
+def main() -> None:
+    args = _args()
     # per rule: stops, false stops, missed obstacles, missed within 0.1 m
     tally = {r[0]: np.zeros(4, dtype=int) for r in RULES}
-    n_moments = n_real = n_close = 0
+    counts = np.zeros(3, dtype=int)  # moments, with an obstacle in the way, within 0.1 m
     print(f"{time.strftime('%H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.1f}; "
           f"noise {args.noise} m, {args.slam}")  # fmt: skip
     for name in args.worlds.split(","):
-        for seed in seeds:
+        for seed in args.seed_range:
             moments, result, p = run(name, seed, args)
             print(f"{name} seed {seed}: {result.outcome} ({result.reason}) at "
                   f"{result.t[-1]:.0f} s, coverage {result.coverage:.3f}, "
                   f"{len(moments.noisy)} moments, "
                   f"{result.safety_triggers} safety stops")  # fmt: skip
-            draw_rng = np.random.default_rng([seed, 7])
-            for noisy, true in zip(moments.noisy, moments.true, strict=True):
-                d_true, _ = front_clearance(
-                    true,
-                    angles,
-                    laser.range_max,
-                    p.costmap.footprint_half_m,
-                    p.costmap.footprint_padding,
-                )
-                real = d_true < p.safety_distance
-                close = d_true < 0.1
-                scans = [noisy]
-                if args.drive_noise_free:  # the laser read it noise-free: noisy versions
-                    scans = [
-                        add_range_noise(true, args.noise, laser.range_max, draw_rng)
-                        for _ in range(args.draws)
-                    ]
-                for scan in scans:
-                    n_moments += 1
-                    n_real += real
-                    n_close += close
-                    for rule, median, k, n in RULES:
-                        fired = _fires(scan, angles, laser.range_max, p, args.noise, median, k, n)
-                        tally[rule] += (fired, fired and not real, real and not fired,
-                                        close and not fired)  # fmt: skip
+            _judge(moments, p, seed, args, tally, counts)
+    n_moments, n_real, n_close = (int(v) for v in counts)
     print(f"\n{n_moments} moments judged, {n_real} with an obstacle really in the way "
           f"({n_close} within 0.1 m)\n")  # fmt: skip
     print("| rule | stops | false stops | missed obstacles | missed within 0.1 m |")
