@@ -9,6 +9,7 @@ from typing import Any
 
 from worker.errors import InputError
 from worker.explore.params import ExploreParams
+from worker.params import from_dict
 
 GROUPS: tuple[str, ...] = tuple(
     f.name for f in fields(ExploreParams) if dataclasses.is_dataclass(f.default_factory)
@@ -16,8 +17,8 @@ GROUPS: tuple[str, ...] = tuple(
 
 
 def _group_of_flat_key() -> dict[str, str]:
-    hints = {f.name: f.default_factory for f in fields(ExploreParams) if f.name in GROUPS}
-    return {f.name: group for group, cls in hints.items() for f in fields(cls)}  # type: ignore[arg-type]
+    groups = {name: getattr(ExploreParams(), name) for name in GROUPS}
+    return {f.name: name for name, group in groups.items() for f in fields(group)}
 
 
 FLAT_KEYS: dict[str, str] = _group_of_flat_key()  # flat key of before the groups -> its group
@@ -47,6 +48,4 @@ def nest_flat(data: Any) -> Any:
 def explore_params(**values: Any) -> ExploreParams:
     """ExploreParams from keyword values, by group (`doors={"door_align": True}`) or flat as
     before the groups (`door_align=True`), strictly checked as a parameter file is."""
-    from worker.params import from_dict
-
     return from_dict(ExploreParams, nest_flat(values), "explore")

@@ -15,7 +15,9 @@ SnapshotMeasure = Literal["changed_share", "mse"]  # StopParams.snapshot_measure
 SNAPSHOT_MEASURES: tuple[str, ...] = get_args(SnapshotMeasure)
 
 
-def _check_positive(obj: Any, signed: tuple[str, ...] = (), may_be_zero: tuple[str, ...] = ()):
+def _check_positive(
+    obj: Any, signed: tuple[str, ...] = (), may_be_zero: tuple[str, ...] = ()
+) -> None:
     """InputError naming the numeric fields of `obj` below zero, or at zero unless allowed."""
     bad = []
     for f in fields(obj):

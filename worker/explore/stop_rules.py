@@ -281,7 +281,7 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    little (SnapshotRule's measures). With `holds` > 0 (explore.snapshot_holds, 1 by
+    little (SnapshotRule's measures). With `holds` > 0 (explore.stop.snapshot_holds, 1 by
     default) the rule does not fire while the robot is on its way to a frontier it chose
     since the earlier snapshot, at most `holds` times a run: a goal chosen in the last
     period has not been tried yet (a big building's far wing, 80 m away, changes less than
