@@ -30,7 +30,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from worker.explore.loop import ExploreParams, explore  # noqa: E402
+from worker.explore.flat_params import explore_params  # noqa: E402
+from worker.explore.loop import explore  # noqa: E402
 from worker.sim.params import SimParams  # noqa: E402
 from worker.sim.simulator import Simulator  # noqa: E402
 from worker.slam import registry  # noqa: E402
@@ -65,7 +66,7 @@ def run(name: str, slam_name: str, seed: int, time_limit: float, **explore_kw):
     oracle = slam_name == "oracle"
     slam = make_slam("odometry" if oracle else slam_name, sim_params.laser, SlamParams(), rng)
     t0 = time.perf_counter()
-    params = ExploreParams(time_limit=time_limit, **explore_kw)
+    params = explore_params(time_limit=time_limit, **explore_kw)
     result = explore(world, sim, slam, params, oracle=oracle)
     return world, result, time.perf_counter() - t0
 

@@ -33,6 +33,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from worker.explore.flat_params import explore_params  # noqa: E402
 from worker.explore.loop import Exploration, ExploreParams  # noqa: E402
 from worker.explore.safety import front_clearance, median_ranges  # noqa: E402
 from worker.param_io import load_params_file  # noqa: E402
@@ -79,10 +80,10 @@ class _Moments:
 
 
 def _fires(ranges, angles, range_max, p: ExploreParams, sigma, median, k, n) -> bool:
-    half, lateral = p.footprint_half_m, p.footprint_padding
+    half, lateral = p.costmap.footprint_half_m, p.costmap.footprint_padding
     d, _ = front_clearance(median_ranges(ranges, median), angles, range_max, half, lateral,
                            k * sigma, n)  # fmt: skip
-    return d < p.safety_distance
+    return d < p.safety.safety_distance
 
 
 def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
@@ -93,7 +94,7 @@ def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
     oracle = args.slam == "oracle"
     slam = make_slam("odometry" if oracle else args.slam, sim_params.laser, SlamParams(), rng)
     extra = load_params_file(args.params).get("explore", {}) if args.params else {}
-    params = ExploreParams(time_limit=args.time_limit, **extra)
+    params = explore_params(time_limit=args.time_limit, **extra)
     loop = Exploration(world, sim, slam, params, oracle, None)
     moments = _Moments(sim)
     moments.wrap(loop.nav.safety)
@@ -103,7 +104,7 @@ def run(name: str, seed: int, args) -> tuple[_Moments, object, ExploreParams]:
     return moments, loop.result(stop), params
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", default="office_d_furnitures,Freiburg79_scan")
     ap.add_argument("--seeds", default="1-3", help="A-B or A")
@@ -125,45 +126,57 @@ def main() -> None:
         raise SystemExit(2)
     a, _, b = args.seeds.partition("-")
     try:
-        seeds = range(int(a), int(b or a) + 1)
+        args.seed_range = range(int(a), int(b or a) + 1)
     except ValueError:
         print(f"bench_safety: --seeds must be A or A-B, not {args.seeds!r}", file=sys.stderr)
         raise SystemExit(2) from None
+    return args
+
+
+def _judge(moments: _Moments, p: ExploreParams, seed: int, args, tally, counts) -> None:
+    """Each rule's verdict on each moment of a run (its scans, or noisy draws of its true
+    ones), added to `tally` (per rule: stops, false stops, missed obstacles, missed within
+    0.1 m) and `counts` (moments, with an obstacle really in the way, within 0.1 m)."""
     laser = SimParams().laser
     angles = laser.angles
+    draw_rng = np.random.default_rng([seed, 7])
+    c = p.costmap
+    for noisy, true in zip(moments.noisy, moments.true, strict=True):
+        d_true, _ = front_clearance(
+            true, angles, laser.range_max, c.footprint_half_m, c.footprint_padding
+        )
+        real = d_true < p.safety.safety_distance
+        close = d_true < 0.1
+        scans = [noisy]
+        if args.drive_noise_free:  # the laser read it noise-free: noisy versions
+            scans = [
+                add_range_noise(true, args.noise, laser.range_max, draw_rng)
+                for _ in range(args.draws)
+            ]
+        for scan in scans:
+            counts += (1, real, close)
+            for rule, median, k, n in RULES:
+                fired = _fires(scan, angles, laser.range_max, p, args.noise, median, k, n)
+                tally[rule] += (fired, fired and not real, real and not fired,
+                                close and not fired)  # fmt: skip
+
+
+def main() -> None:
+    args = _args()
     # per rule: stops, false stops, missed obstacles, missed within 0.1 m
     tally = {r[0]: np.zeros(4, dtype=int) for r in RULES}
-    n_moments = n_real = n_close = 0
+    counts = np.zeros(3, dtype=int)  # moments, with an obstacle in the way, within 0.1 m
     print(f"{time.strftime('%H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.1f}; "
           f"noise {args.noise} m, {args.slam}")  # fmt: skip
     for name in args.worlds.split(","):
-        for seed in seeds:
+        for seed in args.seed_range:
             moments, result, p = run(name, seed, args)
             print(f"{name} seed {seed}: {result.outcome} ({result.reason}) at "
                   f"{result.t[-1]:.0f} s, coverage {result.coverage:.3f}, "
                   f"{len(moments.noisy)} moments, "
                   f"{result.safety_triggers} safety stops")  # fmt: skip
-            draw_rng = np.random.default_rng([seed, 7])
-            for noisy, true in zip(moments.noisy, moments.true, strict=True):
-                d_true, _ = front_clearance(
-                    true, angles, laser.range_max, p.footprint_half_m, p.footprint_padding
-                )
-                real = d_true < p.safety_distance
-                close = d_true < 0.1
-                scans = [noisy]
-                if args.drive_noise_free:  # the laser read it noise-free: noisy versions
-                    scans = [
-                        add_range_noise(true, args.noise, laser.range_max, draw_rng)
-                        for _ in range(args.draws)
-                    ]
-                for scan in scans:
-                    n_moments += 1
-                    n_real += real
-                    n_close += close
-                    for rule, median, k, n in RULES:
-                        fired = _fires(scan, angles, laser.range_max, p, args.noise, median, k, n)
-                        tally[rule] += (fired, fired and not real, real and not fired,
-                                        close and not fired)  # fmt: skip
+            _judge(moments, p, seed, args, tally, counts)
+    n_moments, n_real, n_close = (int(v) for v in counts)
     print(f"\n{n_moments} moments judged, {n_real} with an obstacle really in the way "
           f"({n_close} within 0.1 m)\n")  # fmt: skip
     print("| rule | stops | false stops | missed obstacles | missed within 0.1 m |")

@@ -94,7 +94,8 @@ def main() -> int:
     thresholds = [float(x) for x in a.thresholds.split(",")]
     base = RunParams(algorithm=a.slam)
     # the rule never fires during the recording: each run ends as it would without it
-    params = replace(base, explore=replace(base.explore, snapshot_period=1e12))
+    stop = replace(base.explore.stop, snapshot_period=1e12)
+    params = replace(base, explore=replace(base.explore, stop=stop))
     head = f"{'world':<22} {'seed':>4} {'end':>14} {'t_end':>6} {'cov':>6}"
     head += "".join(f" {'share<' + format(x, 'g'):>17}" for x in thresholds)
     print(head + f" {'thesis MSE<5':>17}")

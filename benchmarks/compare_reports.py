@@ -12,7 +12,10 @@ in the text before the comparison (so key order and number formatting still coun
 is compared member by member (its member timestamps are the wall clock too). With
 `--allow-new-params`, parameters that this checkout stores and the other does not (a setting
 that was a constant in the code before) are listed, not counted as a difference: the rest of
-summary.json must still match, key order included. Prints one line per run and a summary; exit
+summary.json must still match, key order included. With `--params-as-read`, the other
+checkout's stored params are read by this checkout's `RunParams.from_json` and written back
+before the comparison (a new stored layout of the same settings: issue 53's grouped `explore`).
+Prints one line per run and a summary; exit
 0 when every run's folder matches, 1 when one differs, 2 on bad input.
 """
 
@@ -58,14 +61,22 @@ def _prune(this: dict, that: dict, where: str, added: list[str]) -> dict:
     return out
 
 
-def same_summary(da: bytes, db: bytes, added: list[str]) -> bool:
-    """summary.json alike but for the parameters only `da` has (listed in `added`)."""
+def same_summary(da: bytes, db: bytes, added: list[str], as_read: bool = False) -> bool:
+    """summary.json alike but for the parameters only `da` has (listed in `added`); as_read:
+    `db`'s params as this checkout reads and stores them."""
     a, b = (json.loads(masked("summary.json", d)) for d in (da, db))
+    if as_read:
+        sys.path.insert(0, str(HERE))
+        from worker.run_params import RunParams
+
+        b["params"] = RunParams.from_json(b["params"]).to_json()
     a["params"] = _prune(a.get("params", {}), b.get("params", {}), "params.", added)
     return json.dumps(a) == json.dumps(b)
 
 
-def compare_folders(a: Path, b: Path, new_params: list[str] | None = None) -> list[str]:
+def compare_folders(
+    a: Path, b: Path, new_params: list[str] | None = None, as_read: bool = False
+) -> list[str]:
     """Differences between report folders a and b, one line each (empty when they match);
     with `new_params` (a list), summary.json parameters only `a` has are put there instead."""
     names_a = {p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file()}
@@ -79,8 +90,8 @@ def compare_folders(a: Path, b: Path, new_params: list[str] | None = None) -> li
             if za != zb:
                 bad = sorted(k for k in za.keys() | zb.keys() if za.get(k) != zb.get(k))
                 diffs.append(f"differs: {n} (members {', '.join(bad)})")
-        elif n.endswith("summary.json") and new_params is not None:
-            if not same_summary(da, db, new_params):
+        elif n.endswith("summary.json") and (new_params is not None or as_read):
+            if not same_summary(da, db, [] if new_params is None else new_params, as_read):
                 diffs.append(f"differs: {n} (beyond the parameters only this checkout stores)")
         elif masked(n, da) != masked(n, db):
             diffs.append(f"differs: {n} ({len(da)} against {len(db)} bytes)")
@@ -130,6 +141,10 @@ def main() -> int:
         "--allow-new-params", action="store_true",
         help="list parameters only this checkout stores instead of counting them as differences",
     )  # fmt: skip
+    ap.add_argument(
+        "--params-as-read", action="store_true",
+        help="read the other checkout's stored params with this checkout's RunParams first",
+    )  # fmt: skip
     args = ap.parse_args()
     other = args.against.resolve()
     for c in (HERE, other):
@@ -149,7 +164,7 @@ def main() -> int:
         t_this = one_run(HERE, w, s, seed, args.time_limit, root / "this" / key)
         t_that = one_run(other, w, s, seed, args.time_limit, root / "that" / key)
         new: list[str] | None = [] if args.allow_new_params else None
-        diffs = compare_folders(root / "this" / key, root / "that" / key, new)
+        diffs = compare_folders(root / "this" / key, root / "that" / key, new, args.params_as_read)
         n = sum(1 for p in (root / "this" / key).rglob("*") if p.is_file())
         state = "same" if not diffs else f"{len(diffs)} differences"
         print(f"[{i}/{len(cases)}] {key}: {n} files, {state} ({t_this:.0f} s / {t_that:.0f} s)")

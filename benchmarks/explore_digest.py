@@ -28,13 +28,15 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from worker.explore.loop import ExploreParams, ExploreProgress, explore  # noqa: E402
+from worker.explore.flat_params import explore_params  # noqa: E402
+from worker.explore.loop import ExploreProgress, explore  # noqa: E402
 from worker.sim.simulator import SimParams, Simulator  # noqa: E402
 from worker.slam.params import SlamParams  # noqa: E402
 from worker.slam.registry import make_slam  # noqa: E402
 from worker.world.loader import load_world  # noqa: E402
 
-# (world, slam, seed, time limit [s], other ExploreParams): furniture worlds exercise the
+# (world, slam, seed, time limit [s], other ExploreParams, flat keys as the digests saved
+# before the groups name them): furniture worlds exercise the
 # safety controller, a plain one goes to the end of its exploration; impatient settings give
 # goals up (back-outs, blacklists, their retry), a room behind a slit makes planning fail
 RUNS = (
@@ -88,7 +90,7 @@ def digest(name: str, slam_name: str, seed: int, time_limit: float, other: dict)
         steps.append((pr.t, str(pr.status), pr.goals_reached, pr.coverage, goal, plan))
 
     # progress every control period: the status of each step goes into the digest
-    params = ExploreParams(time_limit=time_limit, progress_period=0.1, **other)
+    params = explore_params(time_limit=time_limit, progress_period=0.1, **other)
     r = explore(world, sim, slam, params, oracle=oracle, on_progress=on_progress)
     h = hashlib.sha256()
     for a in (r.t, r.pose_gt, r.pose_est, r.T_world_map, r.final_map.prob):

@@ -230,7 +230,9 @@ def _map_score(world: World, params: RunParams, ex: ExplorationResult) -> MapSco
         int(math.floor((start[0] - world.origin[0]) / world.resolution)),
         int(math.floor((start[1] - world.origin[1]) / world.resolution)),
     )
-    reach = reachable_free(world.occ, world.resolution, start_cell, params.explore.footprint_half_m)
+    reach = reachable_free(
+        world.occ, world.resolution, start_cell, params.explore.costmap.footprint_half_m
+    )
     T0 = start_alignment(ex.pose_est[0], ex.pose_gt[0])
     p = MapScoreParams().for_laser_noise(params.sim.laser_noise_sigma)
     return score_map(world.occ, world.resolution, world.origin, reach, ex.final_map, T0, p)

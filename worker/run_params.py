@@ -14,6 +14,7 @@ from pydantic import AfterValidator, Field
 
 from worker.errors import InputError
 from worker.evaluate.params import AParams, BParams, SMParams
+from worker.explore.flat_params import nest_flat
 from worker.explore.params import ExploreParams
 from worker.param_io import adapter, from_dict, to_dict
 from worker.sim.params import FOOTPRINT_M, SimParams
@@ -42,8 +43,10 @@ class EvalParams:
 class RunParams:
     """Everything that determines a run besides the world and the seed; stored with each run.
 
-    The robot's size is set once, by `sim.footprint` [m]; the exploration's footprint_half_m
-    is derived from it here (it is stored, for the record, but cannot be set on its own).
+    The robot's size is set once, by `sim.footprint` [m]; the exploration's
+    costmap.footprint_half_m follows from it (it is stored, for the record, but cannot be set
+    on its own): `from_json` fills it in, and a RunParams built in Python with another robot
+    size is given `ExploreParams.with_footprint(sim.footprint)`.
     """
 
     algorithm: Algorithm = "rbpf"  # a name in worker.slam.registry (oracle = ground truth)
@@ -58,8 +61,9 @@ class RunParams:
     def __post_init__(self) -> None:
         if not self.sim.footprint > 0:  # SimParams refuses it too; RunParams relies on it
             raise InputError(f"sim.footprint must be > 0 [m], got {self.sim.footprint}")
-        if self.explore.footprint_half_m != 0.5 * self.sim.footprint:
-            object.__setattr__(self, "explore", self.explore.with_footprint(self.sim.footprint))
+        half = self.explore.costmap.footprint_half_m
+        if half != 0.5 * self.sim.footprint:
+            raise InputError(_footprint_message(half, self.sim.footprint))
         rt = self.realtime
         if rt is not None and rt.fixed_latency_s is None and self.algorithm not in MODELLED:
             raise InputError(
@@ -79,29 +83,50 @@ class RunParams:
     def from_json(cls, data: dict[str, Any]) -> RunParams:
         """Strictly validated: unknown keys, wrong types and bad values raise InputError.
 
-        A stored `explore.footprint_half_m` (every stored run has one) is accepted when it is
-        half of `sim.footprint`, the value it is derived from.
+        `explore` may be nested (`{"doors": {"door_align": true}}`, as `to_json` writes it) or
+        flat, as runs stored before the groups hold it (`{"door_align": true}`; see
+        `worker.explore.params.nest_flat`). A stored `explore.costmap.footprint_half_m`
+        (every stored run has one) is accepted when it is half of `sim.footprint`, the value
+        it is derived from.
         """
-        return from_dict(cls, _without_derived(data))
+        return from_dict(cls, _with_derived(_nested(data)))
 
 
-def _without_derived(data: Any) -> Any:
-    """`data` without `explore.footprint_half_m`, once checked against `sim.footprint`."""
+def _nested(data: Any) -> Any:
+    """`data` with a flat `explore` mapping (runs stored before the groups) nested."""
     explore = data.get("explore") if isinstance(data, dict) else None
-    if not (isinstance(explore, dict) and "footprint_half_m" in explore):
+    nested = nest_flat(explore)
+    return data if nested is explore else {**data, "explore": nested}
+
+
+def _footprint_message(half: Any, side: Any) -> str:
+    return (
+        f"explore.costmap.footprint_half_m ({half!r}) follows from sim.footprint ({side!r}): "
+        "set the robot's size with sim.footprint [m] alone"
+    )
+
+
+def _with_derived(data: Any) -> Any:
+    """`data` with `explore.costmap.footprint_half_m` set to half of `sim.footprint` (a stored
+    one, every stored run has one, is checked against it first). Left as is when the mapping
+    or the footprint is malformed: the validation names that key."""
+    if not isinstance(data, dict):
         return data
-    sim = data.get("sim")
-    side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else FOOTPRINT_M
-    half = explore["footprint_half_m"]
-    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (side, half))
-    if numbers and half != 0.5 * side or not numbers and isinstance(side, int | float):
-        raise InputError(
-            f"explore.footprint_half_m ({half!r}) follows from sim.footprint ({side!r}): "
-            "set the robot's size with sim.footprint [m] alone"
-        )
+    explore, sim = data.get("explore", {}), data.get("sim", {})
+    costmap = explore.get("costmap", {}) if isinstance(explore, dict) else None
+    side = sim.get("footprint", FOOTPRINT_M) if isinstance(sim, dict) else None
+    if not (isinstance(costmap, dict) and _is_number(side)):
+        return data
+    half = costmap.get("footprint_half_m", 0.5 * side)
+    if not _is_number(half) or half != 0.5 * side:
+        raise InputError(_footprint_message(half, side))
     data = copy.copy(data)
-    data["explore"] = {k: v for k, v in explore.items() if k != "footprint_half_m"}
+    data["explore"] = {**explore, "costmap": {**costmap, "footprint_half_m": 0.5 * side}}
     return data
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def run_params_schema() -> dict[str, Any]:
@@ -120,5 +145,6 @@ def run_params_schema() -> dict[str, Any]:
         return node
 
     out = inline(schema)
-    out["properties"]["explore"]["properties"].pop("footprint_half_m", None)
+    explore = out["properties"]["explore"]["properties"]
+    explore["costmap"]["properties"].pop("footprint_half_m", None)
     return out

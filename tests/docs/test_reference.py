@@ -121,7 +121,7 @@ def test_every_run_parameter_is_in_the_reference_with_its_default(generated):
         for part in key.split("."):
             value = getattr(value, part) if value is not None else None
         plain = isinstance(value, int | float | str) and not isinstance(value, bool)
-        if plain and key != "explore.footprint_half_m":  # derived: shown as such
+        if plain and key != "explore.costmap.footprint_half_m":  # derived: shown as such
             shown = html.escape(repr(value), quote=False)
             assert f"<code>{shown}</code>" in rows[key], (key, value, rows[key])
 

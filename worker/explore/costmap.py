@@ -8,7 +8,7 @@ import numpy as np
 
 from worker.explore import costmap_kernels as ck
 from worker.explore import local_kernels as lk
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, DwaParams
 
 _TILE = 8  # [cells] block size of the inflation updates
 
@@ -22,8 +22,11 @@ class GlobalCostmap:
     inscribed radius, as costmap_2d's inflation layer writes it).
     """
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: CostmapParams, keep_map_obstacles: bool = False):
+        """keep_map_obstacles: keep the SLAM map's obstacles apart (`map_lethal`), for the
+        door passage (DoorParams.door_align)."""
         self.params = params
+        self.keep_map_obstacles = keep_map_obstacles
         self.inscribed_radius = params.footprint_half_m
         self.circumscribed_radius = params.footprint_half_m * math.sqrt(2.0)
         self.resolution = 0.0
@@ -35,7 +38,7 @@ class GlobalCostmap:
         # obstacle layer: the laser's hits, kept until a beam passes through (raytrace_scan)
         self.obstacle = np.zeros((0, 0), dtype=np.bool_)
         # the SLAM map's obstacles alone (above occupied_thresh), without the obstacle
-        # layer's: kept only for the door passage (explore.door_align), else empty
+        # layer's: kept only for the door passage (explore.doors.door_align), else empty
         self.map_lethal = np.zeros((0, 0), dtype=np.bool_)
         self._kernel = np.zeros((1, 1), dtype=np.uint8)
         self._fresh = np.zeros((0, 0), dtype=np.bool_)  # new obstacle cells to stamp
@@ -110,7 +113,7 @@ class GlobalCostmap:
             y0, y1, x0, x1 = _union((y0, y1, x0, x1), marked)
         if y1 <= y0 or x1 <= x0:
             return (0, 0, 0, 0)
-        if self.params.door_align:
+        if self.keep_map_obstacles:
             self._classify_map(prob, off_y, off_x, y0, y1, x0, x1)
         t = _TILE
         tiles, fresh_tiles = self._tile_flags()
@@ -239,7 +242,8 @@ class LocalCostmap:
     `inner` bool (see local_kernels.local_layers) and `cost` uint8.
     """
 
-    def __init__(self, params: ExploreParams, resolution: float):
+    def __init__(self, params: CostmapParams, dwa: DwaParams, resolution: float):
+        """dwa: the local planner's limits, which set how far its trajectories reach."""
         self.params = params
         self.resolution = float(resolution)
         self.n = int(math.ceil(params.local_window_m / self.resolution))
@@ -251,7 +255,7 @@ class LocalCostmap:
         self._inner = lk.disc_half_widths(half)
         # farthest a trajectory takes the footprint from the robot: the map's obstacles
         # matter for the collision test only that near
-        reach_m = params.max_vel_x * params.sim_time + params.heading_lookahead + 2 * half * res_m
+        reach_m = dwa.max_vel_x * dwa.sim_time + dwa.heading_lookahead + 2 * half * res_m
         self._reach = int(math.ceil(reach_m / self.resolution)) + 2
         # the obstacle marks, in the order added: (K, 2) points [m], the time each was seen
         # and the number of the scan (add_points call) that made it

@@ -10,7 +10,7 @@ import numpy as np
 from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, DwaParams
 
 
 def drive(x: float, y: float, th: float, v: float, w: float, duration: float, n: int):
@@ -37,8 +37,10 @@ class Command:
 class DwaPlanner:
     """Scores forward-simulated (v, w) samples against the local costmap and the global path."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: DwaParams, costmap: CostmapParams):
+        """costmap: the footprint's settings (footprint_half_m, footprint_padding)."""
         self.params = params
+        self.half_m = costmap.footprint_half_m  # [m] the bare footprint's half side
         p = params
         prm = np.zeros(dk.N_PARAMS)
         prm[dk.P_DT] = 1.0 / p.controller_frequency
@@ -55,10 +57,10 @@ class DwaPlanner:
         prm[dk.P_GDIST] = p.gdist_scale
         prm[dk.P_OCCDIST] = p.occdist_scale
         prm[dk.P_LOOKAHEAD] = p.heading_lookahead
-        prm[dk.P_HALF] = p.footprint_half_m + p.footprint_padding
-        prm[dk.P_CIRC] = p.footprint_half_m * math.sqrt(2.0)
+        prm[dk.P_HALF] = costmap.footprint_half_m + costmap.footprint_padding
+        prm[dk.P_CIRC] = costmap.footprint_half_m * math.sqrt(2.0)
         prm[dk.P_ESCAPE_VX] = p.escape_vel
-        prm[dk.P_HALF_RAW] = p.footprint_half_m
+        prm[dk.P_HALF_RAW] = costmap.footprint_half_m
         self.prm = prm
         self._prm_unpadded = prm.copy()
         self.path_xy: np.ndarray | None = None
@@ -108,13 +110,42 @@ class DwaPlanner:
         # distances counted in cells, so distances in metres and the cost weight x resolution
         self.prm[dk.P_OCCDIST] = p.occdist_scale * local.resolution
         self._prm_unpadded[:] = self.prm
-        self._prm_unpadded[dk.P_HALF] = p.footprint_half_m
+        self._prm_unpadded[dk.P_HALF] = self.half_m
+        path_dist, goal_dist = self._distances(pose, local, seeds, goal_cell)
+        goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        vx, vth, kind = self._best(pose, v0, w0, local, goal_gap, path_dist, goal_dist, no_forward)
+        self._track_oscillation(pose, kind, vth)
+        if kind < 0:
+            return Command(0.0, 0.0, False, "none")
+        return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
+
+    def command_or_scans_only(
+        self, pose: np.ndarray, v0: float, w0: float, local: LocalCostmap, costmap
+    ) -> Command:
+        """`command` towards the plan's end (no heading asked); with nothing legal, its
+        command on the scans alone (`local` rebuilt without the map from `costmap`, the
+        GlobalCostmap)."""
+        # Frontier goals carry no heading requirement: with a 270 degree laser the robot sees
+        # the frontier on arrival, and turning in place in a doorway is how robots got stuck.
+        cmd = self.command(pose, v0, w0, local, None)
+        if not cmd.legal:
+            # the map's obstacles may sit a cell nearer than the real ones (rounded hits):
+            # with nothing legal, trust the scans alone, as the thesis's local costmap did
+            local.build(pose[0], pose[1], costmap, pose[2], use_map=False)
+            cmd = self.command(pose, v0, w0, local, None)
+            if cmd.kind in ("escape", "rotate"):
+                # not blind: backing up or turning sweeps what the laser does not see
+                cmd = Command(0.0, 0.0, False, "none")
+        return cmd
+
+    def _distances(self, pose, local: LocalCostmap, seeds, goal_cell):
+        """The distance maps `(n, n)` [m] to the path (`seeds`) and to the local goal, filled
+        only where a trajectory or the heading look-ahead can reach."""
         n = local.cost.shape[0]
         if self._dist.shape[1:] != local.cost.shape:
             self._dist = np.empty((2, n, n), dtype=np.float32)
             self._queue = np.empty(n * n, dtype=np.int64)
         path_dist, goal_dist = self._dist[0], self._dist[1]
-        # the distances are read only where a trajectory or the heading look-ahead can reach
         cy = int(math.floor((pose[1] - local.origin[1]) / local.resolution))
         cx = int(math.floor((pose[0] - local.origin[0]) / local.resolution))
         r = int(math.ceil(self._reach / local.resolution)) + 2
@@ -122,7 +153,12 @@ class DwaPlanner:
         dk.wavefront_into(
             goal_cell, local.cost, local.resolution, goal_dist, self._queue, cy, cx, r
         )
-        goal_gap = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        return path_dist, goal_dist
+
+    def _best(self, pose, v0, w0, local: LocalCostmap, goal_gap, path_dist, goal_dist, no_forward):
+        """(vx, vth, kind) of the best trajectory: with the padded footprint, then the exact
+        one, then with the oscillation flags cleared; kind < 0: nothing legal."""
+        p = self.params
         passes = [(self.prm, False), (self._prm_unpadded, True)]
         if self._stuck_left or self._stuck_right:
             passes.append((None, True))  # nothing legal: the oscillation flags give way too
@@ -141,10 +177,7 @@ class DwaPlanner:
             )  # fmt: skip
             if kind >= 0:
                 break
-        self._track_oscillation(pose, kind, vth)
-        if kind < 0:
-            return Command(0.0, 0.0, False, "none")
-        return Command(float(vx), float(vth), True, ("forward", "rotate", "escape")[kind])
+        return vx, vth, kind
 
     def _track_oscillation(self, pose, kind: int, vth: float) -> None:
         """TrajectoryPlanner's oscillation flags: an in-place turn one way after one the other

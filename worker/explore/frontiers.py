@@ -11,7 +11,7 @@ import numpy as np
 from worker.explore import frontier_kernels as fk
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.costmap_kernels import INSCRIBED
-from worker.explore.params import ExploreParams
+from worker.explore.params import FrontierParams, PlannerParams
 from worker.explore.planner import (
     ClosedGaps,
     DijkstraSearch,
@@ -45,20 +45,21 @@ class FrontierSearch:
 
     def __init__(
         self,
-        params: ExploreParams,
+        params: FrontierParams,
+        planner: PlannerParams,
         closed: ClosedGaps | None = None,
         search: DijkstraSearch | None = None,
     ):
-        """search: the Dijkstra buffers of the goal search (see GlobalPlanner); new if None."""
+        """planner: the goal search's cost model and margins; search: the Dijkstra buffers of
+        the goal search (see GlobalPlanner); new if None."""
         self.params = params
+        self.planner = planner
         self.closed = closed if closed is not None else ClosedGaps()  # the narrow search's
         # the look-through pass's goal search: goals up to look_through_radius from the
         # frontier, one such radius of travel past the first candidate
-        look = dataclasses.replace(
+        self._look_params = dataclasses.replace(
             params, goal_radius=max(params.look_through_radius, 1e-9), goal_search_extra=1.0
         )
-        object.__setattr__(look, "footprint_half_m", params.footprint_half_m)
-        self._look_params = look
         self.frontier = np.zeros((0, 0), dtype=np.bool_)
         self.n_frontier_cells = 0
         self.search = search if search is not None else DijkstraSearch()
@@ -183,7 +184,7 @@ class FrontierSearch:
         squeeze: the last pass, after the look-through pass (which asked with the wider
         margins first, on the same map): goals the search reaches with squeeze_margin (down
         to the inscribed radius), through a door the robot may not get back out of
-        (`ExploreParams.squeeze_margin`); None when squeeze_margin is narrow_margin.
+        (`PlannerParams.squeeze_margin`); None when squeeze_margin is narrow_margin.
         """
         sx, sy = costmap.world_to_cell(robot_xy[0], robot_xy[1])
         if self.n_frontier_cells == 0 or not costmap.in_bounds(sx, sy):
@@ -249,8 +250,9 @@ class FrontierSearch:
         navigator asks after the others found nothing on the same map, nothing off). Gaps
         closed after a failure (`ClosedGaps`) stay closed to every attempt. look_through:
         goals within look_through_radius of the frontier (`choose`)."""
-        p = self._look_params if look_through else self.params
-        args = (costmap, start, cells, labels, cell_valid, avoid)
+        f = self._look_params if look_through else self.params
+        p = self.planner
+        args = (costmap, start, cells, labels, cell_valid, avoid, f)
         with self.closed.applied(costmap):  # closed gaps: closed to every attempt
             if squeeze:
                 if p.narrow_margin <= p.squeeze_margin:
@@ -264,16 +266,17 @@ class FrontierSearch:
                 found = self._search_with(*args, narrow_params(p), None)
         return found, False
 
-    def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, p, escape_m):
-        """One goal search with settings `p` and escape radius escape_m [m] (None: p's)."""
+    def _search_with(self, costmap, start, cells, labels, cell_valid, avoid, f, p, escape_m):
+        """One goal search with frontier settings `f`, planner settings `p` and escape radius
+        escape_m [m] (None: p's)."""
         res = costmap.resolution
-        offsets = cells_in_radius(p.goal_radius, res)
+        offsets = cells_in_radius(f.goal_radius, res)
         marked = fk.stamp_targets(
             cells, labels, cell_valid, offsets, costmap.inflated, costmap.unknown,
-            self._target, self._owner, planner_blocked_cost(p),
+            self._target, self._owner, planner_blocked_cost(p, costmap.params),
         )  # fmt: skip
         if avoid:
-            disc = cells_in_radius(p.blacklist_radius, res)
+            disc = cells_in_radius(f.blacklist_radius, res)
             h, w = costmap.shape
             for a in avoid:
                 ax, ay = costmap.world_to_cell(a[0], a[1])
@@ -283,7 +286,7 @@ class FrontierSearch:
         try:
             # Look a little past the first candidate (goal_search_extra goal radii of free
             # travel) so that the goal can be the lowest-cost cell of that cluster.
-            extra = p.neutral_cost * p.goal_search_extra * p.goal_radius / res
+            extra = p.neutral_cost * f.goal_search_extra * f.goal_radius / res
             return self.search.run(
                 costmap, start, self._target, p, extra, allow_unknown=False, escape_m=escape_m
             )

@@ -136,14 +136,15 @@ class Exploration:
             int(math.floor((start[0] - world.origin[0]) / world.resolution)),
             int(math.floor((start[1] - world.origin[1]) / world.resolution)),
         )
-        self.reach = reachable_free(world.occ, world.resolution, start_cell, p.footprint_half_m)
+        half = p.costmap.footprint_half_m
+        self.reach = reachable_free(world.occ, world.resolution, start_cell, half)
         # the part behind gaps the robot can drive through: what `incomplete` is judged on
         self.passable = reachable_free(
-            world.occ, world.resolution, start_cell, p.footprint_half_m, p.passable_clearance_m
+            world.occ, world.resolution, start_cell, half, p.passable_clearance_m
         )
         self.rec = _Recorder()
         self.n_collisions0 = len(sim.collisions)
-        self.rules = default_rules(p, start, self.n_collisions0)
+        self.rules = default_rules(p.stop, p.time_limit, start, self.n_collisions0)
         self.prev_odom: np.ndarray | None = None
         self.last_map_t = -math.inf  # [s] the last costmap update
         # an algorithm that can send its map with the update it is read after (an external
@@ -200,7 +201,7 @@ class Exploration:
     def _map_due(self, t: float) -> bool:
         """Whether the costmap takes the SLAM map at `t` if the SLAM updated it (at
         global_costmap_rate)."""
-        return t - self.last_map_t >= 1.0 / self.p.global_costmap_rate - 1e-9
+        return t - self.last_map_t >= 1.0 / self.p.costmap.global_costmap_rate - 1e-9
 
     def _feed_map(self, t: float, updated: bool) -> tuple[float, float]:
         """Give the navigator the SLAM map at global_costmap_rate (whole every
@@ -209,7 +210,7 @@ class Exploration:
         nav_s = cpu_s = 0.0
         if updated and self._map_due(t):
             grid = self.slam.occupancy()
-            full = t - self.last_full_t >= p.full_map_check_period
+            full = t - self.last_full_t >= p.costmap.full_map_check_period
             c0, u0 = time.perf_counter(), time.thread_time()
             self.nav.update_map(grid.prob, grid.resolution, grid.origin, full)
             nav_s += time.perf_counter() - c0

@@ -10,6 +10,7 @@ from enum import Enum
 import numpy as np
 
 from worker.explore.frontiers import FrontierGoal
+from worker.explore.planner import remaining_length
 
 
 class NavState(Enum):
@@ -100,6 +101,23 @@ class Pursuit:
     plan_fail_since: float | None = None  # [s] the planner failing since (PLANNING)
     ctrl_fail_since: float | None = None  # [s] no legal command since (RECOVERING)
 
+    def no_progress(self, t: float, pose: np.ndarray, step: float, timeout: float) -> bool:
+        """explore_lite's progress_timeout: the goal got no `step` [m] nearer for `timeout`
+        [s], neither in a straight line (explore_lite's measure) nor along the plan. The plan
+        may lead away from the goal first, round a block of rooms and through doors taken
+        slowly; a robot driving along it makes progress (office_d_furnitures, oracle, 0.1 m
+        noise, seed 7: a room's door given up at 950 s after 35 s of steady driving on a
+        detour, the room never entered)."""
+        gap = float(np.hypot(*(self.goal.goal_xy - pose[:2])))
+        route = remaining_length(self.path, pose[:2])
+        if gap < self.best_gap - step:
+            self.best_gap = gap
+            self.progress_t = t
+        if route < self.best_route - step:
+            self.best_route = route
+            self.progress_t = t
+        return t - self.progress_t >= timeout
+
 
 @dataclass(frozen=True)
 class Retrace:
@@ -183,3 +201,18 @@ class NavStats:
     plan_failures: int = 0
     consecutive_failures: int = 0  # given-up goals since the last success
     transitions: Counter[tuple[NavState, NavState]] = field(default_factory=Counter)
+
+
+def grown_box(box, pose: np.ndarray, ranges, angles: np.ndarray):
+    """`box (x0, y0, x1, y1)` [m] (None: none yet) grown to hold the robot at `pose` and its
+    beams' end points."""
+    a = angles + pose[2]
+    xs = pose[0] + ranges * np.cos(a)
+    ys = pose[1] + ranges * np.sin(a)
+    new = (
+        min(xs.min(), pose[0]), min(ys.min(), pose[1]),
+        max(xs.max(), pose[0]), max(ys.max(), pose[1]),
+    )  # fmt: skip
+    if box is None:
+        return new
+    return (min(box[0], new[0]), min(box[1], new[1]), max(box[2], new[2]), max(box[3], new[3]))

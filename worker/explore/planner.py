@@ -10,7 +10,7 @@ import numpy as np
 
 from worker.explore import planner_kernels as pk
 from worker.explore.costmap import GlobalCostmap
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, PlannerParams
 
 
 class DijkstraSearch:
@@ -29,7 +29,7 @@ class DijkstraSearch:
         costmap: GlobalCostmap,
         start_cell: tuple[int, int],
         target: np.ndarray,
-        params: ExploreParams,
+        params: PlannerParams,
         stop_extra: float = 0.0,
         allow_unknown: bool | None = None,
         goal_cell: tuple[int, int] | None = None,
@@ -64,7 +64,7 @@ class DijkstraSearch:
             self.run_id,
             -1 if goal_cell is None else goal_cell[1],
             -1 if goal_cell is None else goal_cell[0],
-            planner_blocked_cost(params),
+            planner_blocked_cost(params, costmap.params),
             int(round(escape / costmap.resolution)),
             int(round(min(escape, params.escape_radius) / costmap.resolution)),
         )
@@ -74,7 +74,7 @@ class DijkstraSearch:
         costmap: GlobalCostmap,
         start_cell: tuple[int, int],
         goal_cell: tuple[int, int],
-        params: ExploreParams,
+        params: PlannerParams,
         escape_m: float | None = None,
     ) -> bool:
         """True when `run` from start_cell could not reach goal_cell (a goal walled into a
@@ -90,7 +90,7 @@ class DijkstraSearch:
         return bool(
             pk.sealed_off(
                 costmap.inflated, costmap.unknown, goal_cell[1], goal_cell[0], start_cell[1],
-                start_cell[0], params.allow_unknown, planner_blocked_cost(params),
+                start_cell[0], params.allow_unknown, planner_blocked_cost(params, costmap.params),
                 int(round(escape / costmap.resolution)), budget, self.stamp,
                 self.run_id, self.queue,
             )
@@ -110,7 +110,7 @@ class GlobalPlanner:
 
     def __init__(
         self,
-        params: ExploreParams,
+        params: PlannerParams,
         closed: ClosedGaps | None = None,
         search: DijkstraSearch | None = None,
     ):
@@ -185,7 +185,7 @@ class ClosedGaps:
     def clear(self) -> None:
         self.points = np.zeros((0, 2))
 
-    def close(self, costmap, params: ExploreParams, path_xy, robot_xy, radius: float) -> int:
+    def close(self, costmap, params: PlannerParams, path_xy, robot_xy, radius: float) -> int:
         """Close the gap of `path_xy (K, 2)` within `radius` [m] of the robot: its cells that
         only the narrow fallback or an escape lets a plan through (cost at or above the
         margin's blocked cost, below INSCRIBED), and the gap's other such cells within the
@@ -201,12 +201,13 @@ class ClosedGaps:
         ix, iy = self._cells(costmap, pts[near])
         if ix.size == 0:
             return 0
-        blocked = planner_blocked_cost(params)
+        blocked = planner_blocked_cost(params, costmap.params)
         c = costmap.inflated[iy, ix]
         narrow = (c >= blocked) & (c < INSCRIBED)
         if not narrow.any():
             return 0
-        disc = cells_in_radius(params.footprint_half_m + params.planner_margin, costmap.resolution)
+        half = costmap.params.footprint_half_m
+        disc = cells_in_radius(half + params.planner_margin, costmap.resolution)
         h, w = costmap.shape
         gy = (iy[narrow][:, None] + disc[:, 0]).ravel()
         gx = (ix[narrow][:, None] + disc[:, 1]).ravel()
@@ -250,25 +251,25 @@ class ClosedGaps:
             costmap.inflated[iy, ix] = saved
 
 
-def narrow_params(params: ExploreParams, squeeze: bool = False) -> ExploreParams:
+def narrow_params(params: PlannerParams, squeeze: bool = False) -> PlannerParams:
     """The settings with planner_margin lowered to narrow_margin (the fallback that lets the
     plans through doors whose clearance is under the margin), or with `squeeze` to
     squeeze_margin (the last pass's: down to the inscribed radius)."""
     margin = params.squeeze_margin if squeeze else params.narrow_margin
-    out = dataclasses.replace(params, planner_margin=margin)
-    object.__setattr__(out, "footprint_half_m", params.footprint_half_m)
-    return out
+    return dataclasses.replace(params, planner_margin=margin)
 
 
-def planner_blocked_cost(params: ExploreParams) -> int:
+def planner_blocked_cost(params: PlannerParams, costmap: CostmapParams) -> int:
     """Costmap value from which the planners treat a cell as blocked: the inflation cost at
-    the inscribed radius plus `planner_margin` (INSCRIBED when the margin is 0)."""
+    the inscribed radius (the footprint's half side) plus `planner_margin` (INSCRIBED when
+    the margin is 0)."""
     from worker.explore.costmap_kernels import INSCRIBED, inflation_cost
 
     if params.planner_margin <= 0:
         return INSCRIBED
-    d = params.footprint_half_m + params.planner_margin
-    return inflation_cost(d, params.footprint_half_m, params.cost_scaling_factor, 1e9) + 1
+    half = costmap.footprint_half_m
+    d = half + params.planner_margin
+    return inflation_cost(d, half, costmap.cost_scaling_factor, 1e9) + 1
 
 
 def path_length(path_xy: np.ndarray) -> float:

@@ -10,7 +10,7 @@ from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap
 from worker.explore.dwa import DwaPlanner, drive, wrap_angle
-from worker.explore.params import ExploreParams
+from worker.explore.params import DwaParams, RecoveryParams
 
 _UNWEDGE_STEPS = 20  # Euler steps of an unwedging motion's end pose
 
@@ -19,7 +19,7 @@ class Trail:
     """The robot's recent positions `(2,)` [m] (map frame), trail_spacing apart, newest last:
     the way it came, which was free."""
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: RecoveryParams):
         self.params = params
         self.points: list[np.ndarray] = []
         # per point: the robot's heading there [rad], and whether the local planner drove
@@ -62,7 +62,7 @@ class Trail:
         # cell nearer after the robot drove past it 2 cm off made traps in open rooms
         # (Freiburg52_scan_furnitures). The local costmap's first test, a centre within the
         # padded half side of an obstacle, is its own (`footprint_collides`' inner layer)
-        half = p.footprint_half_m
+        half = L.params.footprint_half_m
         poses = np.column_stack((pts[k0:], self.headings[k0:]))
         hit = ck.first_colliding_pose(
             L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
@@ -71,7 +71,7 @@ class Trail:
         if hit < 0:
             return None
         first = k0 + int(hit)
-        return _newest_from(pts, pts[first], p.footprint_half_m + reach, end=first)
+        return _newest_from(pts, pts[first], half + reach, end=first)
 
     def back_target(self, xy: np.ndarray | None = None) -> np.ndarray | None:
         """The point to back out to: walking back along the trail from its newest point, the
@@ -142,7 +142,7 @@ def _newest_from(pts: np.ndarray, here, dist: float, end: int | None = None) -> 
     return pts[int(far[-1]) if far.size else 0].copy()
 
 
-def _legal(p: ExploreParams, L: LocalCostmap, pose, v: float, w: float, duration: float, half):
+def _legal(p: DwaParams, L: LocalCostmap, pose, v: float, w: float, duration: float, half):
     """Driving (v, w) for `duration` [s] from pose keeps a footprint of half side `half` clear."""
     return dk.motion_legal(
         float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration, L.lethal, L.near,
@@ -151,25 +151,26 @@ def _legal(p: ExploreParams, L: LocalCostmap, pose, v: float, w: float, duration
 
 
 def back_out(
-    p: ExploreParams, L: LocalCostmap, pose: np.ndarray, d: np.ndarray
+    r: RecoveryParams, p: DwaParams, L: LocalCostmap, pose: np.ndarray, d: np.ndarray
 ) -> tuple[float, float] | None:
     """Reverse along `d (2,)` [m] (towards the target, map frame), checked against the local
-    costmap: turning the rear towards it, and reversing once it about points there; None when
-    no such motion is legal."""
+    costmap (with the bare footprint of its settings): turning the rear towards it, and
+    reversing once it about points there; None when no such motion is legal. `p`: the local
+    planner's limits."""
     # backwards: the robot's rear points at the target
     err = wrap_angle(math.atan2(d[1], d[0]) + math.pi - pose[2])
-    w = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * err))
-    v = p.escape_vel * p.back_out_speed_ratio if abs(err) < p.retrace_max_heading_error else 0.0
+    w = max(-p.max_vel_theta, min(p.max_vel_theta, r.back_out_gain * err))
+    v = p.escape_vel * r.back_out_speed_ratio if abs(err) < r.retrace_max_heading_error else 0.0
     for vv, ww in ((v, w), (0.0, w), (v, 0.0)):
         if (vv, ww) != (0.0, 0.0) and _legal(
-            p, L, pose, vv, ww, p.back_out_check_time, p.footprint_half_m
+            p, L, pose, vv, ww, r.back_out_check_time, L.params.footprint_half_m
         ):
             return vv, ww
     return None
 
 
 def unwedge(
-    p: ExploreParams, L: LocalCostmap, costmap: GlobalCostmap, pose: np.ndarray
+    r: RecoveryParams, p: DwaParams, L: LocalCostmap, costmap: GlobalCostmap, pose: np.ndarray
 ) -> tuple[float, float] | None:
     """Out of contact: the footprint overlaps an obstacle cell (the scan's or the map's) at
     the robot's own pose, so every motion collides, backing away included (in clutter the
@@ -179,7 +180,7 @@ def unwedge(
     ties (sliding along an obstacle at its side is a way out too); None when it touches
     nothing, or every such motion would take it nearer to them."""
     x, y, th = (float(v) for v in pose)
-    half = p.footprint_half_m
+    half = L.params.footprint_half_m
     L.build(x, y, costmap, th)
     if not ck.footprint_collides(
         L.lethal, L.near, L.inner, float(L.origin[0]), float(L.origin[1]), L.resolution,
@@ -194,7 +195,7 @@ def unwedge(
     cx = L.origin[0] + (ix + 0.5) * L.resolution
     cy = L.origin[1] + (iy + 0.5) * L.resolution
     best, best_gap = None, square_gap(cx, cy, x, y, th, half) - 1e-6
-    duration = p.unwedge_time
+    duration = r.unwedge_time
     for v in (p.escape_vel, 0.0, p.min_vel_x):
         for w in (-p.min_in_place_vel_theta, 0.0, p.min_in_place_vel_theta):
             if (v, w) == (0.0, 0.0) or not _legal(p, L, (x, y, th), v, w, duration, half):
@@ -207,7 +208,7 @@ def unwedge(
 
 
 def safe_override(
-    p: ExploreParams,
+    backoff_time: float,
     L: LocalCostmap,
     dwa: DwaPlanner,
     pose: np.ndarray,
@@ -220,9 +221,9 @@ def safe_override(
     manoeuvre `vw` against the local costmap, which holds the map's obstacles; if it would
     hit something, only turn; if that too, let the local planner turn or back off its way;
     if it cannot either, its own (collision-checked) `planned` command, as the only way
-    out of the corner."""
+    out of the corner. backoff_time [s]: SafetyParams.safety_backoff_time."""
     for v, w in (vw, (0.0, vw[1])):
-        if _legal(p, L, pose, v, w, p.safety_backoff_time, p.footprint_half_m):
+        if _legal(dwa.params, L, pose, v, w, backoff_time, L.params.footprint_half_m):
             return v, w
     if dwa.path_xy is not None:
         cmd = dwa.command(pose, v0, w0, L, None, no_forward=True)

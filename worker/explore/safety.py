@@ -7,7 +7,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, DwaParams, SafetyParams
 
 
 def median_ranges(ranges_m: np.ndarray, beams: int) -> np.ndarray:
@@ -70,10 +70,20 @@ class SafetyController:
     """Overrides the planner for a short manoeuvre when an obstacle is too close in front."""
 
     def __init__(
-        self, params: ExploreParams, angles: np.ndarray, range_max: float, median: int = 1
+        self,
+        params: SafetyParams,
+        costmap: CostmapParams,
+        dwa: DwaParams,
+        angles: np.ndarray,
+        range_max: float,
+        median: int = 1,
     ):
-        """median: each beam read as the median of this many neighbours (1: raw)."""
+        """costmap: the footprint's settings; dwa: its escape_vel is the back-off speed;
+        median: each beam read as the median of this many neighbours (1: raw)."""
         self.params = params
+        self.half_m = costmap.footprint_half_m  # [m]
+        self.padding_m = costmap.footprint_padding  # [m]
+        self.escape_vel = dwa.escape_vel  # [m/s]
         self.angles = angles
         self.range_max = range_max
         self.median = int(median)
@@ -93,12 +103,12 @@ class SafetyController:
         """
         p = self.params
         if t < self._until:
-            return (p.escape_vel, self._turn)
+            return (self.escape_vel, self._turn)
         if v_cmd <= 0.0:
             return None
         ranges_m = median_ranges(ranges_m, self.median)
         d, side = front_clearance(
-            ranges_m, self.angles, self.range_max, p.footprint_half_m, p.footprint_padding
+            ranges_m, self.angles, self.range_max, self.half_m, self.padding_m
         )
         if d >= p.safety_distance:
             return None
@@ -106,4 +116,4 @@ class SafetyController:
         self._until = t + p.safety_backoff_time
         # Obstacle on the left (side +1): turn clockwise so that the nose points away from it.
         self._turn = -side * p.safety_turn_vel
-        return (p.escape_vel, self._turn)
+        return (self.escape_vel, self._turn)

@@ -10,7 +10,7 @@ from worker.evaluate.se2_scalar import wrap_fold as wrap_angle
 from worker.explore import dwa_kernels as dk
 from worker.explore.costmap import LocalCostmap
 from worker.explore.dwa import drive
-from worker.explore.params import ExploreParams
+from worker.explore.params import CostmapParams, DwaParams, RecoveryParams
 
 # added to the end cost of a motion against the way the robot is already moving: more than
 # any costmap value, so it only decides when nothing else is legal
@@ -28,8 +28,12 @@ class HeadingShim:
     turn there, it moves a little (backwards first) to where it has more room, until it can.
     """
 
-    def __init__(self, params: ExploreParams):
+    def __init__(self, params: DwaParams, costmap: CostmapParams, recovery: RecoveryParams):
+        """params: the local planner's (shim_* and the limits); costmap: the footprint's;
+        recovery: the back_out_* motions that get room to turn."""
         self.params = params
+        self.costmap_params = costmap
+        self.recovery = recovery
         self.active = False
         self._dir = 0.0  # sign of the speed while moving to get room to turn; 0: not doing so
         self._turn = 0.0  # sign of the turn under way; 0: none
@@ -80,12 +84,12 @@ class HeadingShim:
         """Boxed in (no turn is legal): the short legal motion, backwards or forwards, that
         leads where the costmap is lowest (farthest from obstacles) within back_out_lookahead,
         backwards on ties (the robot came from there); None when nothing is legal."""
-        p = self.params
+        p, r = self.params, self.recovery
         # backing up, the rear's heading th + pi turns with w: w > 0 swings it left (ccw)
         rear_err = wrap_angle(err + math.pi)
-        w_back = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * rear_err))
-        w_fwd = max(-p.max_vel_theta, min(p.max_vel_theta, p.back_out_gain * err))
-        v_back, v_fwd = p.back_out_speed_ratio * p.escape_vel, p.min_vel_x
+        w_back = max(-p.max_vel_theta, min(p.max_vel_theta, r.back_out_gain * rear_err))
+        w_fwd = max(-p.max_vel_theta, min(p.max_vel_theta, r.back_out_gain * err))
+        v_back, v_fwd = r.back_out_speed_ratio * p.escape_vel, p.min_vel_x
         best = None
         # the exact footprint first; then one half a cell smaller: the cell test is that much
         # conservative, and a robot whose edge touches a map cell must still get away from it
@@ -93,7 +97,7 @@ class HeadingShim:
             for v, w in (
                 (v_back, w_back), (v_back, 0.0), (v_back, -w_back), (v_fwd, w_fwd), (v_fwd, 0.0)
             ):  # fmt: skip
-                horizon = p.back_out_check_time
+                horizon = r.back_out_check_time
                 if not self._legal(pose, v, w, local, horizon, padded=False, shrink=shrink):
                     continue
                 # once going one way, keep going that way while it is legal (no shuffling)
@@ -119,11 +123,11 @@ class HeadingShim:
         Where the first step ends alone is myopic: between table legs a forward turn gains a
         few cells of room in half a second and ends in a slot the robot can neither turn in
         nor leave, while backing out the way it came gains more a second later."""
-        p = self.params
-        step = p.back_out_check_time
+        r = self.recovery
+        step = r.back_out_check_time
         best = _cost_after(pose, v, w, step, local)
         k = 2
-        while k * step <= p.back_out_lookahead + 1e-9 and best > 0:
+        while k * step <= r.back_out_lookahead + 1e-9 and best > 0:
             if not self._legal(pose, v, w, local, k * step, padded=False, shrink=shrink):
                 break
             best = min(best, _cost_after(pose, v, w, k * step, local))
@@ -143,8 +147,8 @@ class HeadingShim:
         """Driving (v, w) for `duration` [s] keeps the (padded, or shrunk by `shrink` [m])
         footprint clear. Getting room to turn is checked with the exact footprint: where the
         robot stands, it fits."""
-        p = self.params
-        half = p.footprint_half_m + (p.footprint_padding if padded else -shrink)
+        p, c = self.params, self.costmap_params
+        half = c.footprint_half_m + (c.footprint_padding if padded else -shrink)
         return dk.motion_legal(
             float(pose[0]), float(pose[1]), float(pose[2]), v, w, duration,
             local.lethal, local.near, local.inner, float(local.origin[0]),

@@ -11,7 +11,7 @@ import numpy as np
 from scipy import ndimage
 
 from worker.evaluate.coverage import align_map_to_world
-from worker.explore.params import ExploreParams
+from worker.explore.params import StopParams
 from worker.status import RunOutcome, RunReason
 
 Outcome = RunOutcome  # completed | failed
@@ -279,7 +279,7 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    little (SnapshotRule's measures). With `holds` > 0 (explore.snapshot_holds, 1 by
+    little (SnapshotRule's measures). With `holds` > 0 (explore.stop.snapshot_holds, 1 by
     default) the rule does not fire while the robot is on its way to a frontier it chose
     since the earlier snapshot, at most `holds` times a run: a goal chosen in the last
     period has not been tried yet (a big building's far wing, 80 m away, changes less than
@@ -320,8 +320,11 @@ class TimeLimitRule:
         return StopReason(RunReason.TIME_LIMIT, f"time limit {self.limit:g} s reached")
 
 
-def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> list[StopRule]:
-    """The loop's stop rules in the order they are asked: the first to fire ends the run."""
+def default_rules(
+    p: StopParams, time_limit: float, start_xy: np.ndarray, n_collisions: int
+) -> list[StopRule]:
+    """The loop's stop rules in the order they are asked: the first to fire ends the run;
+    time_limit [s]: ExploreParams.time_limit (m)."""
     return [
         CollisionRule(n_collisions),
         DivergenceRule(p.slam_divergence),
@@ -336,7 +339,7 @@ def default_rules(p: ExploreParams, start_xy: np.ndarray, n_collisions: int) -> 
             change=p.snapshot_change,
             tolerance=p.snapshot_tolerance,
         ),  # fmt: skip
-        TimeLimitRule(p.time_limit),
+        TimeLimitRule(time_limit),
     ]
 
 

@@ -101,7 +101,10 @@ def test_openapi_job_body_has_the_run_params_schema_and_the_registry_enum(api):
     particles = params["properties"]["slam"]["properties"]["particles"]
     assert particles == {"default": 40, "title": "Particles", "type": "integer"}
     # the derived half footprint is stored with a run but is no parameter of its own
-    assert "footprint_half_m" not in params["properties"]["explore"]["properties"]
+    assert (
+        "footprint_half_m"
+        not in params["properties"]["explore"]["properties"]["costmap"]["properties"]
+    )
     assert "required" not in params["properties"]["sim"]  # partial overrides are fine
 
 
@@ -116,4 +119,18 @@ def test_partial_params_keep_their_defaults_as_before(api):
     job = api.post("/api/v1/jobs", json=body).json()
     assert job["slam"] == "rbpf" and job["params"]["slam"]["particles"] == 7
     assert job["params"]["slam"]["delta"] == 0.05 and job["params"]["sim"]["footprint"] == 0.4
-    assert job["params"]["explore"]["footprint_half_m"] == 0.2
+    assert job["params"]["explore"]["costmap"]["footprint_half_m"] == 0.2
+
+
+def test_a_job_with_the_flat_explore_keys_of_before_the_groups_is_stored_nested(api):
+    up = api.post(
+        "/api/v1/worlds",
+        files=[("file", ("box.png", _png(), "image/png"))],
+        data={"resolution": "0.05"},
+        params={"wait": 30},
+    )
+    flat = {"door_align": True, "trail_cap": 150, "time_limit": 60.0}
+    body = {"world_id": up.json()["id"], "runs": 1, "params": {"explore": flat}}
+    explore = api.post("/api/v1/jobs", json=body).json()["params"]["explore"]
+    assert explore["doors"]["door_align"] is True and explore["recovery"]["trail_cap"] == 150
+    assert explore["time_limit"] == 60.0 and "door_align" not in explore

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +11,7 @@ from worker.explore import costmap_kernels as ck
 from worker.explore import dwa_kernels as dk
 from worker.explore import local_kernels as lk
 from worker.explore.costmap import GlobalCostmap, LocalCostmap, cost_from_distance
+from worker.explore.flat_params import explore_params
 from worker.explore.params import ExploreParams
 
 RES = 0.05
@@ -47,7 +47,7 @@ def _prob_with_wall(h=60, w=80):
 
 
 def test_global_costmap_costs_by_distance_to_wall():
-    cm = GlobalCostmap(ExploreParams())
+    cm = GlobalCostmap(ExploreParams().costmap)
     cm.update(_prob_with_wall(), RES, (0.0, 0.0))
     row = cm.inflated[30]
     assert row[40] == 254
@@ -61,7 +61,7 @@ def test_global_costmap_costs_by_distance_to_wall():
 def test_unknown_cells_are_no_information_unless_inscribed():
     prob = _prob_with_wall()
     prob[:, 42:] = np.nan
-    cm = GlobalCostmap(ExploreParams())
+    cm = GlobalCostmap(ExploreParams().costmap)
     cm.update(prob, RES, (0.0, 0.0))
     master = cm.master()
     assert master[10, 41] == 253  # known, inscribed
@@ -73,7 +73,7 @@ def test_unknown_cells_are_no_information_unless_inscribed():
 def test_incremental_update_equals_full_rebuild():
     rng = np.random.default_rng(3)
     prob = np.full((90, 110), np.nan, dtype=np.float32)
-    inc = GlobalCostmap(ExploreParams())
+    inc = GlobalCostmap(ExploreParams().costmap)
     inc.update(prob, RES, (1.0, -2.0))
     for _ in range(12):
         y0, x0 = rng.integers(0, 80), rng.integers(0, 100)
@@ -88,7 +88,7 @@ def test_incremental_update_equals_full_rebuild():
         changed = inc.update(prob, RES, (1.0, -2.0), window_m=window_m)
         if changed[1] > changed[0]:  # the changes lie inside the window that was re-read
             assert y0 <= changed[0] and changed[1] <= y0 + 10
-    full = GlobalCostmap(ExploreParams())
+    full = GlobalCostmap(ExploreParams().costmap)
     full.update(prob, RES, (1.0, -2.0))
     np.testing.assert_array_equal(inc.lethal, full.lethal)
     np.testing.assert_array_equal(inc.unknown, full.unknown)
@@ -100,7 +100,7 @@ def test_inflation_agrees_with_an_exact_distance_transform():
 
     rng = np.random.default_rng(8)
     prob = np.where(rng.random((70, 70)) < 0.02, 0.9, 0.05).astype(np.float32)
-    cm = GlobalCostmap(ExploreParams())
+    cm = GlobalCostmap(ExploreParams().costmap)
     cm.update(prob, RES, (0.0, 0.0))
     dist = ndimage.distance_transform_edt(prob < 0.25) * RES
     expected = cost_from_distance(dist, 0.2, 7.5, 2.25)
@@ -110,8 +110,8 @@ def test_inflation_agrees_with_an_exact_distance_transform():
 
 
 def test_growing_cropped_map_keeps_one_frame_and_matches_a_fresh_costmap():
-    p = ExploreParams(growth_margin=1.0)
-    cm = GlobalCostmap(p)
+    p = explore_params(growth_margin=1.0)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(_prob_with_wall(), RES, (0.0, 0.0))
     frame = cm.frame_id
     bigger = np.full((80, 100), np.nan, dtype=np.float32)
@@ -121,7 +121,7 @@ def test_growing_cropped_map_keeps_one_frame_and_matches_a_fresh_costmap():
     assert cm.frame_id != frame
     # grown by the incoming map plus a 1 m (20 cell) margin on the sides it outgrew
     assert cm.shape == (60 + 10 + 20 + 10 + 20, 80 + 10 + 20 + 10 + 20)
-    fresh = GlobalCostmap(p)
+    fresh = GlobalCostmap(p.costmap, p.doors.door_align)
     fresh.update(bigger, RES, (-0.5, -0.5))
     oy, ox = (np.round((fresh.origin - cm.origin) / RES).astype(int))[::-1]
     sub = (slice(oy, oy + 80), slice(ox, ox + 100))
@@ -170,7 +170,7 @@ def test_local_layers_distances():
 
 def test_local_costmap_marks_hits_only_and_clears():
     p = ExploreParams()
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     angles = np.array([0.0, math.pi / 2])
     local.add_scan(0.0, np.array([5.0, 5.0, 0.0]), np.array([1.0, 30.0]), angles, 30.0)
     local.build(5.0, 5.0)
@@ -197,13 +197,19 @@ def test_local_costmap_raytrace_clears_earlier_marks_its_beams_cross():
     angles = np.array([0.0, math.pi / 2])
     pose = np.array([5.02, 5.02, 0.0])
     for raytrace, ghosts in ((True, 0), (False, 1)):
-        local = LocalCostmap(dataclasses.replace(ExploreParams(), local_raytrace=raytrace), RES)
+        local = LocalCostmap(
+            explore_params(local_raytrace=raytrace).costmap,
+            explore_params(local_raytrace=raytrace).dwa,
+            RES,
+        )
         local.add_scan(0.0, pose, np.array([1.0, 30.0]), angles, 30.0)
         local.add_scan(0.1, pose, np.array([2.0, 30.0]), angles, 30.0)
         local.build(5.0, 5.0)
         wall = [(7.025, 5.025)]
         assert _marked(local) == (wall if ghosts == 0 else [(6.025, 5.025), *wall])
-    local = LocalCostmap(dataclasses.replace(ExploreParams(), local_raytrace=True), RES)
+    local = LocalCostmap(
+        explore_params(local_raytrace=True).costmap, explore_params(local_raytrace=True).dwa, RES
+    )
     # a beam ending in the ghost's own cell, one without a return, and one on another
     # bearing leave it; only a beam through the cell clears
     local.add_points(0.0, np.array([[6.02, 5.02]]))
@@ -227,9 +233,9 @@ def _marked(local):
 
 def test_local_costmap_includes_map_obstacles_and_inflation():
     p = ExploreParams()
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(_prob_with_wall(), RES, (0.0, 0.0))  # wall at x in [2.0, 2.05]
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     local.build(1.5, 1.5, cm)
     wx = int(round((2.0 - local.origin[0]) / RES))
     wy = int(round((1.5 - local.origin[1]) / RES))
@@ -239,7 +245,7 @@ def test_local_costmap_includes_map_obstacles_and_inflation():
 
 def test_local_costmap_clears_the_robots_own_footprint():
     p = ExploreParams()
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     local.add_points(0.0, np.array([[5.1, 5.0], [5.5, 5.0]]))  # one under the robot
     local.build(5.0, 5.0, None, 0.0)
     assert local.lethal.sum() == 1
@@ -252,16 +258,16 @@ def test_a_map_wall_the_footprint_overlaps_does_not_wedge_the_robot():
     # robot's footprint (0.2 m half side) at 0.22 m from the wall's cell edge, turned 0.57 rad,
     # overlaps it; with that cell kept every motion collided, backing away included.
     p = ExploreParams()
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(_prob_with_wall(), RES, (0.0, 0.0))  # wall cells x in [2.0, 2.05)
     x, y, th = 1.77, 1.5, 0.57  # corner at x = 1.77 + 0.2 (cos + sin) = 2.05: in the wall
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     local.build(x, y, cm, th)
     args = (local.lethal, local.near, local.inner, *local.origin, RES)
-    half = p.footprint_half_m
+    half = p.costmap.footprint_half_m
     assert not ck.footprint_collides(*args, x, y, th, half)
-    back = dk.motion_legal(x, y, th, -0.1, 0.0, 1.0, *args, half, p.sim_granularity)
-    on = dk.motion_legal(x, y, th, 0.1, 0.0, 1.0, *args, half, p.sim_granularity)
+    back = dk.motion_legal(x, y, th, -0.1, 0.0, 1.0, *args, half, p.dwa.sim_granularity)
+    on = dk.motion_legal(x, y, th, 0.1, 0.0, 1.0, *args, half, p.dwa.sim_granularity)
     assert back and not on  # away from the wall is free; into it still collides
     local.build(x, y, cm)  # without the heading nothing is cleared: the wall is there
     assert ck.footprint_collides(local.lethal, local.near, local.inner, *local.origin, RES,
@@ -303,7 +309,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     face = np.column_stack((np.full(21, 2.0), np.linspace(1.0, 2.0, 21)))
     nav.local.add_points(0.0, face)
     pose = np.array([1.81, 1.5, 0.0])  # front edge at x = 2.01
-    v, w = unwedge(p, nav.local, nav.costmap, pose)
+    v, w = unwedge(p.recovery, p.dwa, nav.local, nav.costmap, pose)
     assert v < 0
     # independent check: one second of it leaves the 0.4 m square clear of the face by more
     x, y, th = 1.81, 1.5, 0.0
@@ -314,7 +320,7 @@ def test_a_robot_touching_an_obstacle_backs_away_from_it():
     q = np.abs(-(face[:, 0] - x) * s + (face[:, 1] - y) * c) - 0.2
     assert np.min(np.hypot(np.maximum(u, 0), np.maximum(q, 0))) > 0.05
     assert (
-        unwedge(p, nav.local, nav.costmap, np.array([1.5, 1.5, 0.0])) is None
+        unwedge(p.recovery, p.dwa, nav.local, nav.costmap, np.array([1.5, 1.5, 0.0])) is None
     )  # clear of it: nothing to do
 
 
@@ -332,7 +338,7 @@ def test_a_robot_touching_an_obstacle_at_its_side_slides_back_along_it():
     ahead = np.column_stack((np.full(11, 1.86), np.linspace(1.35, 1.65, 11)))
     pts = np.concatenate([side, ahead])
     nav.local.add_points(0.0, pts)
-    v, w = unwedge(p, nav.local, nav.costmap, np.array([1.6, 1.5, 0.0]))
+    v, w = unwedge(p.recovery, p.dwa, nav.local, nav.costmap, np.array([1.6, 1.5, 0.0]))
     assert v < 0
     # independent check: a second of it takes the 0.4 m square no nearer any obstacle point
     x, y, th = 1.6, 1.5, 0.0

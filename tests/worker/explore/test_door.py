@@ -7,149 +7,33 @@ import math
 
 import numpy as np
 
+from tests.worker.explore.door_scenes import (
+    RES,
+    WALL_X,
+    door_map,
+    door_params,
+    door_pass,
+    drive_through,
+    find_on_path,
+    footprint_hits_wall,
+    in_wall_poses,
+    thick_wall_map,
+)
 from worker.explore import costmap_kernels as ck
-from worker.explore import door_kernels as dok
 from worker.explore.costmap import GlobalCostmap
-from worker.explore.door import DoorPass, _ahead, find_door
 from worker.explore.params import ExploreParams
-
-RES = 0.05
-WALL_X = 60  # the wall's cells: x in [3.0, 3.1) m (two cells thick)
-
-
-def _door_map(door_cells: int) -> np.ndarray:
-    """(80, 120) SLAM probabilities: free, a wall two cells thick at x = 3.0 m with a door
-    of `door_cells` free cells centred on y = 2.0 m."""
-    prob = np.full((80, 120), 0.02, dtype=np.float32)
-    prob[:, WALL_X : WALL_X + 2] = 0.9
-    prob[40 - door_cells // 2 : 40 - door_cells // 2 + door_cells, WALL_X : WALL_X + 2] = 0.02
-    return prob
-
-
-def _params(**kw) -> ExploreParams:
-    return dataclasses.replace(ExploreParams(), door_align=True, **kw)
-
-
-def _find(path, x, y, local, p):
-    """find_door on the path ahead of (x, y)."""
-    return find_door(*_ahead(path, x, y, p), local, p)
-
-
-def _drive_through(
-    p: ExploreParams,
-    cm: GlobalCostmap,
-    pose,
-    path,
-    steps: int = 300,
-    replan=None,
-    *,
-    range_noise: float = 0.0,
-    phases: list[str] | None = None,
-):
-    """Unicycle integration of DoorPass's commands at 10 Hz; the poses and the kinds.
-    replan(x, y, door): a new path for a new goal (the passage told so), or None.
-    range_noise: the passage's (default 0); phases: a list that gets the passage's phase
-    after each command."""
-    door = DoorPass(p, range_noise)
-    poses, kinds = [np.array(pose, dtype=float)], []
-    x, y, th = pose
-    for _ in range(steps):
-        new = None if replan is None else replan(x, y, door)
-        if new is not None:
-            path = new
-            door.new_goal()  # as Navigator._choose does
-        cmd = door.command(np.array([x, y, th]), path, cm)
-        if cmd is None:
-            break
-        v, w, kind = cmd
-        kinds.append(kind)
-        if phases is not None:
-            phases.append(door.phase)
-        for _ in range(10):  # 0.1 s in ten sub-steps
-            x += v * math.cos(th) * 0.01
-            y += v * math.sin(th) * 0.01
-            th += w * 0.01
-        poses.append(np.array([x, y, th]))
-    return np.array(poses), kinds, door
-
-
-def _footprint_hits_wall(cm: GlobalCostmap, x: float, y: float, th: float, half: float) -> bool:
-    """Whether the exact square footprint covers a map obstacle cell (sampled densely)."""
-    c, s = math.cos(th), math.sin(th)
-    for u in np.linspace(-half, half, 17):
-        for v in np.linspace(-half, half, 17):
-            px, py = x + u * c - v * s, y + u * s + v * c
-            ix, iy = int(math.floor(px / RES)), int(math.floor(py / RES))
-            if cm.map_lethal[iy, ix]:
-                return True
-    return False
-
-
-def test_map_lethal_is_the_map_alone_and_only_kept_for_the_door_passage():
-    prob = _door_map(10)
-    cm = GlobalCostmap(_params(obstacle_min_prob=0.0))  # every mark counts
-    cm.update(prob, RES, (0.0, 0.0), scan=(np.array([2.0, 2.0, 0.0]), np.array([0.6]),
-                                           np.array([0.0]), 30.0))  # fmt: skip
-    assert np.array_equal(cm.map_lethal, prob > 0.25)
-    assert cm.lethal[40, 52] and not cm.map_lethal[40, 52]  # the obstacle layer's mark
-    off = GlobalCostmap(dataclasses.replace(ExploreParams(), door_align=False))
-    off.update(prob, RES, (0.0, 0.0))
-    assert off.map_lethal.size == 0
-
-
-def test_obstacle_marks_in_cells_the_map_knows_free_can_be_left_out():
-    # a noisy short reading marks a cell the map has seen free many times (0.02), another
-    # marks a wall face the map shows under occupied_thresh (0.2): with obstacle_min_prob
-    # 0.1 only the second is an obstacle, with 0 (the default) both are
-    prob = _door_map(10)
-    prob[10, 50] = 0.2
-    scans = [
-        (np.array([2.0, 2.02, 0.0]), np.array([0.62])),  # ends in cell (40, 52): p 0.02
-        (np.array([2.0, 0.52, 0.0]), np.array([0.52])),  # ends in cell (10, 50): p 0.2
-    ]
-    for min_prob, expected in ((0.0, [True, True]), (0.1, [False, True])):
-        cm = GlobalCostmap(dataclasses.replace(ExploreParams(), obstacle_min_prob=min_prob))
-        for pose, r in scans:
-            cm.update(prob, RES, (0.0, 0.0), scan=(pose, r, np.array([0.0]), 30.0))
-        assert [bool(cm.lethal[40, 52]), bool(cm.lethal[10, 50])] == expected
-
-
-def test_a_passage_is_found_where_both_sides_are_near_and_not_in_a_corridor():
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_door_map(10), RES, (0.0, 0.0))
-    path = np.column_stack((np.arange(1.5, 4.5, RES), np.full(60, 2.025)))
-    from worker.explore.costmap import LocalCostmap
-
-    local = LocalCostmap(p, RES)
-    local.build(2.4, 2.0, cm, 0.0, map_only=True)
-    door = _find(path, 2.4, 2.0, local, p)
-    # the jambs: the wall's cells nearest the door's middle, rows 45 (left of the path,
-    # centre y 2.275 m) and 34 (right, 1.725 m); the centre between them, the axis along +x
-    assert np.isclose(door.jambs[0][1], 2.275) and np.isclose(door.jambs[1][1], 1.725)
-    assert abs(door.centre[1] - 2.0) < 1e-9 and 3.0 < door.centre[0] < 3.1
-    assert np.allclose(door.axis, [1.0, 0.0])
-    assert abs(door.width - 0.5) < 1e-9  # 10 free cells
-    entry, exit_ = door.centre + door.s_in * door.axis, door.centre + door.s_out * door.axis
-    assert 2.7 <= entry[0] <= 3.0 and 3.1 <= exit_[0] <= 3.5  # through the wall's cells
-    local.build(1.5, 2.0, cm, 0.0, map_only=True)
-    assert _find(path, 1.5, 2.0, local, p) is None  # farther than door_lookahead
-    wide = GlobalCostmap(p)
-    wide.update(_door_map(24), RES, (0.0, 0.0))  # 1.2 m: wider than door_width
-    local.build(2.4, 2.0, wide, 0.0, map_only=True)
-    assert _find(path, 2.4, 2.0, local, p) is None
 
 
 def test_the_robot_lines_up_with_a_tight_door_and_drives_through_without_touching():
     # a 0.5 m door (10 cells) for the 0.4 m robot: it comes 0.12 m off the door's axis at
     # 1 rad to it, as it came off a diagonal plan, and must not touch the jambs
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_door_map(10), RES, (0.0, 0.0))
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(door_map(10), RES, (0.0, 0.0))
     path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.0)))
-    poses, kinds, door = _drive_through(p, cm, (2.2, 1.88, 1.0), path)
+    poses, kinds, door = drive_through(p, cm, (2.2, 1.88, 1.0), path)
     assert poses[-1, 0] > 3.3 and door.n_passages == 1, "not through the door"
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m) for q in poses)
     in_door = poses[(poses[:, 0] > 2.75) & (poses[:, 0] < 3.35)]
     assert len(in_door) > 0
     assert np.abs(in_door[:, 2]).max() < 0.12  # faced along the door while in it
@@ -158,58 +42,33 @@ def test_the_robot_lines_up_with_a_tight_door_and_drives_through_without_touchin
 
 
 def test_a_door_narrower_than_the_robot_is_not_forced():
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_door_map(7), RES, (0.0, 0.0))  # 0.35 m: narrower than the 0.4 m robot
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(door_map(7), RES, (0.0, 0.0))  # 0.35 m: narrower than the 0.4 m robot
     path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.0)))
-    poses, kinds, _ = _drive_through(p, cm, (2.3, 2.0, 0.0), path)
-    assert poses[-1, 0] < 3.0 - p.footprint_half_m + 0.02
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    poses, kinds, _ = drive_through(p, cm, (2.3, 2.0, 0.0), path)
+    assert poses[-1, 0] < 3.0 - p.costmap.footprint_half_m + 0.02
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m) for q in poses)
     assert ck.LETHAL == 254  # the costmap values the checks rely on
-
-
-def test_a_gap_between_pieces_of_furniture_is_not_a_door():
-    # the same 0.5 m gap on the same path, once in a wall and once between two cabinets
-    # 0.4 m long: only the first is a door (door_wall_min 1 m); the gap between the
-    # cabinets is the DWA's, as every other gap between furniture
-    from worker.explore.costmap import LocalCostmap
-
-    p = _params()
-    assert p.door_wall_min == 1.0
-    path = np.column_stack((np.arange(1.5, 4.5, RES), np.full(60, 2.025)))
-    furniture = np.full((80, 120), 0.02, dtype=np.float32)
-    furniture[27:35, WALL_X : WALL_X + 2] = 0.9  # y in [1.35, 1.75): 0.4 m
-    furniture[45:53, WALL_X : WALL_X + 2] = 0.9  # y in [2.25, 2.65)
-    local = LocalCostmap(p, RES)
-    for prob, is_door in ((_door_map(10), True), (furniture, False)):
-        cm = GlobalCostmap(p)
-        cm.update(prob, RES, (0.0, 0.0))
-        local.build(2.4, 2.0, cm, 0.0, map_only=True)
-        assert (_find(path, 2.4, 2.0, local, p) is not None) is is_door
-    long_cabinets = furniture.copy()
-    long_cabinets[15:35, WALL_X : WALL_X + 2] = 0.9  # 1.0 m long each: wall enough
-    long_cabinets[45:65, WALL_X : WALL_X + 2] = 0.9
-    cm = GlobalCostmap(p)
-    cm.update(long_cabinets, RES, (0.0, 0.0))
-    local.build(2.4, 2.0, cm, 0.0, map_only=True)
-    assert _find(path, 2.4, 2.0, local, p) is not None
 
 
 def test_a_door_it_gets_no_farther_into_is_given_up_to_the_dwa():
     # a 0.6 m door with a post the map holds 0.15 m past it, on the axis: the robot lines
     # up and drives in, but no motion takes it farther; after door_patience (10 s) the
     # passage is refused, and the same door is not taken up again for this goal
-    p = _params()
-    prob = _door_map(12)
+    p = door_params()
+    prob = door_map(12)
     prob[38:42, WALL_X + 5 : WALL_X + 7] = 0.9  # x in [3.25, 3.35), y in [1.9, 2.1)
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(prob, RES, (0.0, 0.0))
     path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.0)))
-    poses, kinds, door = _drive_through(p, cm, (2.3, 2.0, 0.0), path, steps=400)
+    poses, kinds, door = drive_through(p, cm, (2.3, 2.0, 0.0), path, steps=400)
     assert len(door.refused) == 1 and abs(door.refused[0][0] - 3.0) < 0.35
     n = len(kinds)
-    assert p.door_patience * p.controller_frequency < n < 400  # it gave up, after patience
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    assert (
+        p.doors.door_patience * p.dwa.controller_frequency < n < 400
+    )  # it gave up, after patience
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m) for q in poses)
     assert door.command(poses[-1], path, cm) is None  # refused: left to the DWA
     start = np.array([2.3, 2.0, 0.0])
     assert door.command(start, path, cm) is None  # from before the door too
@@ -223,39 +82,23 @@ def test_the_passage_takes_over_only_where_the_dwa_sees_the_door_tight():
     # m left, under door_engage_width 0.8 m) the passage lines the robot up
     from worker.explore.costmap import LocalCostmap
 
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_door_map(17), RES, (0.0, 0.0))  # y in [1.6, 2.45)
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(door_map(17), RES, (0.0, 0.0))  # y in [1.6, 2.45)
     path = np.column_stack((np.arange(2.0, 4.5, RES), np.full(50, 2.025)))
     pose = np.array([2.4, 1.9, 0.8])
-    clean = LocalCostmap(p, RES)
+    clean = LocalCostmap(p.costmap, p.dwa, RES)
     clean.build(pose[0], pose[1], cm, pose[2])
-    assert DoorPass(p).command(pose, path, cm, clean) is None
-    noisy = LocalCostmap(p, RES)
+    assert door_pass(p).command(pose, path, cm, clean) is None
+    noisy = LocalCostmap(p.costmap, p.dwa, RES)
     marks = np.array([[3.0 + dx, y] for dx in (0.0, 0.05) for y in (1.62, 1.72, 2.32, 2.42)])
     noisy.add_points(0.0, marks)
     noisy.build(pose[0], pose[1], cm, pose[2])
-    door = DoorPass(p)
+    door = door_pass(p)
     cmd = door.command(pose, path, cm, noisy)
     # 0.125 m off the door's axis: it makes for the pre-door point first
     assert cmd is not None and door.phase == "approach"
-    assert DoorPass(p).command(pose, path, cm) is not None  # no local costmap: every door
-
-
-def _thick_wall_map(door_cells: int, thickness_cells: int = 8) -> np.ndarray:
-    """(80, 120) SLAM probabilities: a wall `thickness_cells` thick from x = 3.0 m with a
-    door of `door_cells` free cells centred on y = 2.0 m."""
-    prob = np.full((80, 120), 0.02, dtype=np.float32)
-    prob[:, WALL_X : WALL_X + thickness_cells] = 0.9
-    lo = 40 - door_cells // 2
-    prob[lo : lo + door_cells, WALL_X : WALL_X + thickness_cells] = 0.02
-    return prob
-
-
-def _in_wall_poses(poses: np.ndarray, half: float, x0: float, x1: float) -> np.ndarray:
-    """The poses whose footprint reaches into the wall's x range [x0, x1)."""
-    reach = half * (np.abs(np.cos(poses[:, 2])) + np.abs(np.sin(poses[:, 2])))
-    return poses[(poses[:, 0] + reach > x0) & (poses[:, 0] - reach < x1)]
+    assert door_pass(p).command(pose, path, cm) is not None  # no local costmap: every door
 
 
 def test_a_door_the_plan_crosses_diagonally_is_passed_on_its_own_axis():
@@ -265,23 +108,23 @@ def test_a_door_the_plan_crosses_diagonally_is_passed_on_its_own_axis():
     # the jambs with its footprint grown by 0.02 m. Lined up with the plan's chord instead,
     # a 0.4 m square 0.6 rad off needs 0.4 (cos 0.6 + sin 0.6) + 0.4 tan 0.6 = 0.83 m
     # (docs/results/laser-noise.md: rbpf's pose error did the rest)
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_thick_wall_map(16), RES, (0.0, 0.0))  # x in [3.0, 3.4), y in [1.6, 2.4)
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(thick_wall_map(16), RES, (0.0, 0.0))  # x in [3.0, 3.4), y in [1.6, 2.4)
     s = np.arange(-1.6, 1.6, 0.025)
     path = np.column_stack((3.2 + s * math.cos(0.6), 2.0 + s * math.sin(0.6)))
     start = (3.2 - 0.9 * math.cos(0.6), 2.0 - 0.9 * math.sin(0.6), 0.6)  # y 1.49
     from worker.explore.costmap import LocalCostmap
 
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     local.build(start[0], start[1], cm, 0.6, map_only=True)
-    door = _find(path, start[0], start[1], local, p)
+    door = find_on_path(path, start[0], start[1], local, p)
     assert door is not None and abs(math.atan2(door.axis[1], door.axis[0])) < 0.05
     assert abs(door.centre[1] - 2.0) < 0.03 and abs(door.width - 0.8) < 0.06
-    poses, kinds, passage = _drive_through(p, cm, start, path, steps=600)
+    poses, kinds, passage = drive_through(p, cm, start, path, steps=600)
     assert passage.n_passages == 1 and poses[-1, 0] > 3.55, "not through the door"
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m + 0.02) for q in poses)
-    inside = _in_wall_poses(poses, p.footprint_half_m, 3.0, 3.4)
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m + 0.02) for q in poses)
+    inside = in_wall_poses(poses, p.costmap.footprint_half_m, 3.0, 3.4)
     assert len(inside) > 0 and np.abs(inside[:, 2]).max() < 0.12  # along the door's axis
     assert np.abs(inside[:, 1] - 2.0).max() < 0.08
 
@@ -291,63 +134,22 @@ def test_a_robot_off_the_axis_goes_to_the_pre_door_point_first():
     # its axis, 0.7 m before it, heading for the door's middle: steering onto the axis on
     # the way (at most 0.6 rad) would put its corner into the wall before the axis; it
     # drives to a point on the axis first, turns there, and passes
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_thick_wall_map(14), RES, (0.0, 0.0))  # y in [1.65, 2.35)
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(thick_wall_map(14), RES, (0.0, 0.0))  # y in [1.65, 2.35)
     start = np.array([2.3, 1.64])
     th = math.atan2(2.0 - start[1], 3.0 - start[0])
     leg1 = start + np.linspace(0.0, 1.0, 40)[:, None] * (np.array([3.0, 2.0]) - start)
     leg2 = np.column_stack((np.arange(3.0, 4.6, RES), np.full(32, 2.0)))
     path = np.vstack((leg1, leg2))
-    poses, kinds, passage = _drive_through(p, cm, (*start, th), path, steps=900)
+    poses, kinds, passage = drive_through(p, cm, (*start, th), path, steps=900)
     assert passage.n_passages == 1 and poses[-1, 0] > 3.55, "not through the door"
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m + 0.02) for q in poses)
-    inside = _in_wall_poses(poses, p.footprint_half_m, 3.0, 3.4)
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m + 0.02) for q in poses)
+    inside = in_wall_poses(poses, p.costmap.footprint_half_m, 3.0, 3.4)
     assert np.abs(inside[:, 2]).max() < 0.12 and np.abs(inside[:, 1] - 2.0).max() < 0.06
     # it came onto the axis before the wall: the pre-door point
     before = poses[(poses[:, 0] < 2.75) & (np.abs(poses[:, 1] - 2.0) < 0.04)]
     assert len(before) > 0
-
-
-def test_a_wall_the_plan_turns_away_from_is_not_a_door():
-    # the plan runs at a wall and turns along it 0.35 m before it: the wall is ahead of the
-    # path, not across it, on either side
-    from worker.explore.costmap import LocalCostmap
-
-    p = _params()
-    prob = np.full((80, 120), 0.02, dtype=np.float32)
-    prob[:, WALL_X : WALL_X + 2] = 0.9
-    cm = GlobalCostmap(p)
-    cm.update(prob, RES, (0.0, 0.0))
-    leg1 = np.column_stack((np.arange(2.0, 2.65, RES), np.full(13, 2.0)))
-    leg2 = np.column_stack((np.full(30, 2.65), 2.0 + RES * np.arange(1, 31)))
-    path = np.vstack((leg1, leg2))
-    local = LocalCostmap(p, RES)
-    local.build(2.2, 2.0, cm, 0.0, map_only=True)
-    assert _find(path, 2.2, 2.0, local, p) is None
-    assert DoorPass(p).command(np.array([2.2, 2.0, 0.0]), path, cm) is None
-
-
-def test_nearest_sides_splits_by_side_and_keeps_to_the_cone_across_the_line():
-    # from (1.0, 1.0) along +x: a cell at (1.025, 1.325) is across on the left (0.325 m),
-    # one at (1.025, 0.575) across on the right (0.425 m); a nearer one straight ahead at
-    # (1.275, 1.025) is neither (0.28 m ahead, 0.025 m to the side); one at (1.475, 0.775)
-    # is 0.475 m ahead and 0.225 m to the right: 64.6 degrees off the normal, inside a
-    # 70 degree cone but not a 60 degree one
-    lethal = np.zeros((40, 40), dtype=np.bool_)
-    for x, y in ((1.025, 1.325), (1.025, 0.575), (1.275, 1.025), (1.475, 0.775)):
-        lethal[int(y / RES), int(x / RES)] = True
-    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, dok.ACROSS_PATH)
-    assert np.allclose(out, (1.025, 1.325, math.hypot(0.025, 0.325),
-                             1.025, 0.575, math.hypot(0.025, 0.425)))  # fmt: skip
-    wide = math.tan(math.radians(70.0))
-    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, wide)
-    assert np.allclose(out[3:], (1.025, 0.575, math.hypot(0.025, 0.425)))  # 0.425 < 0.526
-    lethal[int(0.575 / RES), int(1.025 / RES)] = False
-    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, wide)
-    assert np.allclose(out[3:], (1.475, 0.775, math.hypot(0.475, 0.225)))
-    out = dok.nearest_sides(1.0, 1.0, 1.0, 0.0, lethal, 0.0, 0.0, RES, 0.9, dok.ACROSS_PATH)
-    assert out[5] == np.inf  # nothing across on the right any more
 
 
 def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks_out():
@@ -361,10 +163,10 @@ def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks
     angles = np.array([math.pi / 2, -math.pi / 2])
     free = Navigator(p, angles, 30.0)
     noisy = Navigator(p, angles, 30.0, range_noise=0.1)
-    assert free.params is p and not free.params.door_align  # noise-free: nothing changes
-    assert noisy.params.door_align and noisy.params.obstacle_min_prob == 0.1
-    assert noisy.params.footprint_half_m == p.footprint_half_m
-    prob = _door_map(17)  # door cells: rows 32-48, y in [1.6, 2.45) m
+    assert free.params is p and not free.params.doors.door_align  # noise-free: nothing changes
+    assert noisy.params.doors.door_align and noisy.params.costmap.obstacle_min_prob == 0.1
+    assert noisy.params.costmap.footprint_half_m == p.costmap.footprint_half_m
+    prob = door_map(17)  # door cells: rows 32-48, y in [1.6, 2.45) m
     # the robot in the door's middle, x = 3.05 m, reading its jambs 0.175 m from centre
     # instead of 0.425: hits at y = 2.2 and 1.85 m, 0.25 m inside the opening
     scan = (np.array([3.05, 2.025, 0.0]), np.array([0.175, 0.175]), angles, 30.0)
@@ -374,9 +176,13 @@ def test_on_a_noisy_laser_the_stack_takes_the_door_passage_and_keeps_noisy_marks
         through = nav.costmap.inflated[door_row, WALL_X]  # the door's cells, wall's line
         assert bool((through >= ck.INSCRIBED).all()) == closed
     # users may keep the noise-free stack on a noisy laser
-    plain = dataclasses.replace(p, noisy_door_align=False, noisy_obstacle_min_prob=0.0)
+    plain = dataclasses.replace(
+        p,
+        doors=dataclasses.replace(p.doors, noisy_door_align=False),
+        costmap=dataclasses.replace(p.costmap, noisy_obstacle_min_prob=0.0),
+    )
     kept = plain.for_range_noise(0.1)
-    assert not kept.door_align and kept.obstacle_min_prob == 0.0
+    assert not kept.doors.door_align and kept.costmap.obstacle_min_prob == 0.0
 
 
 def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
@@ -386,9 +192,9 @@ def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
     # and less in a noisy map or off a wrong pose (Freiburg79, rbpf at 0.1 m noise, seed 5:
     # stuck across a door for 180 s); it backs out along the axis instead and leaves the
     # turn for where it has room
-    p = _params()
-    cm = GlobalCostmap(p)
-    cm.update(_door_map(14), RES, (0.0, 0.0))
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    cm.update(door_map(14), RES, (0.0, 0.0))
     xs = np.arange(4.0, 1.5, -RES)
     west = np.column_stack((xs, np.full(len(xs), 2.0)))
     east = west[::-1]
@@ -397,19 +203,19 @@ def test_in_a_door_facing_back_the_robot_reverses_out_rather_than_turns_round():
     def replan(x, y, door):
         return goals.pop() if goals and x < 3.05 else None
 
-    poses, kinds, door = _drive_through(p, cm, (3.7, 2.03, math.pi), west, replan=replan)
+    poses, kinds, door = drive_through(p, cm, (3.7, 2.03, math.pi), west, replan=replan)
     assert "door_reverse" in kinds and door.n_passages == 1, "did not back out through it"
-    assert poses[-1, 0] > 3.1 + p.footprint_half_m  # the whole footprint east of the wall
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m) for q in poses)
+    assert poses[-1, 0] > 3.1 + p.costmap.footprint_half_m  # the whole footprint east of the wall
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m) for q in poses)
     back = poses[kinds.index("door_reverse") :]
     assert np.abs(np.cos(back[:, 2]) + 1.0).max() < 0.01  # kept facing west: no turn
 
 
 def _deep_jamb_map(x0_cell: int) -> np.ndarray:
-    """`_door_map` with a 0.85 m door (y in [1.6, 2.45)) whose south jamb is a block running
+    """`door_map` with a 0.85 m door (y in [1.6, 2.45)) whose south jamb is a block running
     back from the wall along the approach side: x in [x0_cell * RES, 3.1), y in [1.2, 1.6)
     (office_d's doors at (19.4, 26.0) and (35.0, 6.7): one jamb a 1.2 m deep wall block)."""
-    prob = _door_map(17)
+    prob = door_map(17)
     prob[24:32, x0_cell : WALL_X + 2] = 0.9
     return prob
 
@@ -417,7 +223,7 @@ def _deep_jamb_map(x0_cell: int) -> np.ndarray:
 def _approach_beside_a_deep_jamb(x0_cell: int, noise_seeds=range(5)):
     """The robot 0.3 m north of the door's axis, level with the nearest pre-door point and
     heading for the door, on the plan a navfn plan takes (diagonally to the door, then
-    along its axis). Drives `_drive_through` and, along the way, reads what a laser at the
+    along its axis). Drives `drive_through` and, along the way, reads what a laser at the
     true pose sees (ray cast on the map, `worker.world.raycast`): the safety controller's
     front clearance of every forward motion of the approach, noise-free, and how often the
     controller (median of 3) would stop a forward motion on that laser with 0.1 m range
@@ -428,8 +234,8 @@ def _approach_beside_a_deep_jamb(x0_cell: int, noise_seeds=range(5)):
 
     prob = _deep_jamb_map(x0_cell)
     occ = prob > 0.5
-    p = _params()
-    cm = GlobalCostmap(p)
+    p = door_params()
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(prob, RES, (0.0, 0.0))
     start = np.array([2.62, 2.32])
     leg1 = start + np.linspace(0.0, 1.0, 20)[:, None] * (np.array([3.05, 2.02]) - start)
@@ -442,23 +248,25 @@ def _approach_beside_a_deep_jamb(x0_cell: int, noise_seeds=range(5)):
         return cast_scan(occ, RES, 0.0, 0.0, q[0], q[1], q[2], angles, rmax)
 
     phases: list[str] = []
-    poses, kinds, door = _drive_through(
+    poses, kinds, door = drive_through(
         p, cm, (*start, -0.6), path, steps=600, range_noise=0.1, phases=phases
     )
     steps = zip(kinds, phases, strict=True)
     forward = [i for i, (k, ph) in enumerate(steps) if k == "door" and ph == "approach"]
     clear = [
-        front_clearance(scan(poses[i]), angles, rmax, p.footprint_half_m, p.footprint_padding)[0]
+        front_clearance(
+            scan(poses[i]), angles, rmax, p.costmap.footprint_half_m, p.costmap.footprint_padding
+        )[0]
         for i in forward
     ]
     stops = []
     for seed in noise_seeds:
         rng = np.random.default_rng(seed)
-        safety = SafetyController(p, angles, rmax, median=3)
+        safety = SafetyController(p.safety, p.costmap, p.dwa, angles, rmax, median=3)
         n = 0
         for i in forward:
             ranges = np.maximum(scan(poses[i]) + rng.normal(0.0, 0.1, len(angles)), 0.0)
-            if safety.check(0.0, ranges, p.door_speed) is not None:
+            if safety.check(0.0, ranges, p.doors.door_speed) is not None:
                 n += 1
                 safety._until = -math.inf  # count each period on its own
         stops.append(n)
@@ -474,8 +282,8 @@ def test_beside_a_deep_jamb_the_approach_is_one_a_noisy_safety_controller_lets_p
     # farther back is reached with the face out of the safety band by 2 sigmas
     p, cm, poses, kinds, door, clear, stops = _approach_beside_a_deep_jamb(38)
     assert door.n_passages == 1 and poses[-1, 0] > 3.3, "not through the door"
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m + 0.02) for q in poses)
-    assert clear and min(clear) >= p.safety_distance + 2 * 0.1
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m + 0.02) for q in poses)
+    assert clear and min(clear) >= p.safety.safety_distance + 2 * 0.1
     # an oblique reading of the face may still land in the band now and then; one stop (a
     # 1 s back-off) per approach at most, where the nearest pre-door point had 11 to 14
     assert max(stops) <= 1
@@ -487,6 +295,6 @@ def test_where_no_forward_approach_is_clear_the_robot_backs_to_the_pre_door_poin
     # and reverses there (the stretch its laser has just seen), then turns onto the axis
     p, cm, poses, kinds, door, clear, stops = _approach_beside_a_deep_jamb(10)
     assert door.n_passages == 1 and poses[-1, 0] > 3.3, "not through the door"
-    assert not any(_footprint_hits_wall(cm, *q, p.footprint_half_m + 0.02) for q in poses)
+    assert not any(footprint_hits_wall(cm, *q, p.costmap.footprint_half_m + 0.02) for q in poses)
     assert "door_reverse" in kinds and not clear  # no forward motion to the pre-door point
     assert stops == [0] * 5

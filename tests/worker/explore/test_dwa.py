@@ -23,7 +23,7 @@ def _wall(x0, x1, y0, y1, step=0.02):
 
 
 def _local(points, pose, p, costmap=None):
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     if len(points):
         local.add_points(0.0, points)
     local.build(pose[0], pose[1], costmap)
@@ -69,7 +69,7 @@ def test_a_wavefront_asked_for_a_square_gives_its_cells_what_the_whole_search_do
 def test_free_straight_path_accelerates_forwards_within_the_window():
     p = ExploreParams()
     pose = np.array([3.0, 3.0, 0.0])
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(_straight_path(3.0, 8.0, 3.0))
     cmd = dwa.command(pose, 0.0, 0.0, _local([], pose, p), None)
     assert cmd.legal and cmd.kind == "forward"
@@ -82,17 +82,17 @@ def test_free_straight_path_accelerates_forwards_within_the_window():
 def test_path_behind_makes_it_turn_in_place():
     p = ExploreParams()
     pose = np.array([3.0, 3.0, 0.0])
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
     cmd = dwa.command(pose, 0.0, 0.0, _local([], pose, p), None)
-    assert cmd.legal and cmd.kind == "rotate" and abs(cmd.w) >= p.min_in_place_vel_theta
+    assert cmd.legal and cmd.kind == "rotate" and abs(cmd.w) >= p.dwa.min_in_place_vel_theta
 
 
 def test_wall_ahead_with_path_through_it_has_no_forward_command():
     p = ExploreParams()
     pose = np.array([3.0, 3.0, 0.0])
     wall = _wall(3.3, 3.32, 0.5, 5.5)  # across the whole window, 0.1 m in front of the robot
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(_straight_path(3.0, 8.0, 3.0))
     cmd = dwa.command(pose, 0.0, 0.0, _local(wall, pose, p), None)
     assert cmd.kind != "forward"
@@ -105,10 +105,10 @@ def test_drives_around_a_post_along_the_global_plan_without_touching_it():
     prob = np.full((120, 160), 0.05, dtype=np.float32)
     cells = np.floor(post / RES).astype(int)
     prob[cells[:, 1], cells[:, 0]] = 0.9
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(prob, RES, (0.0, 0.0))
-    path = GlobalPlanner(p).plan(cm, pose[:2], (4.0, 3.025))
-    dwa = DwaPlanner(p)
+    path = GlobalPlanner(p.planner).plan(cm, pose[:2], (4.0, 3.025))
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(path)
     x, v, w = pose.copy(), 0.0, 0.0
     closest = np.inf
@@ -134,7 +134,7 @@ def test_drives_around_a_post_along_the_global_plan_without_touching_it():
 def test_goal_alignment_then_reached():
     p = ExploreParams()
     pose = np.array([3.0, 3.0, 0.0])
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(np.array([[3.0, 3.0], [3.1, 3.0]]))
     local = _local([], pose, p)
     cmd = dwa.command(pose, 0.0, 0.0, local, math.pi / 2)
@@ -158,7 +158,7 @@ def test_turns_in_place_when_no_turn_looks_at_a_reachable_cell():
     # towards the gap is what the robot must do
     p = ExploreParams()
     pose = np.array([3.0, 3.0, 0.0])
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
     cmd = dwa.command(pose, 0.0, 0.0, _local(_ring(0.5, math.pi, 1.0), pose, p), None)
     assert cmd.legal and cmd.kind == "rotate"
@@ -167,7 +167,7 @@ def test_turns_in_place_when_no_turn_looks_at_a_reachable_cell():
 def test_keeps_turning_the_same_way_until_it_faces_a_path_behind():
     p = ExploreParams()
     x = np.array([3.0, 3.0, 0.3])
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(np.column_stack((np.linspace(3.0, 0.5, 51), np.full(51, 3.0))))
     v = w = 0.0
     for _ in range(60):  # 6 s at 10 Hz: half a turn at 0.7 rad/s takes 4.5 s
@@ -181,7 +181,7 @@ def test_keeps_turning_the_same_way_until_it_faces_a_path_behind():
 
 
 def test_oscillation_flags_block_a_way_only_after_a_reversal():
-    dwa = DwaPlanner(ExploreParams())
+    dwa = DwaPlanner(ExploreParams().dwa, ExploreParams().costmap)
     pose = np.array([3.0, 3.0, 0.0])
     for _ in range(3):  # turning left (positive) again and again is no oscillation
         dwa._track_oscillation(pose, 1, 0.5)
@@ -197,7 +197,7 @@ def test_score_bound_skips_only_trajectories_that_cannot_win():
     pose = np.array([3.0, 3.0, 0.0])
     local = _local(_wall(3.0, 3.05, 3.25, 3.3), pose, p)  # a post 0.25 m to the left
     path = _straight_path(3.0, 8.0, 3.0)
-    dwa = DwaPlanner(p)
+    dwa = DwaPlanner(p.dwa, p.costmap)
     dwa.set_plan(path)
     seeds, goal = dwa._local_plan(pose, local)
     pd = dk.wavefront(seeds, local.cost, local.resolution)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierSearch
 from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
@@ -15,9 +16,9 @@ RES = 0.05
 
 def _setup(prob, params=None):
     p = params or ExploreParams()
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
-    fs = FrontierSearch(p)
+    fs = FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, None)
     return cm, fs
 
@@ -119,7 +120,9 @@ def test_goal_is_backed_off_from_walls():
     cm, fs = _setup(_corridor_world())
     goal = fs.choose(cm, (1.0, 1.0), [])
     ix, iy = cm.world_to_cell(*goal.goal_xy)
-    assert np.hypot(*(goal.goal_xy - goal.frontier_xy)) <= ExploreParams().goal_radius + 1e-9
+    assert (
+        np.hypot(*(goal.goal_xy - goal.frontier_xy)) <= ExploreParams().frontiers.goal_radius + 1e-9
+    )
     # the lowest-cost candidate: on the even sub-lattice, among the cells near the opening
     # (x >= 4.9) none is cheaper; the corridor's edge cells (0.05 m from a wall) cost 253
     near = np.zeros(cm.shape, dtype=bool)
@@ -163,7 +166,7 @@ def test_unknown_enclosed_by_known_cells_is_no_frontier():
     open_set = {tuple(c) for c in cells[is_open]}
     assert open_set == {(r, 59) for r in range(25, 45)}
     # the enclosed pillar region is 46 cells: with a smaller limit it counts as open
-    p = ExploreParams(min_unknown_area=40 * RES**2)
+    p = explore_params(min_unknown_area=40 * RES**2)
     cm2, fs2 = _setup(prob, p)
     cells2, _ = fs2.clusters()
     is_open2 = fs2.open_cells(cm2, cells2)
@@ -229,17 +232,17 @@ def test_frontier_looked_at_from_close_by_repeatedly_is_dead():
     assert fs.choose(cm, (2.0, 1.5), []) is not None
     p = ExploreParams()
     behind = np.array([2.5, 1.525, np.pi])  # 0.5 m away but facing away: out of view
-    for _ in range(2 * p.dead_frontier_looks):
+    for _ in range(2 * p.frontiers.dead_frontier_looks):
         fs.observe(cm, behind, np.radians(135.0) - 0.05)
     assert not fs.seen.any()
     far = np.array([1.0, 1.525, 0.0])  # in view, but 2 m away
     fs.observe(cm, far, np.radians(135.0) - 0.05)
     assert not fs.seen.any()
     near = np.array([2.5, 1.525, 0.0])  # 0.5 m away, facing it, clear line of sight
-    for _ in range(p.dead_frontier_looks):
+    for _ in range(p.frontiers.dead_frontier_looks):
         assert fs.choose(cm, near[:2], []) is not None
         fs.observe(cm, near, np.radians(135.0) - 0.05)
-    assert (fs.seen[25:37, 59] == p.dead_frontier_looks).all()
+    assert (fs.seen[25:37, 59] == p.frontiers.dead_frontier_looks).all()
     assert fs.choose(cm, near[:2], []) is None  # its only frontier is dead
 
 
@@ -266,12 +269,12 @@ def test_a_frontier_behind_a_door_too_narrow_to_pass_is_looked_at_through_it():
     ys, xs = np.nonzero(fs.frontier)
     fx, fy = cm.cell_to_world(xs, ys)
     d = np.hypot(fx - goal.goal_xy[0], fy - goal.goal_xy[1])
-    assert d.min() <= p.look_through_radius + 1e-9
+    assert d.min() <= p.frontiers.look_through_radius + 1e-9
     # on the robot's side of the wall, in front of the door: the laser sees through it
     assert goal.goal_xy[0] < 2.5 and abs(goal.goal_xy[1] - 1.5) < 0.15
     # the nearest to the frontier of the cells a goal may take (below the planner's blocked
     # cost, on the even sub-lattice, on the robot's side): none is nearer than the goal
-    ok = (cm.inflated < planner_blocked_cost(p)) & ~cm.unknown
+    ok = (cm.inflated < planner_blocked_cost(p.planner, p.costmap)) & ~cm.unknown
     ok[:, 50:] = False
     ok[1::2, :] = ok[:, 1::2] = False
     ys2, xs2 = np.nonzero(ok)
@@ -280,12 +283,15 @@ def test_a_frontier_behind_a_door_too_narrow_to_pass_is_looked_at_through_it():
     assert d.min() <= nearest.min() + 1e-9
     # the goals the robot reached there already (avoid) and the blacklist are respected
     other = fs.choose(cm, robot, [], [goal.goal_xy], look_through=True)
-    assert other is not None and np.hypot(*(other.goal_xy - goal.goal_xy)) > p.blacklist_radius
+    assert (
+        other is not None
+        and np.hypot(*(other.goal_xy - goal.goal_xy)) > p.frontiers.blacklist_radius
+    )
     assert fs.choose(cm, robot, [goal.frontier_xy], look_through=True) is None
 
 
 def test_the_look_through_pass_is_off_at_radius_zero():
-    p = ExploreParams(look_through_radius=0.0)
+    p = explore_params(look_through_radius=0.0)
     nav = Navigator(p, np.linspace(-2.35, 2.35, 541), 30.0)
     nav.update_map(_room_behind_a_narrow_door().astype(np.float32), RES, (0.0, 0.0), True)
     cmd = nav.step(0.0, np.array([1.0, 1.5, 0.0]), 0.0, 0.0, np.full(541, 30.0))
@@ -307,7 +313,7 @@ def test_no_look_through_at_unknown_space_smaller_than_a_room():
     # as a frontier for the ordinary search it is still open (over min_unknown_area)
     cells, _ = fs.clusters()
     assert fs.open_cells(cm, cells).any()
-    cm, fs = _setup(prob, ExploreParams(look_through_min_area=0.7))
+    cm, fs = _setup(prob, explore_params(look_through_min_area=0.7))
     assert fs.choose(cm, (1.0, 1.5), [], look_through=True) is not None
 
 
@@ -321,12 +327,15 @@ def test_goal_search_and_planner_sharing_buffers_give_what_separate_ones_give():
     prob = _corridor_world()
     shared = DijkstraSearch()
     pairs = [
-        (FrontierSearch(p, search=shared), GlobalPlanner(p, search=shared)),
-        (FrontierSearch(p), GlobalPlanner(p)),
+        (
+            FrontierSearch(p.frontiers, p.planner, search=shared),
+            GlobalPlanner(p.planner, search=shared),
+        ),
+        (FrontierSearch(p.frontiers, p.planner), GlobalPlanner(p.planner)),
     ]
     got = []
     for fs, planner in pairs:
-        cm = GlobalCostmap(p)
+        cm = GlobalCostmap(p.costmap, p.doors.door_align)
         cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
         fs.update(cm, None)
         first = fs.choose(cm, (1.0, 1.0), [])

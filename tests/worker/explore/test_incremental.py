@@ -47,7 +47,7 @@ def _edited(edits) -> tuple[GlobalCostmap, FrontierSearch, np.ndarray]:
     p = ExploreParams()
     prob = np.full((H, W), np.nan, dtype=np.float32)
     prob[20:36, 24:40] = FREE  # a known room to start from
-    cm, fs = GlobalCostmap(p), FrontierSearch(p)
+    cm, fs = GlobalCostmap(p.costmap, p.doors.door_align), FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, ORIGIN))
     for e in edits:
         window = _apply(prob, e)
@@ -59,7 +59,7 @@ def _edited(edits) -> tuple[GlobalCostmap, FrontierSearch, np.ndarray]:
 @given(st.lists(edit, min_size=1, max_size=12))
 def test_windowed_updates_equal_a_costmap_built_from_scratch(edits):
     cm, _, prob = _edited(edits)
-    fresh = GlobalCostmap(ExploreParams())
+    fresh = GlobalCostmap(ExploreParams().costmap)
     fresh.update(prob, RES, ORIGIN)
     np.testing.assert_array_equal(cm.lethal, fresh.lethal)
     np.testing.assert_array_equal(cm.unknown, fresh.unknown)

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from worker.explore.loop import ExploreParams, explore
+from worker.explore.flat_params import explore_params
+from worker.explore.loop import explore
 from worker.sim.params import SimParams
 from worker.sim.simulator import Simulator
 from worker.slam.params import SlamParams
@@ -37,7 +38,7 @@ def _run(world: World, seed: int = 3, **params):
     slam = make_slam("odometry", sim_params.laser, SlamParams(), rng)
     progress = []
     result = explore(
-        world, sim, slam, ExploreParams(**params), oracle=True, on_progress=progress.append
+        world, sim, slam, explore_params(**params), oracle=True, on_progress=progress.append
     )
     return result, progress
 
@@ -131,7 +132,7 @@ def test_diverging_slam_pose_fails_the_run_as_slam_diverged():
     rng = np.random.default_rng(0)
     sim = Simulator(world, SimParams(), rng)
     slam = DriftingSlam(make_slam("odometry", SimParams().laser, SlamParams(), rng))
-    result = explore(world, sim, slam, ExploreParams(time_limit=60.0), oracle=True)
+    result = explore(world, sim, slam, explore_params(time_limit=60.0), oracle=True)
     assert result.outcome == "failed" and result.reason == "slam_diverged"
     # 3 m at 1 m/s: the step at 3 s (exactly 3 m: rounding decides) or the next
     assert 2.95 < result.t[-1] <= 3.15

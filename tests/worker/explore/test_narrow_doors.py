@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierSearch
 from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
@@ -23,7 +24,7 @@ def _door(cells: int) -> np.ndarray:
 
 
 def _costmap(prob: np.ndarray, p: ExploreParams) -> GlobalCostmap:
-    cm = GlobalCostmap(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
     cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
     return cm
 
@@ -33,7 +34,7 @@ def _far_room_search(p: ExploreParams, closed) -> tuple[FrontierSearch, GlobalCo
     prob = _door(10)
     prob[:, 80:] = np.nan
     cm = _costmap(prob, p)
-    fs = FrontierSearch(p, closed)
+    fs = FrontierSearch(p.frontiers, p.planner, closed)
     fs.update(cm, None)
     return fs, cm
 
@@ -44,7 +45,7 @@ def test_a_0_7_m_door_mapped_a_cell_narrower_each_side_is_planned_through():
     # margin; 11 cells leave the same 0.30 m
     p = ExploreParams()
     for cells in (12, 11):
-        path = GlobalPlanner(p).plan(_costmap(_door(cells), p), (0.5, 0.5), (4.5, 0.5))
+        path = GlobalPlanner(p.planner).plan(_costmap(_door(cells), p), (0.5, 0.5), (4.5, 0.5))
         assert path is not None
         crossing = path[np.argmin(np.abs(path[:, 0] - 2.525))]
         assert 24 * RES < crossing[1] < 36 * RES
@@ -54,35 +55,45 @@ def test_a_door_the_map_draws_0_5_m_wide_is_planned_through_only_by_the_last_pas
     # 10 cells (0.5 m: a 0.5 m door, the robot's 0.4 m and 5 cm each side): the middle cells
     # are 0.25 m from a jamb's centre, under 0.2 + 0.06 m, over the 0.2 m inscribed radius
     p = ExploreParams()
-    assert GlobalPlanner(p).plan(_costmap(_door(10), p), (0.5, 0.5), (4.5, 0.5)) is None
-    path = GlobalPlanner(p).plan(_costmap(_door(10), p), (0.5, 0.5), (4.5, 0.5), squeeze=True)
+    assert GlobalPlanner(p.planner).plan(_costmap(_door(10), p), (0.5, 0.5), (4.5, 0.5)) is None
+    path = GlobalPlanner(p.planner).plan(
+        _costmap(_door(10), p), (0.5, 0.5), (4.5, 0.5), squeeze=True
+    )
     assert path is not None and path[-1][0] > 4.4
     # no last pass when its margin is the narrow one (the runs before it had only navfn's
     # rule as the fallback: narrow_margin 0)
-    off = ExploreParams(squeeze_margin=p.narrow_margin)
-    assert GlobalPlanner(off).plan(_costmap(_door(10), off), (0.5, 0.5), (4.5, 0.5), True) is None
-    old = ExploreParams(narrow_margin=0.0)
-    assert GlobalPlanner(old).plan(_costmap(_door(10), old), (0.5, 0.5), (4.5, 0.5)) is not None
+    off = explore_params(squeeze_margin=p.planner.narrow_margin)
+    assert (
+        GlobalPlanner(off.planner).plan(_costmap(_door(10), off), (0.5, 0.5), (4.5, 0.5), True)
+        is None
+    )
+    old = explore_params(narrow_margin=0.0)
+    assert (
+        GlobalPlanner(old.planner).plan(_costmap(_door(10), old), (0.5, 0.5), (4.5, 0.5))
+        is not None
+    )
 
 
 def test_the_fallback_is_navfn_and_still_refuses_a_door_narrower_than_the_robot():
     p = ExploreParams()
     from worker.explore.costmap_kernels import INSCRIBED, inflation_cost
 
-    assert planner_blocked_cost(narrow_params(p, squeeze=True)) == INSCRIBED
+    assert planner_blocked_cost(narrow_params(p.planner, squeeze=True), p.costmap) == INSCRIBED
     # the narrow margin's: the cost at 0.26 m from an obstacle's centre, plus one
-    cost = inflation_cost(0.26, 0.2, p.cost_scaling_factor, p.inflation_radius)
-    assert planner_blocked_cost(narrow_params(p)) == cost + 1
-    assert narrow_params(p).footprint_half_m == p.footprint_half_m
+    cost = inflation_cost(0.26, 0.2, p.costmap.cost_scaling_factor, p.costmap.inflation_radius)
+    assert planner_blocked_cost(narrow_params(p.planner), p.costmap) == cost + 1
+    assert narrow_params(p.planner).planner_margin == p.planner.narrow_margin
     # 0.35 m mapped (7 cells): the middle cell is 0.2 m from a jamb, inside the inscribed radius
-    assert GlobalPlanner(p).plan(_costmap(_door(7), p), (0.5, 0.5), (4.5, 0.5), True) is None
+    assert (
+        GlobalPlanner(p.planner).plan(_costmap(_door(7), p), (0.5, 0.5), (4.5, 0.5), True) is None
+    )
 
 
 def test_squeeze_margin_may_not_exceed_the_narrow_margin():
     from worker.errors import InputError
 
     with pytest.raises(InputError, match="squeeze_margin"):
-        ExploreParams(squeeze_margin=0.07)
+        explore_params(squeeze_margin=0.07)
 
 
 @pytest.mark.parametrize(
@@ -96,7 +107,7 @@ def test_a_frontier_behind_a_narrow_door_is_a_goal(cells, squeeze, expected):
     prob[:, 80:] = np.nan
     p = ExploreParams()
     cm = _costmap(prob, p)
-    fs = FrontierSearch(p)
+    fs = FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, None)
     goal = fs.choose(cm, (0.5, 1.5), [], squeeze=squeeze)
     if expected is None:
@@ -134,14 +145,14 @@ def test_a_room_behind_a_door_the_map_draws_0_5_m_wide_is_entered_last():
     narrow fallback took the robot into a classroom through a 0.5 m door at 1,120 s; it could
     not line up with the door again from inside, and the frontiers given up earlier (whose
     retry was still to come) were never reached. Such a door now waits for the rest."""
-    p = ExploreParams(look_through_radius=0.0)
+    p = explore_params(look_through_radius=0.0)
     far = _tight_room_and_a_far_frontier(far=True)
     # the far frontier (y 5.8 m) given up once: it is tried again before the door
     given_up = [(1.0, 5.775)]
     nav, _ = _first_goal(far, p, blacklist=given_up)
     assert nav.goal.goal_xy[1] > 5.0 and not nav.goal.squeeze
     # the fallback of the runs before (navfn's rule at once): the room, the retry left
-    old = ExploreParams(look_through_radius=0.0, narrow_margin=0.0)
+    old = explore_params(look_through_radius=0.0, narrow_margin=0.0)
     nav, _ = _first_goal(far, old, blacklist=given_up)
     assert nav.goal.goal_xy[0] > 2.6 and len(nav.memory.blacklist) == 1
     # and so on a noisy laser, whose map draws doors narrower and whose stack takes every
@@ -152,7 +163,7 @@ def test_a_room_behind_a_door_the_map_draws_0_5_m_wide_is_entered_last():
     nav, cmd = _first_goal(_tight_room_and_a_far_frontier(far=False), p)
     assert nav.goal.squeeze and nav.goal.goal_xy[0] > 2.6
     # off (squeeze_margin = narrow_margin): nothing is left
-    off = ExploreParams(look_through_radius=0.0, squeeze_margin=p.narrow_margin)
+    off = explore_params(look_through_radius=0.0, squeeze_margin=p.planner.narrow_margin)
     nav, cmd = _first_goal(_tight_room_and_a_far_frontier(far=False), off)
     assert cmd.status == "no_frontier"
     # before it (look-through on, the default): a look through the door from this side
@@ -161,8 +172,8 @@ def test_a_room_behind_a_door_the_map_draws_0_5_m_wide_is_entered_last():
 
 
 def test_a_goal_of_the_last_pass_takes_the_door_passage_on_a_noise_free_laser():
-    p = ExploreParams(look_through_radius=0.0)
-    assert not p.door_align
+    p = explore_params(look_through_radius=0.0)
+    assert not p.doors.door_align
     nav, cmd = _first_goal(_tight_room_and_a_far_frontier(far=False), p)
     assert nav.goal.squeeze
     # then 0.45 m before the door and 0.1 m off its axis, heading 0.6 rad off it: the

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tests.worker.explore.test_loop import _box, _cells
+from worker.explore.flat_params import explore_params
 from worker.explore.loop import Exploration
 from worker.explore.nav_state import TRANSITIONS, NavState
 from worker.explore.navigator import Navigator
@@ -72,12 +73,12 @@ def test_an_obstacle_the_map_lacks_close_in_front_is_the_safety_controllers_then
     # to the side, inside the 0.22 m band it sweeps: the DWA still drives on (it swerves),
     # the safety controller backs off and turns the nose away, clockwise
     cmd = nav.step(0.1, pose, 0.15, 0.0, _scan_with_point(0.38, 0.21))
-    assert (cmd.status, cmd.v, cmd.w) == ("safety", p.escape_vel, -p.safety_turn_vel)
+    assert (cmd.status, cmd.v, cmd.w) == ("safety", p.dwa.escape_vel, -p.safety.safety_turn_vel)
     assert nav.state is NavState.SAFETY
     # the manoeuvre lasts safety_backoff_time, then the goal layer drives again
     t = 0.2
-    while t < 0.1 + p.safety_backoff_time - 1e-9:
-        assert nav.step(t, pose, p.escape_vel, 0.0, NO_HITS).status == "safety"
+    while t < 0.1 + p.safety.safety_backoff_time - 1e-9:
+        assert nav.step(t, pose, p.dwa.escape_vel, 0.0, NO_HITS).status == "safety"
         t += 0.1
     assert nav.step(t + 0.1, pose, 0.0, 0.0, NO_HITS).status == "driving"
     S = NavState
@@ -109,7 +110,7 @@ def test_a_whole_run_changes_state_only_as_the_table_says():
     rng = np.random.default_rng(3)
     sim = Simulator(world, SimParams(), rng)
     slam = make_slam("odometry", SimParams().laser, SlamParams(), rng)
-    run = Exploration(world, sim, slam, ExploreParams(time_limit=900.0), True, None)
+    run = Exploration(world, sim, slam, explore_params(time_limit=900.0), True, None)
     nav = run.nav
     S = NavState
     visited = set()
@@ -138,7 +139,7 @@ def test_the_door_passage_forward_motion_is_the_safety_controllers_to_veto():
     # door_align on, the robot on the axis of a 0.7 m door in a wall 0.1 m thick, the
     # unexplored room beyond it: the door passage drives; something the map lacks appears
     # 0.1 m in front of the footprint, on the axis: the safety controller backs off
-    p = ExploreParams(door_align=True)
+    p = explore_params(door_align=True)
     nav = Navigator(p, ANGLES, 30.0)
     prob = np.full((80, 120), np.nan, dtype=np.float32)
     prob[:, :90] = 0.05  # known free to x = 4.5 m, unknown beyond
@@ -148,9 +149,9 @@ def test_the_door_passage_forward_motion_is_the_safety_controllers_to_veto():
     pose = np.array([2.3, 2.0, 0.0])
     cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
     assert nav.door.door is not None and cmd.status == "driving"
-    assert (cmd.v, cmd.w) == (p.door_speed, 0.0)
+    assert (cmd.v, cmd.w) == (p.doors.door_speed, 0.0)
     cmd = nav.step(0.1, pose, cmd.v, 0.0, _scan_with_point(0.3, 0.0))
-    assert (cmd.status, cmd.v) == ("safety", p.escape_vel) and nav.state is NavState.SAFETY
+    assert (cmd.status, cmd.v) == ("safety", p.dwa.escape_vel) and nav.state is NavState.SAFETY
     assert nav.safety.n_triggers == 1
 
 
@@ -184,7 +185,7 @@ def test_a_robot_driving_along_a_detour_makes_progress_and_one_standing_still_do
     # plan it grows for the first 5 m and is back to 2 m only after 10 m: at 0.15 m/s (the
     # door passage's speed) that is 67 s, over the 30 s progress_timeout
     p = ExploreParams()
-    assert p.progress_timeout == 30.0
+    assert p.navigator.progress_timeout == 30.0
     nav = Navigator(p, ANGLES, 30.0)
     path = _u_pursuit(nav)
     d = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))))
@@ -203,7 +204,7 @@ def _room_sealed_by_a_closed_gap(reopens: int) -> tuple[Navigator, np.ndarray]:
     # the robot's room (x, y 0.25-2.5 m) with a 1 m door in its top wall (x 1.0-2.0), a
     # corridor above it (y 2.75-4) open to the unknown 4 m to the right; the door's cells are
     # a gap closed after a failure (ClosedGaps), as if the robot had failed to leave by it
-    nav = Navigator(ExploreParams(closed_gap_reopens=reopens), ANGLES, 30.0)
+    nav = Navigator(explore_params(closed_gap_reopens=reopens), ANGLES, 30.0)
     prob = np.full((90, 200), 0.9, dtype=np.float32)
     prob[5:50, 5:50] = 0.05
     prob[50:55, 20:40] = 0.05  # the door
@@ -223,7 +224,7 @@ def test_a_closed_gap_that_seals_the_robot_in_is_opened_when_nothing_else_is_lef
     cmd = nav.step(0.0, pose, 0.0, 0.0, NO_HITS)
     assert nav.state is NavState.DRIVING and cmd.status != "no_frontier"
     assert nav.goal.goal_xy[0] > 6.0 and not nav.goal.look_through  # the corridor's end
-    assert len(nav.closed.points) == 0 and nav._reopens_left == 0
+    assert len(nav.closed.points) == 0 and nav.chooser._reopens_left == 0
 
 
 def _past_a_narrowed_gap(trap_reach: float) -> tuple[Navigator, np.ndarray]:
@@ -233,7 +234,7 @@ def _past_a_narrowed_gap(trap_reach: float) -> tuple[Navigator, np.ndarray]:
     from worker.explore.frontiers import FrontierGoal
     from worker.explore.nav_state import Pursuit
 
-    nav = Navigator(ExploreParams(trail_spacing=0.04, trap_reach=trap_reach), ANGLES, 30.0)
+    nav = Navigator(explore_params(trail_spacing=0.04, trap_reach=trap_reach), ANGLES, 30.0)
     prob = np.full((80, 100), np.nan, dtype=np.float32)
     prob[:, :80] = 0.05
     ys = (np.arange(80) + 0.5) * RES

@@ -54,8 +54,8 @@ def test_a_wall_face_the_map_shows_free_becomes_lethal_and_no_frontier():
     prob[:, :41] = 0.05
     prob[:, 40] = 0.2
     p = ExploreParams()
-    cm = GlobalCostmap(p)
-    fs = FrontierSearch(p)
+    cm = GlobalCostmap(p.costmap, p.doors.door_align)
+    fs = FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, (0.0, 0.0)))
     assert not cm.lethal[:, 40].any() and fs.frontier[5:15, 40].all()
     angles = np.linspace(-0.3, 0.3, 61)

@@ -9,6 +9,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra as sp_dijkstra
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.params import ExploreParams
 from worker.explore.planner import DijkstraSearch, GlobalPlanner, path_length, planner_blocked_cost
 
@@ -16,7 +17,7 @@ RES = 0.05
 
 
 def _costmap(prob):
-    cm = GlobalCostmap(ExploreParams())
+    cm = GlobalCostmap(ExploreParams().costmap)
     cm.update(prob.astype(np.float32), RES, (0.0, 0.0))
     return cm
 
@@ -26,7 +27,7 @@ def test_potential_on_open_ground_is_octile_distance_times_neutral_cost():
     target = np.zeros(cm.shape, dtype=bool)
     target[30, 35] = True
     search = DijkstraSearch()
-    found = search.run(cm, (5, 10), target, ExploreParams())
+    found = search.run(cm, (5, 10), target, ExploreParams().planner)
     assert len(found) == 1 and found[0] == 30 * 41 + 35
     dx, dy = 30, 20  # 20 diagonal steps and 10 straight ones
     assert math.isclose(search.potential[30, 35], 50.0 * (10 + 20 * math.sqrt(2)), rel_tol=1e-12)
@@ -38,7 +39,7 @@ def test_path_goes_through_the_door_and_keeps_off_walls():
     prob[:, 50] = 0.9
     prob[24:36, 50] = 0.05  # a 0.6 m door in the wall, cells 24..35
     cm = _costmap(prob)
-    path = GlobalPlanner(ExploreParams()).plan(cm, (0.5, 0.5), (4.5, 0.5))
+    path = GlobalPlanner(ExploreParams().planner).plan(cm, (0.5, 0.5), (4.5, 0.5))
     assert path is not None
     crossing = path[np.argmin(np.abs(path[:, 0] - 2.525))]
     assert 24 * RES + 0.2 < crossing[1] < 36 * RES - 0.2  # through the door's middle part
@@ -51,14 +52,16 @@ def test_goal_behind_a_closed_wall_is_unreachable():
     prob = np.full((60, 100), 0.05)
     prob[:, 50] = 0.9
     cm = _costmap(prob)
-    assert GlobalPlanner(ExploreParams()).plan(cm, (0.5, 0.5), (4.5, 0.5)) is None
+    assert GlobalPlanner(ExploreParams().planner).plan(cm, (0.5, 0.5), (4.5, 0.5)) is None
 
 
 def test_door_narrower_than_the_robot_is_refused():
     prob = np.full((60, 100), 0.05)
     prob[:, 50] = 0.9
     prob[27:33, 50] = 0.05  # 0.3 m: the 0.4 m robot cannot pass
-    assert GlobalPlanner(ExploreParams()).plan(_costmap(prob), (0.5, 0.5), (4.5, 0.5)) is None
+    assert (
+        GlobalPlanner(ExploreParams().planner).plan(_costmap(prob), (0.5, 0.5), (4.5, 0.5)) is None
+    )
 
 
 def test_unknown_space_is_plannable_but_dearer_than_free():
@@ -66,15 +69,15 @@ def test_unknown_space_is_plannable_but_dearer_than_free():
     prob[10:30, 20:80] = np.nan  # an unknown block in the middle of the straight line
     cm = _costmap(prob)
     p = ExploreParams()
-    path = GlobalPlanner(p).plan(cm, (0.5, 1.0), (4.5, 1.0))
+    path = GlobalPlanner(p.planner).plan(cm, (0.5, 1.0), (4.5, 1.0))
     assert path is not None  # around the block through known free space, not across it
     cells = np.floor(path / RES).astype(int)
     assert not cm.unknown[cells[:, 1], cells[:, 0]].any()
     prob[0:10, 20:80] = 0.9
     prob[30:, 20:80] = 0.9
-    path = GlobalPlanner(p).plan(_costmap(prob), (0.5, 1.0), (4.5, 1.0))
+    path = GlobalPlanner(p.planner).plan(_costmap(prob), (0.5, 1.0), (4.5, 1.0))
     assert path is not None  # the only way is through the unknown block
-    blocked = GlobalPlanner(ExploreParams(allow_unknown=False)).plan(
+    blocked = GlobalPlanner(explore_params(allow_unknown=False).planner).plan(
         _costmap(prob), (0.5, 1.0), (4.5, 1.0)
     )
     assert blocked is None
@@ -86,7 +89,7 @@ def test_start_inside_inscribed_zone_can_escape():
     cm = _costmap(prob)
     start = (21 * RES + 0.025, 1.0)  # 0.05 m from the wall: cost 253
     assert cm.inflated[20, 21] == 253
-    path = GlobalPlanner(ExploreParams()).plan(cm, start, (1.8, 1.0))
+    path = GlobalPlanner(ExploreParams().planner).plan(cm, start, (1.8, 1.0))
     assert path is not None and path[-1][0] > 1.7
 
 
@@ -102,8 +105,8 @@ def test_a_star_plan_costs_the_same_as_dijkstra():
         target = np.zeros(cm.shape, dtype=bool)
         target[gy, gx] = True
         plain, star = DijkstraSearch(), DijkstraSearch()
-        a = plain.run(cm, (sx, sy), target, p)
-        b = star.run(cm, (sx, sy), target, p, goal_cell=(gx, gy))
+        a = plain.run(cm, (sx, sy), target, p.planner)
+        b = star.run(cm, (sx, sy), target, p.planner, goal_cell=(gx, gy))
         assert len(a) == len(b)
         if len(a):
             assert math.isclose(plain.potential[gy, gx], star.potential[gy, gx], rel_tol=1e-9)
@@ -124,16 +127,16 @@ def test_a_walled_in_goal_is_proved_unreachable_on_its_side():
     search = DijkstraSearch()
     target = np.zeros(cm.shape, dtype=bool)
     target[165, 165] = True
-    assert search.run(cm, (10, 10), target, p, goal_cell=(165, 165)).size == 0
+    assert search.run(cm, (10, 10), target, p.planner, goal_cell=(165, 165)).size == 0
     everything = (search.stamp == search.run_id).sum()  # the search covered all it reached
-    assert search.sealed_off(cm, (10, 10), (165, 165), p)
+    assert search.sealed_off(cm, (10, 10), (165, 165), p.planner)
     flooded = (search.stamp == search.run_id).sum()
     assert flooded < 28 * 28 < everything / 40  # only the room's inside was looked at
-    assert GlobalPlanner(p).plan(cm, (0.5, 0.5), (165 * RES, 165 * RES)) is None
+    assert GlobalPlanner(p.planner).plan(cm, (0.5, 0.5), (165 * RES, 165 * RES)) is None
     # outside the room, or with the start inside it: no proof, and the search finds it
-    assert not search.sealed_off(cm, (10, 10), (120, 120), p)
-    assert not search.sealed_off(cm, (160, 160), (165, 165), p)
-    assert GlobalPlanner(p).plan(cm, (0.5, 0.5), (6.0, 6.0)) is not None
+    assert not search.sealed_off(cm, (10, 10), (120, 120), p.planner)
+    assert not search.sealed_off(cm, (160, 160), (165, 165), p.planner)
+    assert GlobalPlanner(p.planner).plan(cm, (0.5, 0.5), (6.0, 6.0)) is not None
 
 
 def test_sealed_off_never_contradicts_the_search():
@@ -152,10 +155,10 @@ def test_sealed_off_never_contradicts_the_search():
         (sy, sx), (gy, gx) = rng.integers(0, 120, size=(2, 2))
         target = np.zeros(cm.shape, dtype=bool)
         target[gy, gx] = True
-        for escape in (None, p.pocket_escape_radius):
+        for escape in (None, p.planner.pocket_escape_radius):
             search = DijkstraSearch()
-            found = search.run(cm, (sx, sy), target, p, goal_cell=(gx, gy), escape_m=escape)
-            if search.sealed_off(cm, (sx, sy), (gx, gy), p, escape_m=escape):
+            found = search.run(cm, (sx, sy), target, p.planner, goal_cell=(gx, gy), escape_m=escape)
+            if search.sealed_off(cm, (sx, sy), (gx, gy), p.planner, escape_m=escape):
                 proofs += 1
                 assert found.size == 0, ((sx, sy), (gx, gy), escape)
     assert proofs > 20  # the proof is exercised, not only its refusals
@@ -175,11 +178,11 @@ def test_pocket_escape_crosses_no_inscribed_gap_beyond_the_escape_radius():
     assert cm.inflated[19:21, 60].min() >= 253
     p = ExploreParams()
     start, goal = (2.0, 1.0), (4.5, 1.0)
-    path = GlobalPlanner(p).plan(cm, start, goal, squeeze=True)
+    path = GlobalPlanner(p.planner).plan(cm, start, goal, squeeze=True)
     assert path is not None
     ix = np.floor(path[:, 0] / RES).astype(int)
     iy = np.floor(path[:, 1] / RES).astype(int)
-    far = np.hypot(path[:, 0] - start[0], path[:, 1] - start[1]) > p.escape_radius
+    far = np.hypot(path[:, 0] - start[0], path[:, 1] - start[1]) > p.planner.escape_radius
     assert cm.inflated[iy[far], ix[far]].max() < 253
     crossing = path[np.argmin(np.abs(path[:, 0] - 3.025))]
     assert 4.75 < crossing[1] < 5.25
@@ -195,17 +198,17 @@ def test_potentials_match_scipy_dijkstra_on_a_large_random_costmap():
     prob = np.where(rng.random((n, n)) < 0.001, 0.9, rng.uniform(0.0, 0.2, (n, n)))
     prob[rng.random((n, n)) < 0.05] = np.nan
     cm = _costmap(prob)
-    p = ExploreParams(allow_unknown=True)
+    p = explore_params(allow_unknown=True)
     sy, sx = n // 2, n // 2
     cm.inflated[sy - 2 : sy + 3, sx - 2 : sx + 3] = 0  # no escaping at the start
     cm.unknown[sy - 2 : sy + 3, sx - 2 : sx + 3] = False
     search = DijkstraSearch()
-    found = search.run(cm, (sx, sy), np.zeros(cm.shape, dtype=bool), p, escape_m=0.0)
+    found = search.run(cm, (sx, sy), np.zeros(cm.shape, dtype=bool), p.planner, escape_m=0.0)
     assert len(found) == 0
 
-    blocked = planner_blocked_cost(p)
+    blocked = planner_blocked_cost(p.planner, p.costmap)
     c = cm.inflated.astype(float)
-    enter = np.where(cm.unknown, 253.0, p.neutral_cost + p.cost_factor * c)
+    enter = np.where(cm.unknown, 253.0, p.planner.neutral_cost + p.planner.cost_factor * c)
     enter[cm.inflated >= blocked] = np.inf  # lethal and inscribed (blocked <= 253) alike
     idx = np.arange(n * n).reshape(n, n)
     rows, cols, w = [], [], []

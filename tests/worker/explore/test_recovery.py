@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from worker.explore.flat_params import explore_params
 from worker.explore.navigator import Navigator
 from worker.explore.params import ExploreParams
 from worker.explore.recovery import Trail, back_out, square_gap
@@ -16,11 +17,11 @@ RES = 0.05
 
 def test_trail_keeps_points_spaced_and_drops_the_oldest_past_its_cap():
     # binary fractions of a metre, exact in floating point: a point every 4th step
-    trail = Trail(ExploreParams(trail_spacing=1 / 16, trail_cap=10, trail_trim=4))
+    trail = Trail(explore_params(trail_spacing=1 / 16, trail_cap=10, trail_trim=4).recovery)
     for i in range(13):
         trail.grow(np.array([i / 64, 0.0, 0.0]))
     assert [float(q[0]) for q in trail.points] == [0.0, 1 / 16, 2 / 16, 3 / 16]
-    trail = Trail(ExploreParams(trail_spacing=0.05, trail_cap=10, trail_trim=4))
+    trail = Trail(explore_params(trail_spacing=0.05, trail_cap=10, trail_trim=4).recovery)
     for i in range(11):  # the 11th point passes the cap: the 4 oldest go, 7 remain
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
     assert len(trail.points) == 7
@@ -28,8 +29,8 @@ def test_trail_keeps_points_spaced_and_drops_the_oldest_past_its_cap():
 
 
 def test_back_target_lies_the_retrace_distance_back_in_a_straight_line():
-    p = ExploreParams(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
-    trail = Trail(p)
+    p = explore_params(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
+    trail = Trail(p.recovery)
     for i in range(3):
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
     assert trail.back_target() is None  # 3 points: too short
@@ -37,7 +38,7 @@ def test_back_target_lies_the_retrace_distance_back_in_a_straight_line():
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
     # newest point at 1.9 m: the newest one at least 16 x 0.05 = 0.8 m from it is at 1.1 m
     assert trail.back_target()[0] == pytest.approx(1.1)
-    trail = Trail(p)
+    trail = Trail(p.recovery)
     for i in range(5):
         trail.grow(np.array([0.1 * i, 0.0, 0.0]))
     assert trail.back_target()[0] == 0.0  # nothing 0.8 m away: the trail's start
@@ -45,8 +46,8 @@ def test_back_target_lies_the_retrace_distance_back_in_a_straight_line():
 
 def test_back_out_after_dithering_goes_the_way_the_robot_came_and_further_each_time():
     # in along x to 2 m, then 40 periods of dithering on the spot (trail points 0.06 m apart)
-    p = ExploreParams(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
-    trail = Trail(p)
+    p = explore_params(retrace_min_points=4, retrace_points=16, trail_spacing=0.05)
+    trail = Trail(p.recovery)
     for i in range(41):
         trail.grow(np.array([0.05 * i, 0.0, 0.0]))
     for k in range(40):
@@ -80,7 +81,7 @@ def test_back_out_reverses_straight_to_a_target_behind():
     pose = np.array([2.0, 2.0, 0.0])
     p, local = _free_local(pose)
     # target 1 m behind: the rear already points at it, so reverse at 1.5 x escape_vel
-    v, w = back_out(p, local, pose, np.array([-1.0, 0.0]))
+    v, w = back_out(p.recovery, p.dwa, local, pose, np.array([-1.0, 0.0]))
     assert (v, w) == (pytest.approx(-0.15), 0.0)
 
 
@@ -89,8 +90,8 @@ def test_back_out_first_turns_the_rear_towards_a_target_at_the_side():
     p, local = _free_local(pose)
     # target to the left (+y): the rear (pointing -x) must turn by -90 degrees, clockwise;
     # 1.5 x 90 degrees is past max_vel_theta, and the error is past 0.6 rad: turn only
-    v, w = back_out(p, local, pose, np.array([0.0, 1.0]))
-    assert (v, w) == (0.0, -p.max_vel_theta)
+    v, w = back_out(p.recovery, p.dwa, local, pose, np.array([0.0, 1.0]))
+    assert (v, w) == (0.0, -p.dwa.max_vel_theta)
 
 
 def test_back_out_into_an_obstacle_is_not_legal():
@@ -99,7 +100,7 @@ def test_back_out_into_an_obstacle_is_not_legal():
     # scan hits 3 cm behind the footprint's rear edge (x = 1.8): 7.5 cm of reversing hit them
     local.add_points(0.0, np.column_stack((np.full(21, 1.77), np.linspace(1.5, 2.5, 21))))
     local.build(pose[0], pose[1], None, pose[2], use_map=False)
-    assert back_out(p, local, pose, np.array([-1.0, 0.0])) is None
+    assert back_out(p.recovery, p.dwa, local, pose, np.array([-1.0, 0.0])) is None
 
 
 def test_square_gap_is_the_distance_to_the_footprints_edge():
@@ -131,7 +132,7 @@ def _gap_local(gap_lo: float, gap_hi: float, pose):
 
 def _straight_trail(x1: float, planned=lambda x: True) -> Trail:
     """A trail along y = 2 m from x = 0 to x1, a point every 0.05 m (all kept), heading +x."""
-    trail = Trail(ExploreParams(trail_spacing=0.04))
+    trail = Trail(explore_params(trail_spacing=0.04).recovery)
     for i in range(int(round(x1 / 0.05)) + 1):
         x = 0.05 * i
         trail.grow(np.array([x, 2.0, 0.0]), planned(x))
@@ -170,8 +171,8 @@ def test_a_trap_is_a_gap_behind_the_robot_now_narrower_than_its_body():
 def test_the_back_out_steers_along_the_trail_round_its_bends():
     # in along x to (1, 0), then up to (1, 1): backing out from (1, 1) to the start of the
     # trail, the aim is on the way in (x = 1, lower y), not on the straight line to (0, 0)
-    p = ExploreParams(trail_spacing=0.04)  # every point below kept (0.05 m apart)
-    trail = Trail(p)
+    p = explore_params(trail_spacing=0.04)  # every point below kept (0.05 m apart)
+    trail = Trail(p.recovery)
     for i in range(21):
         trail.grow(np.array([0.05 * i, 0.0, 0.0]))
     for i in range(1, 21):

@@ -34,10 +34,10 @@ def test_front_clearance_measures_from_the_front_edge_in_the_robots_way():
 
 def test_safety_backs_off_and_turns_away_then_releases():
     p = ExploreParams()
-    safety = SafetyController(p, ANGLES, 30.0)
+    safety = SafetyController(p.safety, p.costmap, p.dwa, ANGLES, 30.0)
     assert safety.check(0.0, _scan_with_point(1.0, 0.0), 0.5) is None
     v, w = safety.check(0.0, _scan_with_point(0.3, 0.1), 0.5)  # obstacle front-left
-    assert v == p.escape_vel < 0 and w < 0  # nose turns clockwise, away from the left
+    assert v == p.dwa.escape_vel < 0 and w < 0  # nose turns clockwise, away from the left
     assert safety.n_triggers == 1 and safety.active(0.5)
     assert safety.check(0.5, _scan_with_point(5.0, 0.0), 0.5) == (v, w)  # manoeuvre continues
     assert safety.check(1.0, _scan_with_point(5.0, 0.0), 0.5) is None
@@ -52,21 +52,24 @@ def test_on_a_noisy_laser_one_short_reading_is_not_an_obstacle_two_beams_are():
     # median of three beams (what Navigator uses on a noisy laser) does not; a thin leg
     # 0.3 m ahead seen by two neighbouring beams (7 mm apart there) stops both
     p = ExploreParams()
-    assert p.safety_median_beams == 3
+    assert p.safety.safety_median_beams == 3
     wall = np.full(541, 30.0)
     ahead = np.abs(ANGLES) < 0.3
     wall[ahead] = 0.7 / np.cos(ANGLES[ahead])
     k = int(np.argmin(np.abs(ANGLES)))
     short = wall.copy()
     short[k] = 0.25
-    raw = SafetyController(p, ANGLES, 30.0)
-    filtered = SafetyController(p, ANGLES, 30.0, median=3)
+    raw = SafetyController(p.safety, p.costmap, p.dwa, ANGLES, 30.0)
+    filtered = SafetyController(p.safety, p.costmap, p.dwa, ANGLES, 30.0, median=3)
     assert raw.check(0.0, wall, 0.5) is None and filtered.check(0.0, wall, 0.5) is None
     assert raw.check(0.0, short, 0.5) is not None
     assert filtered.check(0.0, short, 0.5) is None
     leg = wall.copy()
     leg[k : k + 2] = 0.3
-    assert SafetyController(p, ANGLES, 30.0, median=3).check(0.0, leg, 0.5) is not None
+    assert (
+        SafetyController(p.safety, p.costmap, p.dwa, ANGLES, 30.0, median=3).check(0.0, leg, 0.5)
+        is not None
+    )
 
 
 def test_the_navigator_filters_only_a_noisy_lasers_readings():

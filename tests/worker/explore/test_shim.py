@@ -15,7 +15,7 @@ RES = 0.05
 
 
 def _local(points, pose, p):
-    local = LocalCostmap(p, RES)
+    local = LocalCostmap(p.costmap, p.dwa, RES)
     if len(points):
         local.add_points(0.0, np.asarray(points, dtype=float))
     local.build(pose[0], pose[1], None, pose[2])
@@ -57,16 +57,23 @@ def _path_west(x0=3.0, y=3.0):
 def test_path_ahead_is_left_to_the_dwa():
     p = ExploreParams()
     pose = np.array([3.0, 3.0, math.pi])
-    assert HeadingShim(p).command(pose, 0.0, _path_west(), _local([], pose, p)) is None
+    assert (
+        HeadingShim(p.dwa, p.costmap, p.recovery).command(
+            pose, 0.0, _path_west(), _local([], pose, p)
+        )
+        is None
+    )
 
 
 def test_path_behind_in_the_open_turns_on_the_spot_until_released():
     p = ExploreParams()
-    shim = HeadingShim(p)
+    shim = HeadingShim(p.dwa, p.costmap, p.recovery)
     pose = np.array([3.0, 3.0, 0.2])
     v, w, kind = shim.command(pose, 0.0, _path_west(), _local([], pose, p))
     assert kind == "rotate" and v == 0.0 and w > 0  # the short way round: left
-    assert w <= p.acc_lim_theta / p.controller_frequency + 1e-9  # from rest: one step's accel
+    assert (
+        w <= p.dwa.acc_lim_theta / p.dwa.controller_frequency + 1e-9
+    )  # from rest: one step's accel
     pose[2] = math.pi - 0.9  # 0.9 rad off: above the release angle, it keeps turning
     assert shim.command(pose, 0.25, _path_west(), _local([], pose, p))[2] == "rotate"
     pose[2] = math.pi - 0.4  # below shim_release (0.5 rad): the DWA takes over
@@ -82,7 +89,7 @@ def test_boxed_in_it_backs_out_until_it_can_turn():
          _segment(3.45, 2.72, 3.45, 3.28)]
     )  # fmt: skip
     x = np.array([3.0, 3.0, 0.0])
-    shim = HeadingShim(p)
+    shim = HeadingShim(p.dwa, p.costmap, p.recovery)
     kinds = _until_rotate(
         shim, x, lambda: (_path_west(x[0] - 0.3), _local(walls, x, p)), walls, steps=200
     )
@@ -96,12 +103,14 @@ def test_a_turn_under_way_keeps_its_direction_when_the_path_is_about_behind():
     # the path flipped "the short way round" every other period, and the robot swung back
     # and forth among chair legs for minutes
     p = ExploreParams()
-    shim = HeadingShim(p)
+    shim = HeadingShim(p.dwa, p.costmap, p.recovery)
     pose = np.array([3.0, 3.0, 0.14])  # the path (west) 3.0 rad to the left
     assert shim.command(pose, 0.0, _path_west(), _local([], pose, p))[1] > 0
     pose[2] = -0.04  # now 3.10 rad to the right, 3.18 to the left: keep turning left
     assert shim.command(pose, 0.3, _path_west(), _local([], pose, p))[1] > 0
-    fresh = HeadingShim(p)  # a robot that was not turning takes the short way: right
+    fresh = HeadingShim(
+        p.dwa, p.costmap, p.recovery
+    )  # a robot that was not turning takes the short way: right
     assert fresh.command(pose, 0.0, _path_west(), _local([], pose, p))[1] < 0
 
 
@@ -119,14 +128,14 @@ def test_boxed_in_among_table_legs_it_backs_out_the_way_it_came_not_into_a_slot(
     q = data["prob"]
     prob = np.where(q == 255, np.nan, q / 250.0).astype(np.float32)
     res = float(data["resolution"])
-    costmap = GlobalCostmap(p)
+    costmap = GlobalCostmap(p.costmap, p.doors.door_align)
     costmap.update(prob, res, tuple(data["origin"]))
-    occ = np.argwhere(prob > p.occupied_thresh)  # (row, col) of the map's obstacle cells
+    occ = np.argwhere(prob > p.costmap.occupied_thresh)  # (row, col) of the map's obstacle cells
     occ_xy = data["origin"] + (occ[:, ::-1] + 0.5) * res
     x = data["pose"].astype(float).copy()
     path = data["path"].astype(float)
-    shim = HeadingShim(p)
-    local = LocalCostmap(p, res)
+    shim = HeadingShim(p.dwa, p.costmap, p.recovery)
+    local = LocalCostmap(p.costmap, p.dwa, res)
     local.add_points(0.0, data["marks"].astype(float))
 
     def sense():

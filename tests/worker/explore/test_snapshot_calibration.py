@@ -35,9 +35,9 @@ def _fires(run, **rule_kw) -> list[float]:
     """The snapshot times at which a rule with these settings says the map is unchanged."""
     t, _, origin, res, maps, _ = run
     p = ExploreParams()
-    kw = {"measure": p.snapshot_measure, "change": p.snapshot_change,
-          "tolerance": p.snapshot_tolerance} | rule_kw  # fmt: skip
-    rule = SnapshotRule(p.snapshot_period, p.snapshot_mse, **kw)
+    kw = {"measure": p.stop.snapshot_measure, "change": p.stop.snapshot_change,
+          "tolerance": p.stop.snapshot_tolerance} | rule_kw  # fmt: skip
+    rule = SnapshotRule(p.stop.snapshot_period, p.stop.snapshot_mse, **kw)
     fired = []
     for ti, img, o in zip(t, maps, origin, strict=True):
         # the images are map_saver levels already; feed them back as probabilities
@@ -50,7 +50,7 @@ def _fires(run, **rule_kw) -> list[float]:
 def test_the_data_is_a_finished_exploration_snapshot_every_period(run):
     t, cov, _, _, _, meta = run
     assert meta["end_reason"] == "no_frontier" and meta["end_t"] > 1800
-    np.testing.assert_allclose(np.diff(t), ExploreParams().snapshot_period)
+    np.testing.assert_allclose(np.diff(t), ExploreParams().stop.snapshot_period)
     assert cov[t == 900][0] > 0.97 and cov[-1] - cov[t == 900][0] < 0.005  # it had levelled off
 
 

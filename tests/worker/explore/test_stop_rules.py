@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.worker.explore.test_loop import _dead_end_world, _run
-from worker.explore.params import ExploreParams
+from worker.explore.flat_params import explore_params
 from worker.explore.stop_rules import (
     CollisionRule,
     DivergenceRule,
@@ -301,13 +301,13 @@ def test_rules_are_asked_in_order_and_the_first_answer_wins():
         x: float = 0.0
         y: float = 0.0
 
-    p = ExploreParams(no_frontier_time=0.1, max_goal_failures=2)
-    rules = default_rules(p, np.zeros(3), n_collisions=0)
+    p = explore_params(no_frontier_time=0.1, max_goal_failures=2)
+    rules = default_rules(p.stop, p.time_limit, np.zeros(3), n_collisions=0)
     assert first_stop(rules, _state(0.0, status="no_frontier")) is None
     # no frontier for 0.1 s, two goals given up and a collision, all at once: the collision
     s = _state(0.1, status="no_frontier", goal_failures=2, collisions=[Hit()])
     assert first_stop(rules, s).reason == "collision"
-    rules = default_rules(p, np.zeros(3), n_collisions=0)
+    rules = default_rules(p.stop, p.time_limit, np.zeros(3), n_collisions=0)
     first_stop(rules, _state(0.0, status="no_frontier"))
     s = _state(0.1, status="no_frontier", goal_failures=2)
     assert first_stop(rules, s) == StopReason("stuck", "2 goals given up in a row")
