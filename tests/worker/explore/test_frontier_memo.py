@@ -1,5 +1,5 @@
-"""Issue 52: the frontier choice answered from memory equals a choice made from scratch, after
-random map edits (each read through its own window), looks and questions."""
+"""Issue 52: the frontier choice and the global plan answered from memory equal the ones made
+from scratch, after random map edits (each read through its own window), looks and questions."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
+from worker.explore.planner import GlobalPlanner
 
 RES = 0.05
 H, W = 56, 64
@@ -117,3 +118,52 @@ def test_the_same_question_on_the_same_map_is_answered_from_memory():
     assert fs.memo.hits == 1
     fs = _run([ask0, ("look", 0, 0.0), ask0])  # the room's right side is in view: counted
     assert fs.memo.hits == 0
+
+
+# (start spot, goal spot, squeeze)
+plan = st.tuples(
+    st.just("plan"),
+    st.integers(0, len(SPOTS) - 1),
+    st.integers(0, len(SPOTS) - 1),
+    st.booleans(),
+)
+
+
+def _plans(ops) -> tuple[GlobalPlanner, GlobalCostmap]:
+    """A planner told of every costmap change (as the navigator tells it), asked the `plan`
+    ops between the edits; each answer checked against a new planner on a new costmap."""
+    p = _params()
+    prob = np.full((H, W), np.nan, dtype=np.float32)
+    prob[20:36, 24:40] = FREE
+    cm, planner = GlobalCostmap(p), GlobalPlanner(p)
+    cm.update(prob, RES, ORIGIN)
+    planner.map_changed()
+    for op in ops:
+        if op[0] == "edit":
+            changed = cm.update(prob, RES, ORIGIN, window_m=_window(prob, op))
+            if changed[1] > changed[0]:
+                planner.map_changed()
+            continue
+        _, a, b, squeeze = op
+        got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
+        fresh = GlobalCostmap(p)
+        fresh.update(prob, RES, ORIGIN)
+        want = GlobalPlanner(p).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
+        assert (got is None and want is None) or np.array_equal(got, want)
+    return planner, cm
+
+
+@SETTINGS
+@given(st.lists(st.one_of(edit, plan, plan), min_size=1, max_size=16))
+def test_kept_plans_equal_plans_from_scratch(ops):
+    _plans(ops)
+
+
+def test_a_plan_asked_again_on_the_same_map_is_not_searched_again():
+    planner, cm = _plans([("plan", 0, 2, False)])
+    searches = planner.search.run_id  # one a search (and one a sealed-pocket test)
+    first = planner.plan(cm, SPOTS[0], SPOTS[2])
+    assert first is not None and planner.search.run_id == searches
+    planner.map_changed()
+    assert np.array_equal(planner.plan(cm, SPOTS[0], SPOTS[2]), first)
+    assert planner.search.run_id > searches
