@@ -305,11 +305,11 @@ def _flood_unknown(unknown, state, stamp, run_id, sy, sx, queue, max_cells):
 
 
 @njit(cache=True)
-def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_fov):
+def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_fov, looks):
     """Count a close look at each frontier cell the robot at cell (ry, rx), heading rth [rad],
     sees now: within `radius` cells, inside the laser's field of view (+-half_fov [rad]) and
     with a line of sight over known free cells. seen: (H, W) uint8, saturating. Returns how
-    many cells' counts grew."""
+    many cells' counts reached `looks` (the count that makes a frontier cell dead)."""
     h, w = frontier.shape
     r = int(radius)
     n = 0
@@ -327,7 +327,8 @@ def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_
                 continue
             if line_of_sight(lethal, unknown, ry, rx, jy, jx):
                 seen[jy, jx] += 1
-                n += 1
+                if seen[jy, jx] == looks:
+                    n += 1
     return n
 
 

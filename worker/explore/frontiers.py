@@ -140,11 +140,12 @@ class FrontierSearch:
         ix, iy = costmap.world_to_cell(pose[0], pose[1])
         if self.seen.shape != costmap.shape or not costmap.in_bounds(ix, iy):
             return
-        looks = fk.observe_frontier(
+        dead = fk.observe_frontier(
             self.frontier, costmap.lethal, costmap.unknown, self.seen, iy, ix, float(pose[2]),
             self.params.dead_frontier_radius / costmap.resolution, half_fov,
+            self.params.dead_frontier_looks,
         )  # fmt: skip
-        if looks:
+        if dead:  # a choice reads the counts only against dead_frontier_looks
             self.memo.changed()
 
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:

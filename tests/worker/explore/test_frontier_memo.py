@@ -116,8 +116,12 @@ def test_the_same_question_on_the_same_map_is_answered_from_memory():
     assert fs.memo.hits == 1
     fs = _run([ask0, ("edit", 0, 0, 2, 2, np.nan), ask0])  # nothing changed: unknown already
     assert fs.memo.hits == 1
-    fs = _run([ask0, ("look", 0, 0.0), ask0])  # the room's right side is in view: counted
-    assert fs.memo.hits == 0
+    # the room's right side in view: a look is counted, a second makes its cells dead
+    # (dead_frontier_looks = 2), which changes the choice
+    fs = _run([ask0, ("look", 0, 0.0), ask0])
+    assert fs.memo.hits == 1 and fs.seen.max() == 1
+    fs = _run([ask0, ("look", 0, 0.0), ("look", 0, 0.0), ask0])
+    assert fs.memo.hits == 0 and fs.seen.max() == 2
 
 
 # (start spot, goal spot, squeeze)
