@@ -305,12 +305,14 @@ def _flood_unknown(unknown, state, stamp, run_id, sy, sx, queue, max_cells):
 
 
 @njit(cache=True)
-def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_fov):
+def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_fov, looks):
     """Count a close look at each frontier cell the robot at cell (ry, rx), heading rth [rad],
     sees now: within `radius` cells, inside the laser's field of view (+-half_fov [rad]) and
-    with a line of sight over known free cells. seen: (H, W) uint8, saturating."""
+    with a line of sight over known free cells. seen: (H, W) uint8, saturating. Returns how
+    many cells' counts reached `looks` (the count that makes a frontier cell dead)."""
     h, w = frontier.shape
     r = int(radius)
+    n = 0
     for jy in range(max(0, ry - r), min(h, ry + r + 1)):
         for jx in range(max(0, rx - r), min(w, rx + r + 1)):
             if not frontier[jy, jx] or seen[jy, jx] == 255:
@@ -325,6 +327,9 @@ def observe_frontier(frontier, lethal, unknown, seen, ry, rx, rth, radius, half_
                 continue
             if line_of_sight(lethal, unknown, ry, rx, jy, jx):
                 seen[jy, jx] += 1
+                if seen[jy, jx] == looks:
+                    n += 1
+    return n
 
 
 @njit(cache=True)

@@ -11,6 +11,7 @@ import numpy as np
 from worker.explore import frontier_kernels as fk
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.costmap_kernels import INSCRIBED
+from worker.explore.frontier_memo import ChoiceMemo
 from worker.explore.params import FrontierParams, PlannerParams
 from worker.explore.planner import (
     ClosedGaps,
@@ -76,6 +77,9 @@ class FrontierSearch:
         # frontier cells per _TILE x _TILE block: the clusters are read from the blocks
         # that hold some, not map-wide
         self._counts = np.zeros((0, 0), dtype=np.int32)
+        # the answers of `choose` while nothing it reads changes (a robot with nothing left
+        # to explore asks every control period)
+        self.memo = ChoiceMemo()
 
     def update(self, costmap: GlobalCostmap, bbox) -> None:
         """Refresh the frontier cells in `bbox (y0, y1, x0, x1)` grown by one cell (None: all)."""
@@ -99,6 +103,7 @@ class FrontierSearch:
         y0, y1, x0, x1 = bbox
         if y1 <= y0:
             return
+        self.memo.changed()  # `bbox` holds every cell whose lethal or unknown state changed
         self.n_frontier_cells += fk.update_frontier_region(
             costmap.lethal,
             costmap.unknown,
@@ -136,10 +141,13 @@ class FrontierSearch:
         ix, iy = costmap.world_to_cell(pose[0], pose[1])
         if self.seen.shape != costmap.shape or not costmap.in_bounds(ix, iy):
             return
-        fk.observe_frontier(
+        dead = fk.observe_frontier(
             self.frontier, costmap.lethal, costmap.unknown, self.seen, iy, ix, float(pose[2]),
             self.params.dead_frontier_radius / costmap.resolution, half_fov,
+            self.params.dead_frontier_looks,
         )  # fmt: skip
+        if dead:  # a choice reads the counts only against dead_frontier_looks
+            self.memo.changed()
 
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:
         """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
@@ -161,6 +169,25 @@ class FrontierSearch:
         )
 
     def choose(
+        self,
+        costmap: GlobalCostmap,
+        robot_xy,
+        blacklist: list[np.ndarray],
+        avoid: list[np.ndarray] = (),
+        look_through: bool = False,
+        squeeze: bool = False,
+    ) -> FrontierGoal | None:
+        """`find_goal`'s answer, from memory when the same question was asked on the same map
+        state (`frontier_memo`: nothing map-sized is done while nothing changes)."""
+        cell = costmap.world_to_cell(robot_xy[0], robot_xy[1])
+        key = self.memo.question(cell, blacklist, avoid, self.closed.points, look_through, squeeze)
+        found, goal = self.memo.get(key, robot_xy)
+        if not found:
+            goal = self.find_goal(costmap, robot_xy, blacklist, avoid, look_through, squeeze)
+            self.memo.put(key, robot_xy, goal)
+        return goal
+
+    def find_goal(
         self,
         costmap: GlobalCostmap,
         robot_xy,

@@ -123,6 +123,7 @@ class Navigator(RecoveryLayer):
         self.frontiers.update(self.costmap, changed)
         if changed[1] > changed[0]:
             self._frontier_changed = True
+            self.planner.map_changed()  # plans kept only while the costmap stays the same
         self._map_updated = True
         if self.local is None:
             self.local = LocalCostmap(self.params.costmap, self.params.dwa, resolution)

@@ -121,14 +121,43 @@ class GlobalPlanner:
         self.closed = closed if closed is not None else ClosedGaps()
         self.search = search if search is not None else DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
+        # plans of this map state by question (`map_changed`); None: not kept (nobody tells
+        # the planner when the costmap changes)
+        self._plans: dict[tuple, np.ndarray | None] | None = None
+
+    def map_changed(self) -> None:
+        """The costmap's lethal or unknown cells (so its costs) may have changed: forget the
+        plans kept. The first call turns the keeping on: from then on the owner calls it after
+        every change, and a plan asked again on the same map state (the robot still in its
+        cell: planning failed and is retried every control period, or the robot turns in
+        place) is the one planned before, without a search."""
+        self._plans = {}
 
     def plan(
         self, costmap: GlobalCostmap, start_xy, goal_xy, squeeze: bool = False
     ) -> np.ndarray | None:
         """Path `(K, 2) [x, y]` (cell centres, map frame) from the robot to the goal, or None.
-        squeeze: a goal of the last pass, which may be planned with squeeze_margin."""
+        squeeze: a goal of the last pass, which may be planned with squeeze_margin. A pure
+        function of the costmap, the start and goal cells, squeeze and the closed gaps: kept
+        for the same question until `map_changed`."""
         sx, sy = costmap.world_to_cell(start_xy[0], start_xy[1])
         gx, gy = costmap.world_to_cell(goal_xy[0], goal_xy[1])
+        if self._plans is None:
+            return self._plan_cells(costmap, sx, sy, gx, gy, squeeze)
+        key = (
+            costmap.frame_id, costmap.shape, sx, sy, gx, gy, bool(squeeze),
+            self.closed.points.tobytes(),
+        )  # fmt: skip
+        if key not in self._plans:
+            if len(self._plans) >= 16:
+                self._plans.clear()
+            self._plans[key] = self._plan_cells(costmap, sx, sy, gx, gy, squeeze)
+        return self._plans[key]
+
+    def _plan_cells(
+        self, costmap: GlobalCostmap, sx: int, sy: int, gx: int, gy: int, squeeze: bool
+    ) -> np.ndarray | None:
+        """`plan` from cell (sx, sy) to cell (gx, gy)."""
         if not (costmap.in_bounds(sx, sy) and costmap.in_bounds(gx, gy)):
             return None
         if self._target.shape != costmap.shape:
