@@ -15,6 +15,7 @@ safety), sim and world with the reachability masks (simulator) and the trajector
 
 from __future__ import annotations
 
+import os
 import sys
 import tracemalloc
 from collections.abc import Callable
@@ -81,17 +82,39 @@ def sample(run: Any) -> dict[str, int]:
     return out
 
 
-def peak_sampler() -> tuple[Callable[[Any], None], dict[str, int]]:
-    """(on_progress callback, peaks): each call samples the components of the run that
-    called it and keeps the maxima in peaks (bytes)."""
-    peaks = dict.fromkeys(PARTS, 0)
+def resident_mb() -> float:
+    """The process's resident memory now [MiB] (Linux: /proc/self/statm), 0 elsewhere."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, IndexError, ValueError):
+        return 0.0
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
-    def on_progress(_progress: Any) -> None:
+
+def peak_sampler(
+    trace: list | None = None, trace_period: float = 60.0
+) -> tuple[Callable[[Any], None], dict[str, int]]:
+    """(on_progress callback, peaks): each call samples the components of the run that
+    called it and keeps the maxima in peaks (bytes). trace: a list that gets, every
+    trace_period of simulated time [s], [t, coverage, resident MiB, particle maps MiB,
+    planners MiB]: how the memory grows along the run."""
+    peaks = dict.fromkeys(PARTS, 0)
+    next_t = [0.0]
+
+    def on_progress(progress: Any) -> None:
         run = _exploration()
         if run is None:
             return
-        for k, v in sample(run).items():
+        now = sample(run)
+        for k, v in now.items():
             peaks[k] = max(peaks[k], v)
+        t = float(getattr(progress, "t", 0.0))
+        if trace is not None and t >= next_t[0]:
+            next_t[0] = t + trace_period
+            mib = [round(now[k] / 2**20, 1) for k in ("particle maps", "planners")]
+            cov = round(float(getattr(progress, "coverage", 0.0)), 3)
+            trace.append([round(t), cov, round(resident_mb()), *mib])
 
     return on_progress, peaks
 

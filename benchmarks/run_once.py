@@ -1,7 +1,9 @@
 """One whole run in the checkout it is started in, for `bench_run.py --against`: prints one
-JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb, parts_mb} (peak_mb: the process's
-peak resident memory in MiB, warm-up included; parts_mb: each component's peak, MiB, as
-benchmarks/memory_parts.py measures it, through a progress callback given to both trees).
+JSON line {sim_s, wall_s, cpu_s, outcome, threads, peak_mb, parts_mb, stop, coverage, ate,
+trace} (peak_mb: the process's peak resident memory in MiB, warm-up included; parts_mb: each
+component's peak, MiB, as benchmarks/memory_parts.py measures it, through a progress callback
+given to both trees; stop, coverage, ate: the summary's, None where a tree has none; trace:
+[t, coverage, resident MiB, particle maps MiB, planners MiB] every 60 s simulated).
 Uses only what every checkout since 39ad88e has (load_world, RunParams.from_json, run_one),
 so the same driver times both trees:
 
@@ -57,7 +59,8 @@ def main() -> None:
     if args.realtime is not None:  # issue 51's option (absent from older trees)
         data["realtime"] = {"speed": args.realtime}
     params = RunParams.from_json(data)
-    sampler, parts = peak_sampler()
+    trace: list = []
+    sampler, parts = peak_sampler(trace)
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_one(world, params, args.seed, sampler)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -68,7 +71,8 @@ def main() -> None:
         "outcome": s["outcome"], "threads": params.slam.threads,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "parts_mb": {k: round(v / 2**20, 1) for k, v in parts.items()},
-    }))  # fmt: skip
+        "stop": s.get("stop"), "coverage": s.get("coverage"), "ate": s.get("ate"), "trace": trace,
+    }, default=str))  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -20,8 +20,9 @@ NO_BOX = (PATCH, -1, PATCH, -1)  # [row min, row max, col min, col max] of a pat
 
 
 @njit(cache=True, nogil=True)
-def refresh_patches(visits, hits, table, ids, dirty, dense, boxes, changed):
-    """Reassemble the table cells (ty, tx) that are dirty or whose pool id differs from ids.
+def refresh_patches(visits, hslot, hits, table, ids, dirty, dense, boxes, changed):
+    """Reassemble the table cells (ty, tx) that are dirty or whose pool id differs from ids
+    (hits in hit slot hslot[e] of patch e, none where -1: worker.slam.map_kernels).
 
     dense: (TH*32, TW*32) float32 hits / visits, NaN where never visited (as `dense_prob`);
     boxes: (TH, TW, 4) int32 the seen cells' [row min, row max, col min, col max] in each
@@ -40,13 +41,15 @@ def refresh_patches(visits, hits, table, ids, dirty, dense, boxes, changed):
             r0, c0 = ty * PATCH, tx * PATCH
             rmin, rmax, cmin, cmax = PATCH, -1, PATCH, -1
             differs = False
+            s = hslot[e] if e >= 0 else -1
             for ly in range(PATCH):
                 for lx in range(PATCH):
                     p = np.float32(np.nan)
                     if e >= 0:
                         v = visits[e, ly, lx]
                         if v > 0:
-                            p = np.float32(hits[e, ly, lx] / v)
+                            h = hits[s, ly, lx] if s >= 0 else np.float32(0.0)
+                            p = np.float32(h / v)
                             rmin, rmax = min(rmin, ly), max(rmax, ly)
                             cmin, cmax = min(cmin, lx), max(cmax, lx)
                     old = dense[r0 + ly, c0 + lx]
@@ -61,21 +64,21 @@ def refresh_patches(visits, hits, table, ids, dirty, dense, boxes, changed):
 
 
 @njit(cache=True, nogil=True)
-def dense_hits(hits, table):
+def dense_hits(hslot, hits, table):
     """(TH*32, TW*32) float32 end-point counts of one particle's map, 0 where none."""
     th, tw = table.shape
     out = np.zeros((th * PATCH, tw * PATCH), dtype=np.float32)
     for ty in range(th):
         for tx in range(tw):
             e = table[ty, tx]
-            if e < 0:
+            if e < 0 or hslot[e] < 0:
                 continue
-            out[ty * PATCH : (ty + 1) * PATCH, tx * PATCH : (tx + 1) * PATCH] = hits[e]
+            out[ty * PATCH : (ty + 1) * PATCH, tx * PATCH : (tx + 1) * PATCH] = hits[hslot[e]]
     return out
 
 
 @njit(cache=True, nogil=True)
-def dense_prob(visits, hits, table):
+def dense_prob(visits, hslot, hits, table):
     """(TH*32, TW*32) float32 hits / visits of one particle's map, NaN where never visited
     (the whole map at once: the reference `refresh_patches` must agree with)."""
     th, tw = table.shape
@@ -85,11 +88,13 @@ def dense_prob(visits, hits, table):
             e = table[ty, tx]
             if e < 0:
                 continue
+            s = hslot[e]
             for ly in range(PATCH):
                 for lx in range(PATCH):
                     v = visits[e, ly, lx]
                     if v > 0:
-                        out[ty * PATCH + ly, tx * PATCH + lx] = hits[e, ly, lx] / v
+                        h = hits[s, ly, lx] if s >= 0 else np.float32(0.0)
+                        out[ty * PATCH + ly, tx * PATCH + lx] = h / v
     return out
 
 
@@ -112,12 +117,12 @@ class MapAssembly:
     def nbytes(self) -> int:
         return int(self.ids.nbytes + self.dense.nbytes + self.boxes.nbytes + self.changed.nbytes)
 
-    def update(self, visits, hits, table: np.ndarray, tpx0: int, tpy0: int, dirty) -> int:
+    def update(self, visits, hslot, hits, table: np.ndarray, tpx0: int, tpy0: int, dirty) -> int:
         """Bring the map to `table`'s particle (TH, TW) pool ids; clears `dirty`. Returns the
         number of patches reassembled."""
         self._follow(table.shape, tpx0, tpy0)
         n = refresh_patches(
-            visits, hits, table, self.ids, dirty, self.dense, self.boxes, self.changed
+            visits, hslot, hits, table, self.ids, dirty, self.dense, self.boxes, self.changed
         )
         dirty[:] = False
         return int(n)

@@ -5,15 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from worker.slam.assembly import MapAssembly, dense_hits
+from worker.slam.claim_kernels import claim_patches, register_claimed, scan_patches
 from worker.slam.grid import OccupancyGrid
-from worker.slam.map_kernels import (
-    PATCH,
-    PATCH_BITS,
-    claim_patches,
-    register_claimed,
-    register_scans,
-    scan_patches,
-)
+from worker.slam.map_kernels import PATCH, PATCH_BITS, register_scans
 
 
 class PatchMaps:
@@ -23,8 +17,10 @@ class PatchMaps:
     indexes the same cells; `tables` (N, TH, TW) int32 maps patch (px, py) to a pool id,
     -1 = never seen, with table cell (0, 0) = patch (tpx0, tpy0). The table grows (all
     particles alike) when a scan reaches past it, so a map covers the explored area only.
-    Resampling copies table rows, never patches (`select`). The pool's cell planes (`visits`,
-    `hits`, `mean`) and row bit masks (`bits`) are described in worker.slam.map_kernels.
+    Resampling copies table rows, never patches (`select`). The patch pool (`visits`, `hslot`)
+    and the hit pool of the patches in which a beam ended (`hits`, `mean`, `bits`) are
+    described in worker.slam.map_kernels; the scan matcher reads the latter through
+    `match_tables`.
     `dirty` (TH, TW) marks the table cells whose patches a scan wrote since the dense map was
     last assembled (worker.slam.assembly): `occupancy` and `changes` reassemble those only.
     """
@@ -37,10 +33,12 @@ class PatchMaps:
         self.tpx0 = 0
         self.tpy0 = 0
         self.visits = np.zeros((0, PATCH, PATCH), dtype=np.float32)
+        self.counts = np.zeros(0, dtype=np.int32)
+        self.hslot = np.zeros(0, dtype=np.int32)  # hit slot of each patch, -1: no hit
         self.hits = np.zeros((0, PATCH, PATCH), dtype=np.float32)
         self.mean = np.zeros((0, PATCH, PATCH, 2), dtype=np.float32)  # [m] in the cell
         self.bits = np.zeros((0, 2, PATCH), dtype=np.int64)  # occupied / full row bit masks
-        self.counts = np.zeros(0, dtype=np.int32)
+        self._match_tables: np.ndarray | None = None
         self.dirty = np.zeros((0, 0), dtype=np.bool_)
         self._assembly = MapAssembly()
         self.dropped = 0  # cell updates lost for lack of pool space (always 0 in practice)
@@ -54,19 +52,39 @@ class PatchMaps:
         """Patches the pool holds (live or free)."""
         return self.visits.shape[0]
 
+    @property
+    def hit_capacity(self) -> int:
+        """Hit slots the hit pool holds (used or free)."""
+        return self.hits.shape[0]
+
     def live_patches(self) -> int:
         """Distinct patches referenced by any particle."""
         return int(np.count_nonzero(self.counts))
 
+    def live_hit_slots(self) -> int:
+        """Hit slots of the patches referenced by any particle."""
+        return int(np.count_nonzero(self.hslot[self.counts > 0] >= 0))
+
     def nbytes(self) -> int:
-        """Bytes held by the pool, the tables and the assembled dense map."""
+        """Bytes held by the pools, the tables and the assembled dense map."""
         planes = self.visits.nbytes + self.hits.nbytes + self.mean.nbytes + self.bits.nbytes
-        tables = self.tables.nbytes + self.counts.nbytes + self.dirty.nbytes
+        tables = self.tables.nbytes + self.counts.nbytes + self.hslot.nbytes + self.dirty.nbytes
         return int(planes + tables + self._assembly.nbytes())
+
+    def match_tables(self) -> np.ndarray:
+        """(N, TH, TW) int32 every particle's table mapped through `hslot`: the hit slot of the
+        patch at each table cell, -1 where none (never seen, or no hit: all bits 0 there). What
+        the scan matcher reads `mean` and `bits` through."""
+        if self._match_tables is None:
+            out = self.hslot[self.tables] if self.hslot.size else np.full_like(self.tables, -1)
+            out[self.tables < 0] = -1
+            self._match_tables = out
+        return self._match_tables
 
     def select(self, indices: np.ndarray) -> None:
         """Resampling: particle k becomes a copy of old particle indices[k] (shares patches)."""
         self.tables = self.tables[np.asarray(indices, dtype=np.intp)]
+        self._match_tables = None
         self._recount()
 
     def _recount(self) -> None:
@@ -101,15 +119,16 @@ class PatchMaps:
         dirty[oy : oy + th, ox : ox + tw] = self.dirty
         self.tables, self.dirty, self.tpx0, self.tpy0 = grown, dirty, nx0, ny0
 
-    def _grow_pool(self, extra: int) -> None:
-        old = self.capacity
+    def _grow_pool(self, names: tuple[str, ...], extra: int) -> None:
+        """Grow the pool whose planes are `names` by at least `extra` entries (by half)."""
+        old = getattr(self, names[0]).shape[0]
         new = max(old + extra, int(old * 1.5), 256)
 
         # one plane at a time, each old one dropped before the next is copied: the peak is
         # the old pool plus one new plane, not the old pool plus the new one
-        for name in ("visits", "hits", "mean", "bits", "counts"):
+        for name in names:
             a = getattr(self, name)
-            out = np.zeros((new, *a.shape[1:]), dtype=a.dtype)  # new patches are set on use
+            out = np.zeros((new, *a.shape[1:]), dtype=a.dtype)  # new entries are set on use
             out[:old] = a
             del a
             setattr(self, name, out)
@@ -145,16 +164,16 @@ class PatchMaps:
         todo = self._todo(poses, same_as)
         ranges = np.ascontiguousarray(ranges_m, dtype=np.float64)
         need = self._reserve(poses, ranges, usable_range, max_range)
+        self._match_tables = None
         if parallel and todo.size > 1:
             self._register_parallel(
                 poses, ranges, cos_a, sin_a, usable_range, max_range, need, todo
             )
         else:
 
-            def step(free_stack: np.ndarray, n_free: np.ndarray, start: int) -> int:
+            def step(pools: tuple, start: int) -> int:
                 start, dropped = register_scans(
-                    self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
-                    self.tables, self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
+                    *pools, self.tables, self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
                     self.resolution, usable_range, max_range, need, todo, start, self.dirty,
                 )  # fmt: skip
                 self.dropped += int(dropped)
@@ -167,38 +186,56 @@ class PatchMaps:
 
     def _register_parallel(self, poses, ranges, cos_a, sin_a, usable_range, max_range, need, todo):
         """`register` with parallel=True: list each particle's patches (in parallel), claim
-        them in turn, then write (in parallel)."""
+        them and their hit slots in turn, then write (in parallel)."""
         lists, n_listed = scan_patches(
             self.tables.shape[1:], self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a,
             self.resolution, usable_range, max_range, todo,
         )  # fmt: skip
 
-        def claim(free_stack: np.ndarray, n_free: np.ndarray, start: int) -> int:
+        def claim(pools: tuple, start: int) -> int:
             return claim_patches(
-                self.visits, self.hits, self.mean, self.bits, self.counts, free_stack, n_free,
-                self.tables, lists, n_listed, need, todo, start, self.dirty,
+                *pools, self.tables, lists, n_listed, need, todo, start, self.dirty, self.tpx0,
+                self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range, max_range,
             )  # fmt: skip
 
         self._in_pool(need, todo, claim)
         dropped = register_claimed(
-            self.visits, self.hits, self.mean, self.bits, self.counts, self.tables, self.tpx0,
-            self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range, max_range,
-            todo, self.dirty,
+            self.visits, self.counts, self.hslot, self.hits, self.mean, self.bits, self.tables,
+            self.tpx0, self.tpy0, poses, ranges, cos_a, sin_a, self.resolution, usable_range,
+            max_range, todo, self.dirty,
         )  # fmt: skip
         if dropped:  # a patch the claim missed: the maps would differ from the serial ones
             raise RuntimeError(f"parallel scan registration dropped {dropped} cell updates")
 
     def _in_pool(self, need: np.ndarray, todo: np.ndarray, step) -> None:
-        """Run step(free_stack, n_free, start) -> next start over the particles of todo,
-        growing the pool whenever its free patches cannot cover the next one's worst case
-        (need: every patch of its scan's bounding box)."""
+        """Run step(pools, start) -> next start over the particles of todo, growing a pool
+        whenever its free entries cannot cover the next particle's worst case (need: every
+        patch of its scan's bounding box, and a hit slot for each). pools: the kernels'
+        (visits, counts, hslot, free patches, their number, hits, mean, bits, free hit slots,
+        their number); the free ones are those no particle's table reaches."""
         start = 0
         while start < todo.size:
-            free_stack = np.flatnonzero(self.counts == 0).astype(np.int32)
+            worst = int(need[todo[start:]].max())
+            # stacks popped from the end: the lowest free ids first, so that entries freed
+            # are reused before the untouched capacity is (whose pages are never made
+            # resident then)
+            free_stack = np.flatnonzero(self.counts == 0)[::-1].astype(np.int32)
             if free_stack.size < need[todo[start]]:
-                self._grow_pool(int(need[todo[start:]].max()) - free_stack.size)
+                self._grow_pool(("visits", "counts", "hslot"), worst - free_stack.size)
                 continue
-            start = step(free_stack, np.array([free_stack.size], dtype=np.int64), start)
+            used = np.zeros(self.hit_capacity, dtype=np.bool_)
+            slots = self.hslot[self.counts > 0]
+            used[slots[slots >= 0]] = True
+            hfree = np.flatnonzero(~used)[::-1].astype(np.int32)
+            if hfree.size < need[todo[start]]:
+                self._grow_pool(("hits", "mean", "bits"), worst - hfree.size)
+                continue
+            pools = (
+                self.visits, self.counts, self.hslot, free_stack,
+                np.array([free_stack.size], dtype=np.int64), self.hits, self.mean, self.bits,
+                hfree, np.array([hfree.size], dtype=np.int64),
+            )  # fmt: skip
+            start = step(pools, start)
 
     def _todo(self, poses: np.ndarray, same_as: np.ndarray | None) -> np.ndarray:
         """(K,) the particles whose scan is registered: all, or one of each `same_as` group."""
@@ -237,7 +274,15 @@ class PatchMaps:
         with_hits: with its cells' end-point counts (`OccupancyGrid.hits`). Only the patches
         written or re-pointed since the previous call are reassembled (MapAssembly)."""
         a = self._assembly
-        a.update(self.visits, self.hits, self.tables[particle], self.tpx0, self.tpy0, self.dirty)
+        a.update(
+            self.visits,
+            self.hslot,
+            self.hits,
+            self.tables[particle],
+            self.tpx0,
+            self.tpy0,
+            self.dirty,
+        )
         side = self.resolution * PATCH
         origin = np.array([self.tpx0 * side, self.tpy0 * side])
         crop = a.crop()
@@ -249,7 +294,7 @@ class PatchMaps:
         origin = origin + np.array([c0, r0]) * self.resolution
         hits = None
         if with_hits:
-            hits = dense_hits(self.hits, self.tables[particle])[r0:r1, c0:c1]
+            hits = dense_hits(self.hslot, self.hits, self.tables[particle])[r0:r1, c0:c1]
         return OccupancyGrid(a.dense[r0:r1, c0:c1], self.resolution, origin, self.occ_thresh, hits)
 
     def changes(self, particle: int) -> np.ndarray:
@@ -258,7 +303,15 @@ class PatchMaps:
         `changes` saw (at the first call: every seen cell); (0, 4) when none does. The map
         is brought up to date as `occupancy` does (the same incremental assembly)."""
         a = self._assembly
-        a.update(self.visits, self.hits, self.tables[particle], self.tpx0, self.tpy0, self.dirty)
+        a.update(
+            self.visits,
+            self.hslot,
+            self.hits,
+            self.tables[particle],
+            self.tpx0,
+            self.tpy0,
+            self.dirty,
+        )
         rects = a.take_changes()
         side = self.resolution * PATCH
         return (rects + np.array([a.tpx0, a.tpy0, a.tpx0, a.tpy0])) * side

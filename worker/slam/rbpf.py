@@ -234,7 +234,7 @@ class RbpfSlam:
         parallel = self._parallel()
         match = scan_match_all_parallel if parallel else scan_match_all
         args = (ranges, self._cos_a, self._sin_a, self._match_cfg)
-        maps = (m.mean, m.bits, m.tables, m.tpx0, m.tpy0)
+        maps = (m.mean, m.bits, m.match_tables(), m.tpx0, m.tpy0)
         poses, scores, likes = match(*maps, self.poses, *args)
         if pred is not None:
             coarse, _, _ = match(*maps, self.poses, *args[:-1], self._wide_cfg)
@@ -268,9 +268,9 @@ class RbpfSlam:
         m = self.maps
         fit = fit_proposals_parallel if parallel else fit_proposals
         mus, covs, log_eta = fit(
-            m.mean, m.bits, m.tables, m.tpx0, m.tpy0, modes, pred, self._prior_information(pred),
-            ranges, self._cos_a, self._sin_a, self._offsets, self._steps, prop.shifts,
-            self._match_cfg,
+            m.mean, m.bits, m.match_tables(), m.tpx0, m.tpy0, modes, pred,
+            self._prior_information(pred), ranges, self._cos_a, self._sin_a, self._offsets,
+            self._steps, prop.shifts, self._match_cfg,
         )  # fmt: skip
         return draw_gaussians(mus, covs, self.rng), log_eta
 

@@ -23,7 +23,7 @@ def _beam(maps, pose, r):
 def _whole(maps: PatchMaps, particle: int):
     """(prob, origin) of one particle's map assembled whole, cropped with numpy (the former
     PatchMaps.occupancy): the reference."""
-    prob = dense_prob(maps.visits, maps.hits, maps.tables[particle])
+    prob = dense_prob(maps.visits, maps.hslot, maps.hits, maps.tables[particle])
     known = ~np.isnan(prob)
     rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
     side = maps.resolution * PATCH

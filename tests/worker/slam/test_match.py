@@ -50,7 +50,7 @@ def _score(slam, laser, pose, ranges, cfg=None):
     m = slam.maps
     beams = _beams(laser, ranges, cfg)
     return score_and_likelihood(
-        m.mean, m.bits, m.tables[0], m.tpx0, m.tpy0, np.asarray(pose, float), beams, cfg
+        m.mean, m.bits, m.match_tables()[0], m.tpx0, m.tpy0, np.asarray(pose, float), beams, cfg
     )
 
 
@@ -77,8 +77,11 @@ class _Reference:
         if not (0 <= tx < tw and 0 <= ty < th) or m.tables[0, ty, tx] < 0:
             return 0.0, 0.0, 0.0, 0.0
         e, ly, lx = m.tables[0, ty, tx], gy & 31, gx & 31
-        return (float(m.hits[e, ly, lx]), float(m.visits[e, ly, lx]),
-                float(m.mean[e, ly, lx, 0]), float(m.mean[e, ly, lx, 1]))  # fmt: skip
+        s = m.hslot[e]
+        if s < 0:  # no beam ended in this patch
+            return 0.0, float(m.visits[e, ly, lx]), 0.0, 0.0
+        return (float(m.hits[s, ly, lx]), float(m.visits[e, ly, lx]),
+                float(m.mean[s, ly, lx, 0]), float(m.mean[s, ly, lx, 1]))  # fmt: skip
 
     def score(self, pose):
         x, y, t = pose
@@ -187,7 +190,7 @@ def _assert_climbs_as_the_reference(lskip, kernel, offsets, coarse=(0, 0)):
     for off in offsets:
         start = truth + np.array(off)
         pose, score, like, s0, l0 = optimize(
-            m.mean, m.bits, m.tables[0], m.tpx0, m.tpy0, start, beams, cfg
+            m.mean, m.bits, m.match_tables()[0], m.tpx0, m.tpy0, start, beams, cfg
         )
         want_pose, want_score = ref.optimize(start, *coarse)
         assert np.allclose(pose, want_pose, atol=1e-12) and np.isclose(score, want_score)
@@ -222,7 +225,8 @@ def test_hill_climbing_recovers_the_pose():
     beams = _beams(laser, ranges, cfg)
     for off in ([0.12, -0.08, 0.04], [-0.1, 0.1, -0.05], [0.0, 0.0, 0.0]):
         start = truth + np.array(off)
-        pose, score, *_ = optimize(m.mean, m.bits, m.tables[0], m.tpx0, m.tpy0, start, beams, cfg)
+        tables = m.match_tables()
+        pose, score, *_ = optimize(m.mean, m.bits, tables[0], m.tpx0, m.tpy0, start, beams, cfg)
         assert np.hypot(*(pose[:2] - truth[:2])) < 0.025  # within half a map cell
         assert abs(pose[2] - truth[2]) < 0.01  # 3 cm at 3 m: the cell means limit it
         assert score >= _score(slam, laser, start, ranges)[0]

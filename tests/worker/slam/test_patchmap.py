@@ -23,8 +23,9 @@ def test_single_beam_free_cells_and_hit():
     assert np.all(g.prob[0, :10] == 0.0) and g.prob[0, 10] == 1.0
     # the hit's mean position (GMapping's cell.mean()) is kept relative to the cell
     e = maps.tables[0, -maps.tpy0, -maps.tpx0]
-    assert maps.hits[e, 0, 10] == 1 and maps.visits[e, 0, 10] == 1
-    assert np.allclose(maps.mean[e, 0, 10], [0.08, 0.05], atol=1e-6)
+    s = maps.hslot[e]
+    assert maps.hits[s, 0, 10] == 1 and maps.visits[e, 0, 10] == 1
+    assert np.allclose(maps.mean[s, 0, 10], [0.08, 0.05], atol=1e-6)
 
 
 def test_usable_range_cuts_beam_without_hit_and_max_range_ignores():
@@ -47,7 +48,8 @@ def test_hits_over_visits():
     assert np.isclose(g.prob[0, 5], 1 / 3) and g.prob[0, 10] == 1.0
     # the mean of cell 10 over its two hits (both at x = 1.05 + 0.0 in the cell: 0.05)
     e = maps.tables[0, -maps.tpy0, -maps.tpx0]
-    assert maps.hits[e, 0, 10] == 2 and np.allclose(maps.mean[e, 0, 10], [0.05, 0.05], atol=1e-6)
+    s = maps.hslot[e]
+    assert maps.hits[s, 0, 10] == 2 and np.allclose(maps.mean[s, 0, 10], [0.05, 0.05], atol=1e-6)
 
 
 def test_the_map_with_hits_carries_each_cells_end_point_count():
@@ -145,9 +147,11 @@ def _planes(maps, k):
         for tx in range(tw):
             e = maps.tables[k, ty, tx]
             if e >= 0:
-                for plane, src in zip(out, (maps.visits, maps.hits, maps.mean, maps.bits),
-                                      strict=True):  # fmt: skip
-                    plane[ty, tx] = src[e]
+                out[0][ty, tx] = maps.visits[e]
+                s = maps.hslot[e]
+                if s >= 0:  # no slot: no hit, all zeros
+                    for plane, src in zip(out[1:], (maps.hits, maps.mean, maps.bits), strict=True):
+                        plane[ty, tx] = src[s]
     return out
 
 
@@ -183,3 +187,40 @@ def test_parallel_registration_writes_the_same_cells():
     assert serial.dropped == parallel.dropped == 0
     # the claim takes a few patches the lines miss (copies or empty), no more
     assert serial.live_patches() <= parallel.live_patches() <= 1.2 * serial.live_patches()
+
+
+def test_hit_slots_only_for_patches_where_a_beam_ended():
+    # one beam along +x from the origin, 4 m at 0.05 m: 80 cells over three patches; only the
+    # last holds the end point, so one hit slot for three patches
+    maps = PatchMaps(1, 0.05, 1.0, 0.25)
+    _beam(maps, [0.01, 0.01, 0.0], 4.0)
+    assert maps.live_patches() == 3 and maps.live_hit_slots() == 1
+    row = maps.tables[0, -maps.tpy0, -maps.tpx0 : -maps.tpx0 + 3]
+    assert list(maps.hslot[row] >= 0) == [False, False, True]
+    # the matcher's tables see only that patch
+    assert np.count_nonzero(maps.match_tables()[0] >= 0) == 1
+    # a beam cut at the usable range marks free cells only: no slot
+    _beam(maps, [0.01, 0.01, np.pi / 2], 5.0, usable=3.0)
+    assert maps.live_hit_slots() == 1 and maps.live_patches() > 3
+
+
+def test_copied_patches_get_their_own_hit_slots():
+    rng = np.random.default_rng(5)
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    maps = PatchMaps(4, 0.05, 1.0, 0.25)
+    poses = np.zeros((4, 3))
+    for _ in range(8):
+        scan = rng.uniform(4.0, 6.0, angles.size)  # the patches around the robot only crossed
+        maps.register(poses, scan, np.cos(angles), np.sin(angles), 30.0, 29.99)
+        maps.select(np.sort(rng.integers(0, 4, 4)))
+        poses = poses + rng.normal(0, 0.2, (4, 3))
+        live = maps.counts > 0
+        slots = maps.hslot[live][maps.hslot[live] >= 0]
+        # a slot belongs to one live patch; no more slots than patches with a hit
+        assert np.unique(slots).size == slots.size
+        with_hits = [e for e in np.flatnonzero(live) if maps.hslot[e] >= 0]
+        for e in with_hits:
+            assert maps.hits[maps.hslot[e]].sum() > 0
+    # the patches within 4 m of the robot are only crossed by beams: they have no slot
+    assert maps.live_hit_slots() < maps.live_patches()
+    assert maps.dropped == 0

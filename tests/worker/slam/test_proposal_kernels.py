@@ -56,7 +56,8 @@ def test_the_fitted_gaussian_spreads_along_a_featureless_corridor_and_not_across
     sigma_l, sigma_a = 0.05, 0.05  # [m], [rad] the motion model's deviations (isotropic)
     info = np.diag([1 / sigma_l**2, 1 / sigma_l**2, 1 / sigma_a**2])[None]
     mus, covs, log_eta = fit_proposals(
-        maps.mean, maps.bits, maps.tables, maps.tpx0, maps.tpy0, POSE[None], POSE[None], info,
+        maps.mean, maps.bits, maps.match_tables(), maps.tpx0, maps.tpy0, POSE[None], POSE[None],
+        info,
         ranges, np.cos(a), np.sin(a), offsets, STEPS, 0, cfg,
     )  # fmt: skip
     mu, cov = mus[0], covs[0]
@@ -83,7 +84,7 @@ def test_the_fitted_gaussian_spreads_along_a_featureless_corridor_and_not_across
     a_ = LASER.angles
     beams = prepare_beams(ranges, np.cos(a_), np.sin(a_), cfg)
     _, like0 = score_and_likelihood(
-        maps.mean, maps.bits, maps.tables[0], maps.tpx0, maps.tpy0, POSE, beams, cfg
+        maps.mean, maps.bits, maps.match_tables()[0], maps.tpx0, maps.tpy0, POSE, beams, cfg
     )
     assert abs(log_eta[0] - (like0 + math.log(1 + 2 * w1 + 2 * w2))) < 0.1
 
@@ -102,7 +103,8 @@ def test_a_wall_ahead_pins_the_axis_too():
     a = LASER.angles
     info = np.diag([1 / 0.05**2, 1 / 0.05**2, 1 / 0.05**2])[None]
     _, covs, _ = fit_proposals(
-        maps.mean, maps.bits, maps.tables, maps.tpx0, maps.tpy0, POSE[None], POSE[None], info,
+        maps.mean, maps.bits, maps.match_tables(), maps.tpx0, maps.tpy0, POSE[None], POSE[None],
+        info,
         box_scan(POSE, a, closed, 10.0), np.cos(a), np.sin(a),
         sample_offsets(0.1, 0.05, 0.01, 0.01), STEPS, 0, _cfg(),
     )  # fmt: skip
@@ -115,7 +117,7 @@ def test_the_threaded_fit_gives_the_same_gaussians():
     modes = POSE + np.array([[0.0, 0.0, 0.0], [0.3, 0.01, 0.002], [-0.2, -0.02, -0.003]])
     priors = POSE + np.array([[0.05, 0.0, 0.0], [0.0, 0.0, 0.0], [-0.4, 0.0, 0.01]])
     info = np.repeat(np.diag([1 / 0.04**2, 1 / 0.01**2, 1 / 0.08**2])[None], 3, axis=0)
-    tables = np.repeat(maps.tables[:1], 3, axis=0)
+    tables = np.repeat(maps.match_tables()[:1], 3, axis=0)
     args = (
         maps.mean, maps.bits, tables, maps.tpx0, maps.tpy0, modes, priors, info,
         box_scan(POSE, a, CORRIDOR, 10.0), np.cos(a), np.sin(a),
