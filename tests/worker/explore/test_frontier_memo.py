@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from worker.explore.costmap import GlobalCostmap
+from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner
@@ -39,7 +40,7 @@ SETTINGS = settings(max_examples=30, deadline=None, suppress_health_check=[Healt
 
 def _params() -> ExploreParams:
     # small goal radius and frontier size: the 2.8 m x 3.2 m test map has room for goals
-    return ExploreParams(min_frontier_size=0.15, dead_frontier_looks=2)
+    return explore_params(min_frontier_size=0.15, dead_frontier_looks=2)
 
 
 def _window(prob: np.ndarray, op) -> tuple[float, float, float, float]:
@@ -59,7 +60,7 @@ def _from_scratch(prob: np.ndarray, seen: np.ndarray, question) -> FrontierGoal 
     """The choice of a new costmap and frontier search built from the whole map now, with the
     same look counts."""
     p = _params()
-    cm, fs = GlobalCostmap(p), FrontierSearch(p)
+    cm, fs = GlobalCostmap(p.costmap), FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, ORIGIN))
     fs.seen[:] = seen
     xy, blacklist, look_through, squeeze = question
@@ -81,7 +82,7 @@ def _run(ops) -> FrontierSearch:
     prob = np.full((H, W), np.nan, dtype=np.float32)
     prob[20:36, 24:40] = FREE  # a known room, open to the unknown on all sides
     prob[20:36, 23] = OCC
-    cm, fs = GlobalCostmap(p), FrontierSearch(p)
+    cm, fs = GlobalCostmap(p.costmap), FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, ORIGIN))
     blacklist: list[np.ndarray] = []
     for op in ops:
@@ -139,7 +140,7 @@ def _plans(ops) -> tuple[GlobalPlanner, GlobalCostmap]:
     p = _params()
     prob = np.full((H, W), np.nan, dtype=np.float32)
     prob[20:36, 24:40] = FREE
-    cm, planner = GlobalCostmap(p), GlobalPlanner(p)
+    cm, planner = GlobalCostmap(p.costmap), GlobalPlanner(p.planner)
     cm.update(prob, RES, ORIGIN)
     planner.map_changed()
     for op in ops:
@@ -150,9 +151,9 @@ def _plans(ops) -> tuple[GlobalPlanner, GlobalCostmap]:
             continue
         _, a, b, squeeze = op
         got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
-        fresh = GlobalCostmap(p)
+        fresh = GlobalCostmap(p.costmap)
         fresh.update(prob, RES, ORIGIN)
-        want = GlobalPlanner(p).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
+        want = GlobalPlanner(p.planner).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
         assert (got is None and want is None) or np.array_equal(got, want)
     return planner, cm
 
