@@ -38,7 +38,14 @@ def main() -> None:
     sys.path.insert(0, str(tree))
     from worker.explore.loop import ExploreParams, explore
     from worker.sim.simulator import SimParams, Simulator
-    from worker.slam.base import make_slam
+
+    try:  # the tree's own layout: after issue 53, make_slam and grouped explore parameters
+        from worker.explore.flat_params import explore_params
+        from worker.slam.registry import make_slam
+    except ImportError:
+        from worker.slam.base import make_slam
+
+        explore_params = ExploreParams
     from worker.slam.params import SlamParams
     from worker.world.loader import load_world
 
@@ -49,7 +56,7 @@ def main() -> None:
     oracle = args.slam == "oracle"
     slam = make_slam("odometry" if oracle else args.slam, sim_params.laser, SlamParams(), rng)
     never = 10.0 * args.time_limit
-    params = ExploreParams(
+    params = explore_params(
         time_limit=args.time_limit, progress_period=0.1, no_frontier_time=never,
         stuck_timeout=never, snapshot_period=never,
     )  # fmt: skip
