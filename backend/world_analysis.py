@@ -129,7 +129,7 @@ def _analysed(box: Sandbox, blob: bytes, resolution: float | None, main: str):
 def _read_stored_upload(box: Sandbox, blob: bytes, main: str, resolution: float | None) -> bytes:
     """A floorplan's bytes from `pack_upload`'s zip (stored by this server, its names plain
     file names), read in the upload sandbox."""
-    from backend.api.routes.worlds import read_upload
+    from backend.services.worlds import read_upload
 
     with zipfile.ZipFile(io.BytesIO(blob)) as zf:
         files = {name: zf.read(name) for name in zf.namelist()}

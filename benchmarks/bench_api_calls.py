@@ -66,7 +66,7 @@ def _count(n: int, setup: dict) -> dict[str, float]:
 
     import backend.api.routes.jobs as routes
     from backend.core.config import Settings
-    from backend.main import create_app
+    from mapqual.app import create_app
 
     app = create_app(Settings())
     # the thread pool's work: a profiler per (worker thread, route); `on` names the route

@@ -20,17 +20,17 @@ from backend.api.deps import (
     CSRF_HEADER,
     SESSION_COOKIE,
     IdPath,
-    Principal,
     SessionDep,
     SettingsDep,
     current_user,
-    owned,
     require_csrf,
 )
-from backend.api.routes import jobs as jobs_api
-from backend.api.routes import worlds as worlds_api
-from backend.db.models import Job, Run, World
+from backend.db.models import Run, World
 from backend.schemas import JobIn, WorldOut
+from backend.services import jobs as jobs_service
+from backend.services import worlds as worlds_service
+from backend.services.access import Principal, owned
+from backend.services.errors import QuotaExceeded, ServiceError
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from frontend.dashboard.explore_data import group, job_result, load_runs, settings_used
 from worker.errors import InputError
@@ -170,11 +170,11 @@ def logout(
 # --- jobs -----------------------------------------------------------------------------------
 def user_worlds(session, user: Principal) -> list[WorldOut]:
     """The worlds `user` may see, as the API lists them."""
-    return worlds_api.list_worlds(session, user)
+    return worlds_service.list_worlds(session, user)
 
 
 def _jobs_page(request, session, user, settings, error: str | None = None, status_code: int = 200):
-    page = jobs_api.list_jobs(session, user, None, None, 100, 0)
+    page = jobs_service.list_jobs(session, user, limit=100)
     worlds = user_worlds(session, user)
     names = {w.id: w.name for w in worlds}
     refresh = any(j.status in ACTIVE_JOB for j in page.items)
@@ -206,7 +206,7 @@ def submit_job_form(
     time_limit: Annotated[float | None, Form()] = None,
     seeds: Annotated[str, Form(max_length=2000)] = "",
 ) -> Response:
-    """Submit through the API's own handler; errors come back on the page. Several
+    """Submit through the jobs service, as the API does; errors come back on the page. Several
     algorithms make one job that runs each on every seed (the seeds field, else 1..runs)."""
     params: dict[str, Any] = {}
     if time_limit is not None:
@@ -223,14 +223,14 @@ def submit_job_form(
         chosen = {"slam": names[0]} if len(names) == 1 else {"algorithms": names}
         count = {"seeds": parse_seeds(seeds)} if seeds.strip() else {"runs": runs}
         body = JobIn(world_id=world_id, params=params, **chosen, **count)
-        job = jobs_api.submit(session, user, settings, body, None)
+        job = jobs_service.submit(session, user, settings, body, None)
     except ValidationError as exc:
         msg = "; ".join(e["msg"] for e in exc.errors())
         return _jobs_page(request, session, user, settings, f"invalid job: {msg}", 400)
-    except (HTTPException, InputError) as exc:
+    except (ServiceError, InputError) as exc:
         session.rollback()
-        code = 429 if getattr(exc, "status_code", 400) == 429 else 400  # 429: over a quota
-        detail = str(getattr(exc, "detail", exc))
+        code = 429 if isinstance(exc, QuotaExceeded) else 400  # 429: over a quota
+        detail = str(exc)
         return _jobs_page(request, session, user, settings, detail, code)
     return RedirectResponse(f"/jobs/{job.id}", status_code=303)
 
@@ -260,7 +260,7 @@ def job_page(
     from backend.viewer_tokens import issue, signing_key
     from frontend.viewer import run_link
 
-    job = owned(user, session.get(Job, job_id), "job", job_id)
+    job = jobs_service.job_of(session, user, job_id)
     # each viewer link carries a fresh token for its run and this user (it expires)
     key = signing_key(settings.database_url, settings.secret_key)
     runs = []

@@ -11,9 +11,10 @@ from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
 from backend.api.artifacts import built, maybe_files, report_files, serve
-from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep, owned
+from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
 from backend.db.models import Run
 from backend.schemas import RunOut
+from backend.services.access import owned
 from backend.store import load_map, load_trajectory
 from worker.report.summary import RunSummary, summary_json_schema
 from worker.status import RunStatus

@@ -19,8 +19,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Job, Run
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, create_job, save_world
+from mapqual.app import create_app
 from tests.backend.finished_runs import store_finished_run
 from tests.services import ensure_redis, scratch_database
 from worker.pipeline import run_one

@@ -18,9 +18,9 @@ from sqlalchemy import select
 from backend.core.config import Settings
 from backend.db.models import User, World
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import create_pending_world
 from backend.world_analysis import WorldPool, pack_upload
+from mapqual.app import create_app
 
 
 def _png(value: int | None = None, shape: tuple[int, int] = (40, 60)) -> bytes:

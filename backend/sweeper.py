@@ -23,7 +23,7 @@ from backend.db.session import session_scope
 from backend.queue import broker_epoch, enqueue_run
 from worker.status import RunStatus
 
-log = logging.getLogger("mapqual.recovery")
+log = logging.getLogger("mapqual.sweeper")
 SWEEP_EVERY_S = 3.0  # [s]
 
 
