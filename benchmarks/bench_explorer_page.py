@@ -22,8 +22,8 @@ from backend.core.config import Settings  # noqa: E402
 from backend.db.migrate import upgrade  # noqa: E402
 from backend.db.models import Run  # noqa: E402
 from backend.db.session import session_scope  # noqa: E402
-from backend.new_job import create_job  # noqa: E402
 from backend.store import add_user, save_world  # noqa: E402
+from backend.store.jobs import create_job  # noqa: E402
 from tests.services import ensure_redis, scratch_database  # noqa: E402
 from tests.summaries import make_summary, relation  # noqa: E402
 from tests.summaries import stats as rel_stats  # noqa: E402

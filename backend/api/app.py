@@ -15,13 +15,13 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.api import errors
 from backend.api.limits import BodyLimit
+from backend.api.manual import MOUNT as MANUAL_MOUNT
+from backend.api.manual import Manual
 from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
-from backend.manual import MOUNT as MANUAL_MOUNT
-from backend.manual import Manual
-from backend.sandbox import sandbox, scrub_paths, server_folders
-from backend.schemas import API_PREFIX
-from backend.world_analysis import recover_pending, world_pool
+from backend.core.schemas import API_PREFIX
+from backend.sandbox.manager import sandbox, scrub_paths, server_folders
+from backend.services.world_analysis import recover_pending, world_pool
 from worker.errors import InputError
 
 log = logging.getLogger("mapqual.api")

@@ -18,8 +18,8 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.config import Settings, get_settings
+from backend.core.schemas import MAX_ID
 from backend.db.session import get_sessionmaker, session_scope
-from backend.schemas import MAX_ID
 from backend.services.access import Principal
 from backend.store import hash_key, local_user, user_for_key, web_session_user
 
@@ -253,8 +253,8 @@ CurrentUser = Annotated[Principal, Depends(current_user)]
 def prediction_cache(app: FastAPI) -> PredictionCache:
     """The app's cache of world predictions (made on first use), each computed in the
     analysis sandbox (a limited process: address space, CPU and wall time)."""
-    from backend.sandbox import shared_sandbox
-    from backend.world_analysis import PLAN
+    from backend.sandbox.manager import shared_sandbox
+    from backend.services.world_analysis import PLAN
     from worker.errors import InputError
     from worker.predict.service import PredictionCache
 

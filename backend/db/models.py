@@ -202,7 +202,7 @@ class Job(Base):
     # The client's Idempotency-Key: the same key again returns this job instead of a new one.
     idempotency_key: Mapped[str | None] = mapped_column(String(200))
     world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
-    # follows its runs (backend.lifecycle.refresh_job_status)
+    # follows its runs (backend.store.lifecycle.refresh_job_status)
     status: Mapped[JobStatus] = mapped_column(
         StatusText(JobStatus), default=JobStatus.QUEUED, index=True
     )
@@ -265,8 +265,8 @@ class Run(Base):
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     broker_epoch: Mapped[str | None] = mapped_column(String(32))
     # Its explore.time_limit [s], copied from `params` when the run is stored, so that the
-    # per-owner quota on simulated hours is one SQL sum (backend/quotas.py), not a JSON parse
-    # of every active run's parameters.
+    # per-owner quota on simulated hours is one SQL sum (backend/services/quotas.py), not a JSON
+    # parse of every active run's parameters.
     time_limit_s: Mapped[float | None] = mapped_column(Float, default=_run_time_limit)
 
     job: Mapped[Job] = relationship(back_populates="runs")

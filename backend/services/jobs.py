@@ -9,16 +9,16 @@ from functools import lru_cache
 from sqlalchemy import bindparam, func, select
 from sqlalchemy.orm import Session
 
-from backend import quotas
 from backend.core.config import Settings
+from backend.core.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
+from backend.core.schemas import JobIn, JobOut, JobPage
 from backend.db.models import Job, Run, User, World
-from backend.external_slam import resolve_external
-from backend.lifecycle import cancel_run
-from backend.queue import EPOCH_MAX_AGE_S, broker_epoch, send_runs
-from backend.schemas import JobIn, JobOut, JobPage
+from backend.services import quotas
 from backend.services.access import Principal, owned
 from backend.services.errors import Conflict, Unavailable
+from backend.services.external_slam import resolve_external
 from backend.store import create_job, mark_run_failed
+from backend.store.lifecycle import cancel_run
 from worker.run_params import RunParams  # light: no numba in the API process
 from worker.slam import registry
 from worker.status import JobStatus, WorldStatus

@@ -26,13 +26,13 @@ class BackendHost:
         return max(1.0, self.settings.run_lease_s / 2)  # [s]
 
     def execute(self, run_id: int) -> tuple[bool, str]:
-        from backend.execute import execute_run
+        from backend.services.execute import execute_run
 
         outcome = execute_run(run_id, self.settings, live_redis(self.settings.redis_url))
         return outcome.kind == "busy", outcome.message
 
     def start_process(self) -> None:
-        from backend.sweeper import start_sweeper
+        from backend.services.sweeper import start_sweeper
 
         s = self.settings
         start_sweeper(s.database_url, s.redis_url, s.run_lease_s)

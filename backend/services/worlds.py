@@ -15,15 +15,15 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from backend import quotas
 from backend.core.config import Settings
+from backend.core.schemas import WorldOut
 from backend.db.models import Run, World
-from backend.sandbox import shared_sandbox
-from backend.schemas import WorldOut
+from backend.sandbox.manager import shared_sandbox
+from backend.services import quotas
 from backend.services.access import Principal, owned
 from backend.services.errors import Conflict, Invalid, TooLarge
+from backend.services.world_analysis import remember
 from backend.store import create_pending_world, world_occupancy
-from backend.world_analysis import remember
 from worker.errors import InputError
 from worker.world.floorplan import TEXT_MAX, Floorplan, floorplan_header, pack_floorplan
 from worker.world.image_io import ImageTooLarge

@@ -25,8 +25,8 @@ from backend.api.deps import (
     current_user,
     require_csrf,
 )
+from backend.core.schemas import JobIn, WorldOut
 from backend.db.models import Run, World
-from backend.schemas import JobIn, WorldOut
 from backend.services import jobs as jobs_service
 from backend.services import worlds as worlds_service
 from backend.services.access import Principal, owned
@@ -257,7 +257,7 @@ def job_page(
     request: Request, job_id: IdPath, session: SessionDep, user: PageUser, settings: SettingsDep
 ) -> HTMLResponse:
     """A job's runs: outcome, coverage, errors, plots, downloads and the live-view link."""
-    from backend.viewer_tokens import issue, signing_key
+    from backend.core.viewer_tokens import issue, signing_key
     from frontend.viewer import run_link
 
     job = jobs_service.job_of(session, user, job_id)
@@ -310,7 +310,7 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
 def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
     """Each run row's algorithms, (name, relation summaries by kind): its own, then the external
     estimates scored on its relations; and whether it has a sim.log to export as a bag."""
-    from backend.store_estimates import list_estimates
+    from backend.store.estimates import list_estimates
     from worker.export.bag import SIM_LOG_NAMES
 
     by_run: dict[int, list] = {}

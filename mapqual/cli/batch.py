@@ -272,9 +272,9 @@ def _only(groups, pattern: str):
 def _execute(
     specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log, *, allow_outside=False
 ) -> None:
-    from backend.batch import DbBatch
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
+    from backend.services.batch import DbBatch
     from worker.batch.local import run_local
     from worker.batch.remote import run_celery
     from worker.batch.results import write_results

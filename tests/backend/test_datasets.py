@@ -10,10 +10,10 @@ import pytest
 from PIL import Image
 
 from backend.core.config import Settings
-from backend.datasets import BundledCatalogue, import_bundled, imported_ids
 from backend.db.models import World
 from backend.db.session import session_scope
 from backend.services.access import Principal
+from backend.services.datasets import BundledCatalogue, import_bundled, imported_ids
 from backend.services.errors import NotFound, QuotaExceeded
 from backend.store import add_user
 from tests.worker.world.test_datasets import write_plan

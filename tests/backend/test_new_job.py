@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from sqlalchemy import func, select
 
+from backend.core.schemas import JobOut
 from backend.db.models import Job, Run
 from backend.db.session import session_scope
-from backend.new_job import NewJob, create_job
-from backend.schemas import JobOut
 from backend.store import add_user, get_or_create_world
+from backend.store.jobs import NewJob, create_job
 from worker.run_params import RunParams
 
 

@@ -13,12 +13,12 @@ import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import Response
 
-from backend import quotas
 from backend.api.artifacts import built, report_files, unavailable
 from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
 from backend.api.routes.runs import _run
-from backend.sandbox import Sandbox, sandbox
-from backend.store_estimates import list_estimates, save_estimate
+from backend.sandbox.manager import Sandbox, sandbox
+from backend.services import quotas
+from backend.store.estimates import list_estimates, save_estimate
 from worker.errors import InputError
 from worker.storage import RunFiles, StorageError
 

@@ -9,7 +9,7 @@ from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
 from backend.api.deps import CurrentUser, IdPath, IdQuery, SessionDep, SettingsDep, in_session
-from backend.schemas import MAX_ID, JobIn, JobOut, JobPage
+from backend.core.schemas import MAX_ID, JobIn, JobOut, JobPage
 from backend.services import jobs
 from worker.status import JobStatus
 

@@ -12,8 +12,8 @@ from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
 from backend.api.artifacts import built, maybe_files, report_files, serve
 from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
+from backend.core.schemas import RunOut
 from backend.db.models import Run
-from backend.schemas import RunOut
 from backend.services.access import owned
 from backend.store import load_map, load_trajectory
 from worker.report.summary import RunSummary, summary_json_schema

@@ -21,11 +21,11 @@ from backend.api.deps import (
     prediction_cache,
 )
 from backend.core.config import Settings
+from backend.core.schemas import WorldOut
 from backend.db.models import World
-from backend.schemas import WorldOut
 from backend.services import worlds
+from backend.services.world_analysis import world_pool
 from backend.store import world_occupancy
-from backend.world_analysis import world_pool
 from worker.world.picture import occupancy_png
 
 router = APIRouter(tags=["worlds"])

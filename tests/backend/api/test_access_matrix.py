@@ -376,7 +376,7 @@ def _viewer_links(html: str) -> dict[int, str]:
 
 @pytest.mark.parametrize("owner", OWNERS)
 def test_the_viewer_admits_a_run_through_its_owners_or_an_admins_link_only(site, owner):
-    from backend.viewer_tokens import InvalidToken, authorise, signing_key
+    from backend.core.viewer_tokens import InvalidToken, authorise, signing_key
 
     key = signing_key(site.url, None)
     run_id, other_run = site.owned[owner].run, site.owned[_other(owner)].run

@@ -1,7 +1,7 @@
 """The one way the API reads untrusted bytes: a separate, limited process per upload.
 
 Each upload (an estimate in any format, a floorplan with its files) is parsed by a process
-forked for it from a warm zygote (`python -m backend.sandbox_child`, its parsers loaded once),
+forked for it from a warm zygote (`python -m backend.sandbox.child`, its parsers loaded once),
 in a temporary folder of its own, with an allow-listed environment (no database or broker
 URL, no secret key), hard rlimits it sets on itself first (address space, CPU seconds, file
 size, open files), a wall-clock deadline and a byte quota on its folder enforced from here
@@ -94,7 +94,7 @@ class Limits:
 
 
 class Zygote:
-    """One warm parser process (`backend.sandbox_child`) serving one task at a time."""
+    """One warm parser process (`backend.sandbox.child`) serving one task at a time."""
 
     def __init__(self, root: Path | None, kind: str = "sandbox"):
         env = {k: os.environ[k] for k in PASS_ENV if k in os.environ}
@@ -104,7 +104,7 @@ class Zygote:
         # process may be killed in the middle of its warm-up (a server stopped at once)
         self.warm = Path(tempfile.mkdtemp(prefix="mapqual-warm-", dir=root))
         self.proc = subprocess.Popen(
-            [sys.executable, "-P", "-m", "backend.sandbox_child", kind, str(self.warm)],
+            [sys.executable, "-P", "-m", "backend.sandbox.child", kind, str(self.warm)],
             cwd=root, env=env,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             close_fds=True, start_new_session=True,

@@ -13,7 +13,8 @@ from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
 from backend.db.models import Job, Run, RunMap, RunTrajectory
-from backend.lifecycle import (
+from backend.store.jobs import NewJob, create_job
+from backend.store.lifecycle import (
     TransitionRefused,
     claim_run,
     fail_run,
@@ -22,9 +23,8 @@ from backend.lifecycle import (
     new_attempt,
     requeue,
 )
-from backend.lifecycle import refresh_job_status as _refresh_job_status
-from backend.new_job import NewJob, create_job
-from backend.store_users import (
+from backend.store.lifecycle import refresh_job_status as _refresh_job_status
+from backend.store.users import (
     LOCAL_USER,
     add_user,
     create_web_session,
@@ -38,7 +38,7 @@ from backend.store_users import (
     user_for_key,
     web_session_user,
 )
-from backend.store_worlds import (
+from backend.store.worlds import (
     create_pending_world,
     get_or_create_world,
     mark_world_invalid,

@@ -18,12 +18,12 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from backend import quotas
 from backend.core.config import Settings
 from backend.db.models import World
+from backend.services import quotas
 from backend.services.access import Principal
 from backend.services.errors import NotFound
-from backend.store_worlds import save_world
+from backend.store.worlds import save_world
 from worker.world.catalogue import default_worlds_dir
 from worker.world.datasets import (
     BundledWorld,

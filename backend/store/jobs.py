@@ -97,7 +97,7 @@ def create_job(
     algorithms; the job keeps the first's params); without, `slam` and `params` alone. A
     repeated `idempotency_key` of the same owner returns the first job (`checked`: the caller
     looked for it already). `broker_epoch`: the epoch of the broker the runs are about to be
-    sent to (see `backend.queue`), stamped as they are made."""
+    sent to (see `backend.core.queue`), stamped as they are made."""
     if not seeds:
         raise ValueError("a job needs at least one seed")
     if idempotency_key is not None and not checked:

@@ -2,8 +2,8 @@
 
 Each run sent is stamped with the broker's epoch: a random id kept in a Redis key beside the
 queue, made when missing. A broker that lost its queue (Redis restarted without persistence)
-lost that key too, and the workers' sweeper (`backend.sweeper`) sends again the runs stamped
-with an older epoch.
+lost that key too, and the workers' sweeper (`backend.services.sweeper`) sends again the runs
+stamped with an older epoch.
 """
 
 from __future__ import annotations

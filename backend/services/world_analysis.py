@@ -1,7 +1,7 @@
 """Uploaded worlds analysed off the request thread: `world_workers` threads per API process
 turn a `pending` world into `ready` (geometry stored) or `invalid` (reason), each analysis in
-a limited process of its own (`backend.sandbox`, kind "analysis": address space, CPU and wall
-time from the `analysis_*` settings), forked from a warm process that loaded the analysis
+a limited process of its own (`backend.sandbox.manager`, kind "analysis": address space, CPU
+and wall time from the `analysis_*` settings), forked from a warm process that loaded the analysis
 once. The API process never imports what the analysis needs (numba).
 
 The analysis starts from the floorplan the upload sandbox read (`worker.world.floorplan`),
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.sandbox import Sandbox, shared_sandbox
+from backend.sandbox.manager import Sandbox, shared_sandbox
 from worker.status import WorldStatus
 
 log = logging.getLogger("mapqual.worlds")
@@ -44,7 +44,7 @@ def pack_upload(files: dict[str, bytes]) -> bytes:
     return buf.getvalue()
 
 
-# Analyses made where small uploads were read (`backend.sandbox_tasks.floorplan`), by the
+# Analyses made where small uploads were read (`backend.sandbox.tasks.floorplan`), by the
 # floorplan bytes' digest, until their world's analysis takes them; the oldest dropped past
 # KNOWN_MAX (a world whose entry is gone is analysed in the analysis sandbox instead).
 KNOWN_MAX = 256

@@ -13,7 +13,7 @@ from typing import Any
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.execute import Placement, execute_run
+from backend.services.execute import Placement, execute_run
 from backend.store import (
     add_job_runs,
     create_job,
@@ -116,7 +116,7 @@ class DbBatch:
     def send(self, run_id: int, requeue: bool) -> None:
         """Queue the run for the Celery workers (`requeue`: a failed run back to queued first:
         the task runs queued runs only)."""
-        from backend.queue import enqueue_runs
+        from backend.core.queue import enqueue_runs
 
         with session_scope(self.url) as s:
             if requeue:
