@@ -84,3 +84,14 @@ def test_the_shared_vocabularies_load_no_numba_nor_database():
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == "[]"
+
+
+def test_the_services_speak_no_http():
+    # typed errors (backend/services/errors.py), mapped to HTTP in backend/api/errors.py alone
+    wrong = {
+        (a, b)
+        for a, b in edges("backend")
+        if a.startswith(("backend.services", "backend.store", "backend.core.queue"))
+        and _top(b) in ("fastapi", "starlette")
+    }
+    assert wrong == set()

@@ -14,6 +14,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from starlette.concurrency import run_in_threadpool
 
 from backend.api import errors
+from backend.api.deps import recover_pending, world_pool
 from backend.api.limits import BodyLimit
 from backend.api.manual import MOUNT as MANUAL_MOUNT
 from backend.api.manual import Manual
@@ -21,7 +22,6 @@ from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
 from backend.core.schemas import API_PREFIX
 from backend.sandbox.manager import sandbox, scrub_paths, server_folders
-from backend.services.world_analysis import recover_pending, world_pool
 from worker.errors import InputError
 
 log = logging.getLogger("mapqual.api")

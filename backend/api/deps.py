@@ -21,6 +21,7 @@ from backend.core.config import Settings, get_settings
 from backend.core.schemas import MAX_ID
 from backend.db.session import get_sessionmaker, session_scope
 from backend.services.access import Principal
+from backend.services.world_analysis import WorldPool
 from backend.store import hash_key, local_user, user_for_key, web_session_user
 
 if TYPE_CHECKING:
@@ -281,3 +282,23 @@ def prediction_cache(app: FastAPI) -> PredictionCache:
 # answers anything outside with 422.
 IdPath = Annotated[int, Path(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]
 IdQuery = Annotated[int | None, Query(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]
+
+
+def world_pool(app: FastAPI) -> WorldPool:
+    """The app's pool (made on first use, with the app's settings)."""
+    pool = getattr(app.state, "world_pool", None)
+    if pool is None:
+        pool = app.state.world_pool = WorldPool(app.state.settings)
+    return pool
+
+
+def recover_pending(app: FastAPI) -> list[int]:
+    """Hand every world left `pending` (by a process that died) to the pool again."""
+    from backend.store import pending_world_ids
+
+    with session_scope(app.state.settings.database_url) as s:
+        ids = pending_world_ids(s)
+    pool = world_pool(app)
+    for world_id in ids:
+        pool.submit(world_id)
+    return ids

@@ -12,7 +12,7 @@ import secrets
 import time
 from collections.abc import Sequence
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING
 
 from celery import Celery
 from sqlalchemy import update
@@ -20,6 +20,9 @@ from sqlalchemy.orm import Session
 
 from backend.db.models import Run
 from worker.celery_conf import RUN_TASK, producer_conf
+
+if TYPE_CHECKING:
+    from redis import Redis
 
 EPOCH_KEY = "mapqual:broker_epoch"
 
@@ -33,7 +36,7 @@ def _client(broker_url: str) -> Celery:
 
 
 @lru_cache(maxsize=4)
-def _redis(broker_url: str) -> Any:
+def _redis(broker_url: str) -> Redis:
     import redis
 
     return redis.Redis.from_url(broker_url, socket_connect_timeout=2, socket_timeout=5)

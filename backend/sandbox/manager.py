@@ -29,13 +29,16 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from fastapi import HTTPException, status
 
 from backend.core.config import Settings
 from worker.errors import InputError
+
+if TYPE_CHECKING:
+    from fastapi import FastAPI
 
 MiB = 1 << 20
 OPEN_FILES = 64  # descriptors a sandbox may hold: the upload, a bag's few files, Python's own
@@ -389,6 +392,6 @@ def shared_sandbox(settings: Settings, kind: str = "sandbox") -> Sandbox:
         return found[1]
 
 
-def sandbox(app: Any) -> Sandbox:
+def sandbox(app: FastAPI) -> Sandbox:
     """The app's sandbox (made on first use, with the app's settings)."""
     return shared_sandbox(app.state.settings)

@@ -8,7 +8,7 @@ import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from backend.core.config import Settings
 from backend.db.models import Run
@@ -30,6 +30,9 @@ from worker.batch.pool import TaskFailed
 from worker.batch.remote import RunState
 from worker.status import RunStatus
 from worker.world.world import World
+
+if TYPE_CHECKING:
+    from worker.pipeline import RunProgress
 
 log = logging.getLogger("mapqual.batch")
 
@@ -132,7 +135,7 @@ class PoolRun:
     settings: Settings
     run_ids: dict[str, int]  # run key -> the database's run id
 
-    def __call__(self, task: Task, progress: Callable[[Any], None]) -> RunOutput:
+    def __call__(self, task: Task, progress: Callable[[RunProgress], None]) -> RunOutput:
         spec = task.spec
         place = Placement(
             report_dir=Path(task.report_dir), own_folder=True,

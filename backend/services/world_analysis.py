@@ -21,12 +21,15 @@ import logging
 import threading
 import zipfile
 from collections import OrderedDict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from backend.sandbox.manager import Sandbox, shared_sandbox
 from worker.status import WorldStatus
+
+if TYPE_CHECKING:
+    from backend.core.config import Settings
 
 log = logging.getLogger("mapqual.worlds")
 
@@ -141,7 +144,7 @@ class WorldPool:
     processes; a world whose analysis failed on our side is marked invalid (it can be
     uploaded again)."""
 
-    def __init__(self, settings: Any):
+    def __init__(self, settings: Settings):
         self.database_url = settings.database_url
         self.box = shared_sandbox(settings, "analysis")
         self._lock = threading.Lock()
@@ -204,24 +207,3 @@ class WorldPool:
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
         self.box.shutdown()
-
-
-def world_pool(app: Any) -> WorldPool:
-    """The app's pool (made on first use, with the app's settings)."""
-    pool = getattr(app.state, "world_pool", None)
-    if pool is None:
-        pool = app.state.world_pool = WorldPool(app.state.settings)
-    return pool
-
-
-def recover_pending(app: Any) -> list[int]:
-    """Hand every world left `pending` (by a process that died) to the pool again."""
-    from backend.db.session import session_scope
-    from backend.store import pending_world_ids
-
-    with session_scope(app.state.settings.database_url) as s:
-        ids = pending_world_ids(s)
-    pool = world_pool(app)
-    for world_id in ids:
-        pool.submit(world_id)
-    return ids

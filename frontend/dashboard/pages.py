@@ -28,8 +28,9 @@ from backend.api.deps import (
 from backend.core.schemas import JobIn, WorldOut
 from backend.db.models import Run, World
 from backend.services import jobs as jobs_service
+from backend.services import runs as runs_service
 from backend.services import worlds as worlds_service
-from backend.services.access import Principal, owned
+from backend.services.access import Principal
 from backend.services.errors import QuotaExceeded, ServiceError
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from frontend.dashboard.explore_data import group, job_result, load_runs, settings_used
@@ -334,9 +335,7 @@ def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> 
 
     if name not in ("trajectories", "errors", "map_overlay"):
         raise HTTPException(404, f"no plot {name!r}")
-    run = owned(user, session.get(Run, run_id), "run", run_id)
-    if run.status != RunStatus.DONE:
-        raise HTTPException(404, f"run {run_id} is {run.status}: no results yet")
+    run = runs_service.done_run(session, user, run_id)
     files = maybe_files(run)
     if files is not None and files.has(f"{name}.png"):
         return serve(files, f"{name}.png", "image/png", run_id, inline=True)

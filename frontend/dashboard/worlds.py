@@ -8,14 +8,13 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, Path, Request, UploadFile
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
-from backend.api.deps import SessionDep, SettingsDep, prediction_cache
+from backend.api.deps import SessionDep, SettingsDep, prediction_cache, world_pool
 from backend.api.errors import as_http
 from backend.core.schemas import DatasetOut
 from backend.db.models import World
 from backend.services import worlds as worlds_service
 from backend.services.datasets import bundled, import_bundled, imported_ids
 from backend.services.errors import ServiceError
-from backend.services.world_analysis import world_pool
 from frontend.dashboard.pages import PageUser, render, user_worlds
 from worker.errors import InputError
 from worker.status import WorldStatus

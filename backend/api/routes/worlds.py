@@ -19,12 +19,12 @@ from backend.api.deps import (
     SettingsDep,
     in_session,
     prediction_cache,
+    world_pool,
 )
 from backend.core.config import Settings
 from backend.core.schemas import WorldOut
 from backend.db.models import World
 from backend.services import worlds
-from backend.services.world_analysis import world_pool
 from backend.store import world_occupancy
 from worker.world.picture import occupancy_png
 
