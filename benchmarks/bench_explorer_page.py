@@ -22,8 +22,8 @@ from backend.core.config import Settings  # noqa: E402
 from backend.db.migrate import upgrade  # noqa: E402
 from backend.db.models import Run  # noqa: E402
 from backend.db.session import session_scope  # noqa: E402
-from backend.new_job import insert_job  # noqa: E402
 from backend.store import add_user, save_world  # noqa: E402
+from backend.store.jobs import create_job  # noqa: E402
 from tests.services import ensure_redis, scratch_database  # noqa: E402
 from tests.summaries import make_summary, relation  # noqa: E402
 from tests.summaries import stats as rel_stats  # noqa: E402
@@ -62,7 +62,7 @@ def fill(url: str, n_runs: int) -> str:
             seeds = list(range(1, min(per_cell, n_runs - made) + 1))
             if not seeds:
                 break
-            job = insert_job(s, owner_id=user.id, world_id=w, slam=alg, params=params,
+            job = create_job(s, owner_id=user.id, world_id=w, slam=alg, params=params,
                              seeds=seeds)  # fmt: skip
             made += len(seeds)
             for run in job.runs:
@@ -107,7 +107,7 @@ def main() -> None:
     args = ap.parse_args()
     from fastapi.testclient import TestClient
 
-    from backend.main import create_app
+    from mapqual.app import create_app
 
     with scratch_database("mapqual_bench") as url:
         upgrade(url)

@@ -126,7 +126,7 @@ def main() -> None:
 
     import redis
 
-    from backend.progress import ProgressReporter
+    from backend.services.progress import ProgressReporter
     from worker.pipeline import run_one
     from worker.run_params import RunParams
     from worker.world.loader import load_world
@@ -236,7 +236,7 @@ def _best(a: tuple, b: tuple) -> tuple:
 
 def _watched(redis_url, url, run_id, client, world, params, seed) -> tuple[tuple, dict]:
     """One run with a listening viewer process."""
-    from backend.progress import ProgressReporter
+    from backend.services.progress import ProgressReporter
 
     proc = subprocess.Popen(
         [sys.executable, __file__, "--listen", redis_url, str(run_id)],

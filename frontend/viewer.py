@@ -4,7 +4,7 @@ finished ones come from the database. `mapqual viewer` starts it.
 A client sees one run, and only through the link its job's dashboard page gives:
 `http://HOST:PORT/?websocket=ws://HOST:PORT/run/<id>/<token>`. viser's page connects its
 websocket to that path; the path names the run and carries a signed, expiring token for it
-(`backend.viewer_tokens`). Without a valid one the client sees a note and nothing else.
+(`backend.core.viewer_tokens`). Without a valid one the client sees a note and nothing else.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from backend.core.viewer_tokens import InvalidToken, authorise, check_access, signing_key
 from backend.db.session import session_scope
-from backend.viewer_tokens import InvalidToken, authorise, check_access, signing_key
 from frontend.live import LiveRun, load_finished, load_floorplan, run_info, run_status
 from frontend.view import Note, RunView, refuse
 from worker.status import RunStatus

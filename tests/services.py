@@ -111,13 +111,13 @@ def free_port() -> int:
 def api_server(
     env: dict[str, str], cwd: str | os.PathLike | None = None, wait_s: float = 90.0
 ) -> Iterator[tuple[str, subprocess.Popen]]:
-    """`uvicorn backend.main:app` on a free loopback port with `env`: (its base URL, the
+    """`uvicorn mapqual.app:app` on a free loopback port with `env`: (its base URL, the
     process), once /healthz answers; terminated (killed after 20 s) afterwards."""
     import httpx
 
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "backend.main:app", "--port", str(port)],
+        [sys.executable, "-m", "uvicorn", "mapqual.app:app", "--port", str(port)],
         cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )  # fmt: skip
     base = f"http://127.0.0.1:{port}"

@@ -1,4 +1,4 @@
-"""The one Celery app (tasks in `worker.tasks`, which configures it from the settings)."""
+"""The one Celery app (tasks in `worker.tasks`; configured by `worker.tasks.serve`)."""
 
 from __future__ import annotations
 

@@ -15,8 +15,8 @@ from fastapi import HTTPException, status
 from fastapi.responses import FileResponse, Response, StreamingResponse
 from starlette.background import BackgroundTask
 
+from backend.core.single_flight import single_flight
 from backend.db.models import Run
-from backend.single_flight import single_flight
 from worker.status import RunStatus
 from worker.storage import CHUNK, RunFiles, StorageError, run_files
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 import hmac
 import time
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
-from typing import Annotated, TypeVar
+from typing import TYPE_CHECKING, Annotated, TypeVar
 
 from anyio import CancelScope, CapacityLimiter, to_thread
 from fastapi import Depends, FastAPI, Header, HTTPException, Path, Query, Request, status
@@ -19,10 +18,14 @@ from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.config import Settings, get_settings
-from backend.db.models import User
+from backend.core.schemas import MAX_ID
 from backend.db.session import get_sessionmaker, session_scope
-from backend.schemas import MAX_ID
+from backend.services.access import Principal
+from backend.services.world_analysis import WorldPool
 from backend.store import hash_key, local_user, user_for_key, web_session_user
+
+if TYPE_CHECKING:
+    from worker.predict.service import PredictionCache
 
 # The dashboard's cookie: a random session token (the database keeps its SHA-256), never the
 # API key. Sessions are looked up on every request, not cached, so signing out, `users revoke`
@@ -95,20 +98,6 @@ def in_session(settings: Settings, work: Callable[..., T], *args) -> T:
     if it raises): what an `async def` route hands to the thread pool in one trip."""
     with session_scope(settings.database_url) as session:
         return work(session, *args)
-
-
-@dataclass(frozen=True)
-class Principal:
-    """Who a request acts for: a user's id, name and admin flag, detached from any session (so
-    it can be cached between requests)."""
-
-    id: int
-    name: str
-    is_admin: bool
-
-    @classmethod
-    def of(cls, user: User) -> Principal:
-        return cls(id=user.id, name=user.name, is_admin=bool(user.is_admin))
 
 
 class KeyCache:
@@ -262,14 +251,54 @@ def require_csrf(supplied: object, expected: str) -> None:
 CurrentUser = Annotated[Principal, Depends(current_user)]
 
 
-def owned(user: Principal, obj, what: str, obj_id: int):
-    """`obj` if the user may see it; otherwise 404, so other owners' ids reveal nothing."""
-    if obj is None or (not user.is_admin and obj.owner_id != user.id):
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no {what} with id {obj_id}")
-    return obj
+def prediction_cache(app: FastAPI) -> PredictionCache:
+    """The app's cache of world predictions (made on first use), each computed in the
+    analysis sandbox (a limited process: address space, CPU and wall time)."""
+    from backend.sandbox.manager import shared_sandbox
+    from backend.services.world_analysis import PLAN
+    from worker.errors import InputError
+    from worker.predict.service import PredictionCache
+
+    cache = getattr(app.state, "prediction_cache", None)
+    if cache is None:
+        settings = app.state.settings
+        box = shared_sandbox(settings, "analysis")
+
+        def compute(plan_of: Callable[[], bytes], slam: str, _model: dict) -> dict:
+            facts = box.run(
+                "predict", {PLAN: plan_of()}, label="the world", file=PLAN, slam=slam,
+                max_pixels=settings.max_image_pixels,
+            ).facts  # fmt: skip
+            if not isinstance(facts.get("prediction"), dict):
+                raise InputError("the world could not be analysed (a malformed result)")
+            return facts["prediction"]
+
+        workers = settings.world_workers  # as many as analyse uploads
+        cache = app.state.prediction_cache = PredictionCache(workers=workers, compute=compute)
+    return cache
 
 
 # Ids a client sends in a path or a query, bounded as the schema's (see MAX_ID): FastAPI
 # answers anything outside with 422.
 IdPath = Annotated[int, Path(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]
 IdQuery = Annotated[int | None, Query(ge=1, le=MAX_ID, description="an id (1 to 2^31 - 1)")]
+
+
+def world_pool(app: FastAPI) -> WorldPool:
+    """The app's pool (made on first use, with the app's settings)."""
+    pool = getattr(app.state, "world_pool", None)
+    if pool is None:
+        pool = app.state.world_pool = WorldPool(app.state.settings)
+    return pool
+
+
+def recover_pending(app: FastAPI) -> list[int]:
+    """Hand every world left `pending` (by a process that died) to the pool again."""
+    from backend.store import pending_world_ids
+
+    with session_scope(app.state.settings.database_url) as s:
+        ids = pending_world_ids(s)
+    pool = world_pool(app)
+    for world_id in ids:
+        pool.submit(world_id)
+    return ids

@@ -59,7 +59,7 @@ class Settings(BaseSettings):
     # and their stored trajectories' bytes in all [MiB].
     quota_estimates: int = Field(default=1000, ge=1, alias="MAPQUAL_QUOTA_ESTIMATES")
     quota_estimate_mb: float = Field(default=256.0, gt=0, alias="MAPQUAL_QUOTA_ESTIMATE_MB")
-    # The upload sandbox (`backend.sandbox`): uploads are parsed in separate processes, at
+    # The upload sandbox (`backend.sandbox.manager`): uploads are parsed in separate processes, at
     # most this many at once per API process (others wait for one, up to the wall time)...
     sandbox_workers: int = Field(default=2, ge=1, le=64, alias="MAPQUAL_SANDBOX_WORKERS")
     # ...each with this much address space [MiB], CPU time [s] and wall time [s]...
@@ -70,8 +70,8 @@ class Settings(BaseSettings):
     # is unpacked from it), made under this folder (unset: the system's temporary folder).
     sandbox_temp_mb: int = Field(default=96, ge=1, alias="MAPQUAL_SANDBOX_TEMP_MB")
     sandbox_dir: Path | None = Field(default=None, alias="MAPQUAL_SANDBOX_DIR")
-    # A world's analysis and its predictions (`backend.world_analysis`) run after the upload
-    # was read, in processes of their own (`world_workers` of them) with this much address
+    # A world's analysis and its predictions (`backend.services.world_analysis`) run after the
+    # upload was read, in processes of their own (`world_workers` of them) with this much address
     # space [MiB], CPU time [s] and wall time [s] each.
     analysis_memory_mb: int = Field(default=4096, ge=512, alias="MAPQUAL_ANALYSIS_MEMORY_MB")
     analysis_cpu_s: int = Field(default=120, ge=1, alias="MAPQUAL_ANALYSIS_CPU_S")

@@ -24,6 +24,7 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
 )
+from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 from sqlalchemy.types import TypeDecorator
 
@@ -45,12 +46,12 @@ class UtcDateTime(TypeDecorator):
     impl = DateTime(timezone=True)
     cache_ok = True
 
-    def process_bind_param(self, value: datetime | None, dialect: Any) -> datetime | None:
+    def process_bind_param(self, value: datetime | None, dialect: Dialect) -> datetime | None:
         if value is not None and value.tzinfo is None:
             raise ValueError(f"naive datetime {value!r}: mapqual stores aware times only")
         return None if value is None else value.astimezone(UTC)
 
-    def process_result_value(self, value: datetime | None, dialect: Any) -> datetime | None:
+    def process_result_value(self, value: datetime | None, dialect: Dialect) -> datetime | None:
         if value is None:
             return None
         return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
@@ -82,13 +83,13 @@ class StatusText(TypeDecorator):
         # Python call per value (GET /jobs/{id} reads seven statuses a request)
         self._members = _Members(enum)
 
-    def process_bind_param(self, value: str | None, dialect: Any) -> str | None:
+    def process_bind_param(self, value: str | None, dialect: Dialect) -> str | None:
         return None if value is None else str(self.enum(value))
 
-    def process_result_value(self, value: str | None, dialect: Any) -> StrEnum | None:
+    def process_result_value(self, value: str | None, dialect: Dialect) -> StrEnum | None:
         return self._members[value]
 
-    def result_processor(self, dialect: Any, coltype: Any) -> Callable[[Any], Any]:
+    def result_processor(self, dialect: Dialect, coltype: object) -> Callable[[Any], Any]:
         """The lookup itself as the row processor (String has none of its own to chain)."""
         impl = self.impl_instance.result_processor(dialect, coltype)
         if impl is not None:  # a driver that converts strings itself: chain the two
@@ -202,7 +203,7 @@ class Job(Base):
     # The client's Idempotency-Key: the same key again returns this job instead of a new one.
     idempotency_key: Mapped[str | None] = mapped_column(String(200))
     world_id: Mapped[int] = mapped_column(ForeignKey("worlds.id"), index=True)
-    # follows its runs (backend.lifecycle.refresh_job_status)
+    # follows its runs (backend.store.lifecycle.refresh_job_status)
     status: Mapped[JobStatus] = mapped_column(
         StatusText(JobStatus), default=JobStatus.QUEUED, index=True
     )
@@ -265,8 +266,8 @@ class Run(Base):
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     broker_epoch: Mapped[str | None] = mapped_column(String(32))
     # Its explore.time_limit [s], copied from `params` when the run is stored, so that the
-    # per-owner quota on simulated hours is one SQL sum (backend/quotas.py), not a JSON parse
-    # of every active run's parameters.
+    # per-owner quota on simulated hours is one SQL sum (backend/services/quotas.py), not a JSON
+    # parse of every active run's parameters.
     time_limit_s: Mapped[float | None] = mapped_column(Float, default=_run_time_limit)
 
     job: Mapped[Job] = relationship(back_populates="runs")

@@ -1,5 +1,5 @@
 """The dashboard: server-rendered pages over the API's own handlers and access rules, with
-their templates, static files and charts; `backend.main` mounts it at /."""
+their templates, static files and charts; `mapqual.app` mounts it at /."""
 
 from __future__ import annotations
 

@@ -10,9 +10,10 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import HTMLResponse, Response
 from sqlalchemy import select
 
-from backend.api.deps import Principal, SessionDep
-from backend.api.routes import stats as stats_api
+from backend.api.deps import SessionDep
 from backend.db.models import Run, World
+from backend.services import stats as stats_service
+from backend.services.access import Principal
 from frontend.dashboard.explore_data import DEFAULT_KINDS, outcome_kind
 from frontend.dashboard.pages import PageUser, render
 from worker.batch.paired import Sample, paired_diffs
@@ -25,7 +26,7 @@ router = APIRouter(include_in_schema=False)
 @router.get("/compare", response_class=HTMLResponse)
 def compare_page(request: Request, session: SessionDep, user: PageUser) -> HTMLResponse:
     """Success and B errors per world (thesis Tables 6.4, 6.5) and error bars (Figs. 6.8, 6.9)."""
-    rows = stats_api.stats(session, user, "world")
+    rows = stats_service.per_world(session, user)
     counts = _relation_counts(session, user)
     for row in rows:
         row["relations"] = counts.get(row["world_id"], 0)
@@ -126,7 +127,7 @@ def compare_plot(kind: str, session: SessionDep, user: PageUser) -> Response:
         return Response(buf.getvalue(), media_type="image/png")
     if kind not in ("translation", "rotation"):
         raise HTTPException(404, f"no chart {kind!r}")
-    rows = [r for r in stats_api.stats(session, user, "world") if r[kind]["mean"] is not None]
+    rows = [r for r in stats_service.per_world(session, user) if r[kind]["mean"] is not None]
     buf = io.BytesIO()
     error_bar_chart(buf, rows, kind)
     return Response(buf.getvalue(), media_type="image/png")

@@ -20,8 +20,8 @@ import numpy as np
 from scipy import stats
 from sqlalchemy import Text, cast, select
 
-from backend.api.deps import Principal
 from backend.db.models import Run, World
+from backend.services.access import Principal
 from worker.status import RunOutcome, RunStatus
 
 KINDS = ("completed", "incomplete", "time limit", "failed")  # outcome kinds, as filtered

@@ -20,17 +20,18 @@ from backend.api.deps import (
     CSRF_HEADER,
     SESSION_COOKIE,
     IdPath,
-    Principal,
     SessionDep,
     SettingsDep,
     current_user,
-    owned,
     require_csrf,
 )
-from backend.api.routes import jobs as jobs_api
-from backend.api.routes import worlds as worlds_api
-from backend.db.models import Job, Run, World
-from backend.schemas import JobIn, WorldOut
+from backend.core.schemas import JobIn, WorldOut
+from backend.db.models import Run, World
+from backend.services import jobs as jobs_service
+from backend.services import runs as runs_service
+from backend.services import worlds as worlds_service
+from backend.services.access import Principal
+from backend.services.errors import QuotaExceeded, ServiceError
 from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from frontend.dashboard.explore_data import group, job_result, load_runs, settings_used
 from worker.errors import InputError
@@ -170,11 +171,11 @@ def logout(
 # --- jobs -----------------------------------------------------------------------------------
 def user_worlds(session, user: Principal) -> list[WorldOut]:
     """The worlds `user` may see, as the API lists them."""
-    return worlds_api.list_worlds(session, user)
+    return worlds_service.list_worlds(session, user)
 
 
 def _jobs_page(request, session, user, settings, error: str | None = None, status_code: int = 200):
-    page = jobs_api.list_jobs(session, user, None, None, 100, 0)
+    page = jobs_service.list_jobs(session, user, limit=100)
     worlds = user_worlds(session, user)
     names = {w.id: w.name for w in worlds}
     refresh = any(j.status in ACTIVE_JOB for j in page.items)
@@ -206,7 +207,7 @@ def submit_job_form(
     time_limit: Annotated[float | None, Form()] = None,
     seeds: Annotated[str, Form(max_length=2000)] = "",
 ) -> Response:
-    """Submit through the API's own handler; errors come back on the page. Several
+    """Submit through the jobs service, as the API does; errors come back on the page. Several
     algorithms make one job that runs each on every seed (the seeds field, else 1..runs)."""
     params: dict[str, Any] = {}
     if time_limit is not None:
@@ -223,14 +224,14 @@ def submit_job_form(
         chosen = {"slam": names[0]} if len(names) == 1 else {"algorithms": names}
         count = {"seeds": parse_seeds(seeds)} if seeds.strip() else {"runs": runs}
         body = JobIn(world_id=world_id, params=params, **chosen, **count)
-        job = jobs_api.submit(session, user, settings, body, None)
+        job = jobs_service.submit(session, user, settings, body, None)
     except ValidationError as exc:
         msg = "; ".join(e["msg"] for e in exc.errors())
         return _jobs_page(request, session, user, settings, f"invalid job: {msg}", 400)
-    except (HTTPException, InputError) as exc:
+    except (ServiceError, InputError) as exc:
         session.rollback()
-        code = 429 if getattr(exc, "status_code", 400) == 429 else 400  # 429: over a quota
-        detail = str(getattr(exc, "detail", exc))
+        code = 429 if isinstance(exc, QuotaExceeded) else 400  # 429: over a quota
+        detail = str(exc)
         return _jobs_page(request, session, user, settings, detail, code)
     return RedirectResponse(f"/jobs/{job.id}", status_code=303)
 
@@ -257,10 +258,10 @@ def job_page(
     request: Request, job_id: IdPath, session: SessionDep, user: PageUser, settings: SettingsDep
 ) -> HTMLResponse:
     """A job's runs: outcome, coverage, errors, plots, downloads and the live-view link."""
-    from backend.viewer_tokens import issue, signing_key
+    from backend.core.viewer_tokens import issue, signing_key
     from frontend.viewer import run_link
 
-    job = owned(user, session.get(Job, job_id), "job", job_id)
+    job = jobs_service.job_of(session, user, job_id)
     # each viewer link carries a fresh token for its run and this user (it expires)
     key = signing_key(settings.database_url, settings.secret_key)
     runs = []
@@ -311,7 +312,7 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
 def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
     """Each run row's algorithms, (name, relation summaries by kind): its own, then the external
     estimates scored on its relations; and whether it has a sim.log to export as a bag."""
-    from backend.store_estimates import list_estimates
+    from backend.store.estimates import list_estimates
     from worker.export.bag import SIM_LOG_NAMES
 
     by_run: dict[int, list] = {}
@@ -335,9 +336,7 @@ def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> 
 
     if name not in ("trajectories", "errors", "map_overlay"):
         raise HTTPException(404, f"no plot {name!r}")
-    run = owned(user, session.get(Run, run_id), "run", run_id)
-    if run.status != RunStatus.DONE:
-        raise HTTPException(404, f"run {run_id} is {run.status}: no results yet")
+    run = runs_service.done_run(session, user, run_id)
     files = maybe_files(run)
     if files is not None and files.has(f"{name}.png"):
         return serve(files, f"{name}.png", "image/png", run_id, inline=True)

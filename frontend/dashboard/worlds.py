@@ -5,15 +5,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Path, Request, UploadFile
+from fastapi import APIRouter, File, Form, Path, Request, UploadFile
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
-from backend.api.deps import SessionDep, SettingsDep
-from backend.api.routes import worlds as worlds_api
-from backend.datasets import bundled, import_bundled, imported_ids
+from backend.api.deps import SessionDep, SettingsDep, prediction_cache, world_pool
+from backend.api.errors import as_http
+from backend.core.schemas import DatasetOut
 from backend.db.models import World
-from backend.schemas import DatasetOut
-from backend.world_analysis import world_pool
+from backend.services import worlds as worlds_service
+from backend.services.datasets import bundled, import_bundled, imported_ids
+from backend.services.errors import ServiceError
 from frontend.dashboard.pages import PageUser, render, user_worlds
 from worker.errors import InputError
 from worker.status import WorldStatus
@@ -47,7 +48,8 @@ def _predictions(request, session, worlds) -> dict[int, dict]:
             continue
         try:
             row = session.get(World, w.id)
-            out[w.id] = worlds_api.world_prediction_of(request.app, session, row, "rbpf")
+            cache = prediction_cache(request.app)
+            out[w.id] = worlds_service.world_prediction_of(cache, session, row, "rbpf")
         except InputError as exc:
             out[w.id] = {"error": str(exc)}
     return out
@@ -122,7 +124,8 @@ def upload_world_form(
     file: Annotated[list[UploadFile], File()],
     resolution: Annotated[str, Form()] = "",
 ) -> Response:
-    """Upload through the API's own handler; its answer (or its error) is shown on the page."""
+    """Upload through the worlds service, as the API does; its answer (or its error) is shown
+    on the page."""
     try:
         res = float(resolution) if resolution.strip() else None
     except ValueError:
@@ -131,13 +134,15 @@ def upload_world_form(
         msg = f"the resolution must be a positive number of metres per pixel, not {resolution!r}"
         return _worlds_page(request, session, user, msg, None, 400)
     try:
-        names = worlds_api.checked_names(file)
+        names = worlds_service.checked_names([f.filename for f in file])
         files = {name: f.file.read() for name, f in zip(names, file, strict=True)}
-        row, fresh = worlds_api.accept_upload(session, user, settings, files, res)
-    except (HTTPException, InputError) as exc:
+        row, fresh = worlds_service.accept_upload(session, user, settings, files, res)
+    except ServiceError as exc:
         session.rollback()
-        msg = str(getattr(exc, "detail", exc))
-        return _worlds_page(request, session, user, msg, None, getattr(exc, "status_code", 400))
+        return _worlds_page(request, session, user, str(exc), None, as_http(exc).status_code)
+    except InputError as exc:
+        session.rollback()
+        return _worlds_page(request, session, user, str(exc), None, 400)
     session.commit()  # the analysis runs in another process: it must see the row
     if fresh:
         world_pool(request.app).submit(row.id)
@@ -155,12 +160,12 @@ def import_bundled_form(
     dataset: Annotated[str, Path(max_length=100)],
     name: Annotated[str, Path(max_length=200)],
 ) -> Response:
-    """Import a bundled world through the API's own handler; then back to the page."""
+    """Import a bundled world through the same service as the API; then back to the page."""
     try:
         row, fresh = import_bundled(session, user, settings, dataset, name)
-    except HTTPException as exc:  # no such data set or world (404), over the quota (429)
+    except ServiceError as exc:  # no such data set or world (404), over the quota (429)
         session.rollback()
-        return _worlds_page(request, session, user, str(exc.detail), None, exc.status_code)
+        return _worlds_page(request, session, user, str(exc), None, as_http(exc).status_code)
     session.commit()
     again = "" if fresh else "&again=1"
     return RedirectResponse(f"/worlds?uploaded={row.id}&bundled=1{again}", status_code=303)

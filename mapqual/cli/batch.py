@@ -63,7 +63,7 @@ class BatchProgress:
             self.bar.start()
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         if self.bar is not None:
             self.bar.stop()
 
@@ -272,9 +272,9 @@ def _only(groups, pattern: str):
 def _execute(
     specs, todo, loaded, bdir, workers, celery, retry_failed, sim_log, *, allow_outside=False
 ) -> None:
-    from backend.batch import DbBatch
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
+    from backend.services.batch import DbBatch
     from worker.batch.local import run_local
     from worker.batch.remote import run_celery
     from worker.batch.results import write_results

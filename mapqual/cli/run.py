@@ -10,12 +10,15 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from mapqual.cli import app
+from mapqual.cli.progress import RunBar
 from mapqual.cli.world import AllowOutsideOpt
 from worker.errors import InputError
 from worker.slam import registry
 
 if TYPE_CHECKING:
     from worker.report.summary import RunSummary
+    from worker.run_params import RunParams
+    from worker.world.world import World as WorldModel
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -48,48 +51,6 @@ def build_params(
     if realtime is not None:
         over["realtime"] = {"speed": realtime}
     return RunParams.from_json(_merge(data, over))
-
-
-class _Progress:
-    """A rich progress bar on a terminal, a plain line a simulated minute otherwise."""
-
-    def __init__(self, time_limit: float, quiet: bool):
-        self.quiet = quiet
-        self.tty = sys.stderr.isatty()
-        self.next_line = 60.0
-        self.bar = None
-        if self.tty and not quiet:
-            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-            self.bar = Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                TextColumn("{task.completed:>6.0f}/{task.total:.0f} s sim"),
-                TextColumn("coverage {task.fields[cov]:>4.0%}  x{task.fields[rtf]:.0f} real time"),
-                TimeElapsedColumn(),
-                transient=True,
-            )
-            self.task = self.bar.add_task("exploring", total=time_limit, cov=0.0, rtf=0.0)
-
-    def __enter__(self):
-        if self.bar is not None:
-            self.bar.start()
-        return self
-
-    def __exit__(self, *exc):
-        if self.bar is not None:
-            self.bar.stop()
-
-    def __call__(self, p) -> None:
-        if self.bar is not None:
-            self.bar.update(self.task, completed=p.t, cov=p.coverage, rtf=p.rtf)
-        elif not self.quiet and p.t >= self.next_line:
-            self.next_line += 60.0
-            print(
-                f"t={p.t:7.0f} s  coverage {p.coverage:4.0%}  x{p.rtf:.0f} real time  {p.status}",
-                file=sys.stderr,
-                flush=True,
-            )
 
 
 WorldArg = Annotated[
@@ -156,7 +117,7 @@ def run(
 
 
 def _execute(
-    world: Any, suffix: str, params: Any, seed: int, out: Path | None, quiet: bool
+    world: WorldModel, suffix: str, params: RunParams, seed: int, out: Path | None, quiet: bool
 ) -> tuple[int, Path | str, RunSummary]:
     """Store the world and a job of one run, and execute it with the run service: the default
     runs/<id>/ is filled like a worker's (in the attempt's folder, renamed into place with the
@@ -165,13 +126,13 @@ def _execute(
     on stderr and exit code 1."""
     from backend.core.config import get_settings
     from backend.db.migrate import upgrade
-    from backend.execute import Placement, execute_run
+    from backend.services.execute import Placement, execute_run
 
     settings = get_settings()
     upgrade(settings.database_url)
     run_id = _store_job(settings.database_url, world, suffix, params, seed)
     place = Placement(report_dir=out, own_folder=out is not None, fail_on_interrupt=True)
-    with _Progress(params.explore.time_limit, quiet=quiet) as progress:
+    with RunBar(params.explore.time_limit, quiet=quiet) as progress:
         outcome = execute_run(run_id, settings, place=place, on_progress=progress, world=world)
     if outcome.summary is None:
         print(f"mapqual: error: {outcome.message}", file=sys.stderr)
@@ -183,7 +144,7 @@ def _execute(
     return run_id, settings.runs_dir / str(run_id), outcome.summary
 
 
-def _store_job(url: str, world: Any, suffix: str, params: Any, seed: int) -> int:
+def _store_job(url: str, world: WorldModel, suffix: str, params: RunParams, seed: int) -> int:
     """The world (found again by its content) and a new job of one run for it: the run's id."""
     from backend.db.session import session_scope
     from backend.store import create_job, local_user, save_world, world_fingerprint
@@ -196,7 +157,7 @@ def _store_job(url: str, world: Any, suffix: str, params: Any, seed: int) -> int
         )  # fmt: skip
         job = create_job(
             s, owner_id=owner, world_id=row.id, slam=params.algorithm,
-            params=params.to_json(), seeds=[seed],
+            params=params, seeds=[seed],
         )  # fmt: skip
         return job.runs[0].id
 

@@ -81,7 +81,7 @@ def _score_stored(location: str, traj, name: str, source: str, **kw) -> tuple[ob
 def _store(run_id: int, score, est, location: str) -> None:
     from backend.db.models import Run
     from backend.db.session import session_scope
-    from backend.store_estimates import save_estimate
+    from backend.store.estimates import save_estimate
     from mapqual.cli.runs import _database_url
 
     with session_scope(_database_url()) as s:

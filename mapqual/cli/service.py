@@ -31,7 +31,7 @@ def serve(
 
     if migrate:
         upgrade(get_settings().database_url)
-    uvicorn.run("backend.main:app", host=host, port=port, workers=workers, log_level="info")
+    uvicorn.run("mapqual.app:app", host=host, port=port, workers=workers, log_level="info")
 
 
 @app.command("worker")
@@ -40,10 +40,11 @@ def worker(
     loglevel: Annotated[str, typer.Option(help="Celery log level.")] = "INFO",
 ) -> None:
     """A Celery worker that executes runs from the queue."""
+    from backend.services.worker_host import install
     from worker.celery_conf import QUEUE
     from worker.slam.threads import claim_default
-    from worker.tasks import app as celery_app  # configured from the settings on import
 
+    celery_app = install()  # configured from the settings, its task served by the backend
     claim_default(concurrency)  # each process's share of the cores, inherited by the pool
 
     celery_app.worker_main(

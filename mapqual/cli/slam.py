@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
@@ -11,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from mapqual.cli import app
+from mapqual.cli.progress import ScanBar
 from worker.slam import registry
 
 # the registered algorithms that can replay a recorded log (the oracle needs ground truth)
@@ -107,7 +107,7 @@ def _run(
 
     data = read_laser_log(log)
     out.mkdir(parents=True, exist_ok=True)
-    with _Progress(quiet=quiet) as progress:
+    with ScanBar(quiet=quiet) as progress:
         result = run_slam(
             data.t, data.pose_odom, data.ranges, data.laser, algorithm, params,
             np.random.default_rng(seed), on_progress=progress,
@@ -131,30 +131,3 @@ def _run(
         "params": to_dict(result.params),
     }
     return summary, result
-
-
-class _Progress:
-    """A rich progress bar over the scans on a terminal; silent otherwise."""
-
-    def __init__(self, quiet: bool):
-        self.bar = None
-        if sys.stderr.isatty() and not quiet:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-            self.bar = Progress(
-                "[bold]slam", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), transient=True
-            )
-            self.task = self.bar.add_task("slam", total=None)
-
-    def __enter__(self):
-        if self.bar is not None:
-            self.bar.start()
-        return self
-
-    def __exit__(self, *exc):
-        if self.bar is not None:
-            self.bar.stop()
-
-    def __call__(self, done: int, total: int) -> None:
-        if self.bar is not None:
-            self.bar.update(self.task, completed=done, total=total)

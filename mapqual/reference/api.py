@@ -20,7 +20,7 @@ _METHODS = ("get", "post", "put", "patch", "delete")
 
 def openapi() -> dict[str, Any]:
     """The app's OpenAPI document, as the server publishes it."""
-    from backend.main import app
+    from mapqual.app import app
 
     return app.openapi()
 

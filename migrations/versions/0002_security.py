@@ -89,7 +89,7 @@ def upgrade() -> None:
     with op.batch_alter_table("run_events", schema=None) as batch_op:
         batch_op.create_index(batch_op.f("ix_run_events_run_id"), ["run_id"], unique=False)
 
-    # per-owner quota on simulated hours (backend/quotas.py); NULL counts as the default limit
+    # per-owner quota on simulated hours (backend/services/quotas.py); NULL: the default limit
     with op.batch_alter_table("runs", schema=None) as batch_op:
         batch_op.add_column(sa.Column("time_limit_s", sa.Float(), nullable=True))
 

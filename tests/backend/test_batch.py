@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from backend.batch import DbBatch
 from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.lifecycle import history
+from backend.services.batch import DbBatch
+from backend.store.lifecycle import history
 from worker.batch.experiment import RunSpec
 from worker.batch.local import run_local
 from worker.batch.state import BatchDir

@@ -21,9 +21,9 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Run, RunTrajectory
 from backend.db.session import session_scope
-from backend.execute import Placement, execute_run, signalled
-from backend.lifecycle import cancel_run, history, history_faults
+from backend.services.execute import Placement, execute_run, signalled
 from backend.store import create_job, local_user, save_world
+from backend.store.lifecycle import cancel_run, history, history_faults
 from tests.backend.plans import rooms_occupancy
 from tests.services import scratch_database
 from worker.run_params import RunParams

@@ -11,8 +11,8 @@ import pytest
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.execute import execute_run
-from backend.lifecycle import cancel_run
+from backend.services.execute import execute_run
+from backend.store.lifecycle import cancel_run
 from tests.backend.test_execute import _rooms, _run, pg_url  # noqa: F401
 from tests.s3server import make_bucket, raw_client, s3_server
 

@@ -13,7 +13,15 @@ from sqlalchemy import func, select
 
 from backend.db.models import Run, RunEvent, RunTrajectory
 from backend.db.session import session_scope
-from backend.lifecycle import (
+from backend.services.progress import ProgressReporter
+from backend.store import (
+    create_job,
+    get_or_create_world,
+    local_user,
+    mark_run_failed,
+    store_run_result,
+)
+from backend.store.lifecycle import (
     TransitionRefused,
     attempt_dir,
     cancel_run,
@@ -22,14 +30,6 @@ from backend.lifecycle import (
     history_faults,
     new_attempt,
     requeue,
-)
-from backend.progress import ProgressReporter
-from backend.store import (
-    create_job,
-    get_or_create_world,
-    local_user,
-    mark_run_failed,
-    store_run_result,
 )
 from tests.summaries import make_summary
 from worker.pipeline import RunCancelled, RunProgress, RunSuperseded

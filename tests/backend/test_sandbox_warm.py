@@ -4,7 +4,7 @@ finished its warm-up or was stopped in the middle of it (a server stopped at onc
 from __future__ import annotations
 
 from backend.core.config import Settings
-from backend.sandbox import Sandbox
+from backend.sandbox.manager import Sandbox
 
 
 def _warm_folders(root):

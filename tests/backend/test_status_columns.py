@@ -10,8 +10,8 @@ from sqlalchemy.exc import StatementError
 
 from backend.db.models import Job, Run, World
 from backend.db.session import session_scope
-from backend.lifecycle import LEGAL
 from backend.store import create_job, get_or_create_world, local_user, mark_run_started
+from backend.store.lifecycle import LEGAL
 from worker.status import JobStatus, RunStatus, WorldStatus
 
 

@@ -8,7 +8,6 @@ from sqlalchemy import func, select
 
 from backend.db.models import Job, Run, RunTrajectory, User
 from backend.db.session import session_scope
-from backend.lifecycle import TransitionRefused
 from backend.store import (
     add_user,
     create_job,
@@ -23,6 +22,7 @@ from backend.store import (
     user_for_key,
     world_occupancy,
 )
+from backend.store.lifecycle import TransitionRefused
 from tests.summaries import make_summary, relation, stats
 
 
@@ -293,7 +293,7 @@ def test_the_local_user_made_by_two_processes_at_once_is_one_user(db_url, monkey
     # two `mapqual batch` started together on a new database: both find no local user, one
     # stores it first; the other's insert then breaks the unique name and must return the
     # first one's user (it raised IntegrityError out of the CLI before)
-    import backend.store_users as users
+    import backend.store.users as users
 
     real_new = users._new_user
     winner = []

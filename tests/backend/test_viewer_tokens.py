@@ -14,10 +14,7 @@ import numpy as np
 import pytest
 from sqlalchemy import create_engine, func, select
 
-from backend.db.models import AppSecret, Run, User
-from backend.db.session import session_scope
-from backend.store import add_user, create_job, save_world
-from backend.viewer_tokens import (
+from backend.core.viewer_tokens import (
     KEY_NAME,
     InvalidToken,
     app_secret,
@@ -28,6 +25,9 @@ from backend.viewer_tokens import (
     signing_key,
     verify,
 )
+from backend.db.models import AppSecret, Run, User
+from backend.db.session import session_scope
+from backend.store import add_user, create_job, save_world
 from worker.world.world import World
 
 KEY = bytes(range(32))
@@ -152,7 +152,7 @@ def test_concurrent_first_creation_makes_one_key_that_every_engine_reads(db_url)
     # a later engine, and another process (as the API and the viewer are), read that key
     assert app_secret(create_engine(db_url), KEY_NAME) == got[0]
     code = (
-        "from backend.viewer_tokens import signing_key; import sys; "
+        "from backend.core.viewer_tokens import signing_key; import sys; "
         "sys.stdout.write(signing_key(sys.argv[1], None).hex())"
     )
     out = subprocess.run(

@@ -9,7 +9,7 @@ import pytest
 from backend.db.migrate import upgrade
 from backend.db.session import session_scope
 from backend.store import local_user
-from backend.store_estimates import list_estimates
+from backend.store.estimates import list_estimates
 from tests.worker.export.runs import finished_run, store_run
 
 

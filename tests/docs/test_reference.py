@@ -74,7 +74,7 @@ def _api_routes(routes, prefix: str = "") -> list[tuple[str, APIRoute]]:
 
 
 def test_every_api_route_is_in_the_reference(generated):
-    from backend.main import app
+    from mapqual.app import app
 
     page = generated["reference/api.md"]
     routes = [(p, r) for p, r in _api_routes(app.routes) if r.include_in_schema]

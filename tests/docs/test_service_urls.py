@@ -1,5 +1,5 @@
 """Every URL of the running service that the README or the manual names answers (no 404, no
-5xx), against a real server process: `uvicorn backend.main:app` on a database holding a real
+5xx), against a real server process: `uvicorn mapqual.app:app` on a database holding a real
 run, serving the manual built in strict mode."""
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ def test_the_manual_is_served_and_the_dashboard_links_to_it(service):
 def test_an_unbuilt_manual_still_answers(tmp_path):
     from starlette.testclient import TestClient
 
-    from backend.main import create_app
+    from mapqual.app import create_app
 
     os.environ["MAPQUAL_MANUAL_DIR"] = str(tmp_path / "nothing")
     try:

@@ -65,8 +65,8 @@ class Site:
         import uvicorn
 
         from backend.core.config import Settings
-        from backend.main import create_app
         from frontend.viewer import ViewerApp
+        from mapqual.app import create_app
 
         self.service = service
         viewer_port = free_port()

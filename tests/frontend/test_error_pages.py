@@ -13,8 +13,8 @@ from fastapi.testclient import TestClient
 from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, create_job, mark_run_started, save_world, store_run_result
+from mapqual.app import create_app
 from tests.frontend.test_pages import rooms
 from tests.services import ensure_redis
 from tests.summaries import make_summary, relation

@@ -15,8 +15,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Job
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, save_world
+from mapqual.app import create_app
 from tests.frontend.test_pages import rooms
 from tests.services import ensure_redis
 from worker.world.world import World

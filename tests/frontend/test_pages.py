@@ -13,13 +13,13 @@ from fastapi.testclient import TestClient
 from PIL import Image
 
 from backend.core.config import Settings
+from backend.core.viewer_tokens import signing_key, verify
 from backend.db.migrate import upgrade
 from backend.db.models import Job, Run
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, create_job, mark_run_started, save_world, store_run_result
-from backend.viewer_tokens import signing_key, verify
 from frontend.viewer import run_link
+from mapqual.app import create_app
 from tests.services import ensure_redis
 from worker.pipeline import run_one
 from worker.report.folder import write_report

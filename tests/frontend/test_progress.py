@@ -14,7 +14,7 @@ import redis
 
 from backend.db.migrate import upgrade
 from backend.db.session import session_scope
-from backend.progress import ProgressReporter
+from backend.services.progress import ProgressReporter
 from backend.store import add_user, create_job, mark_run_started, save_world
 from frontend.live import LiveRun
 from worker.live_wire import channel, map_codes

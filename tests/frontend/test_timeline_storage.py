@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from backend.execute import execute_run
+from backend.services.execute import execute_run
 from frontend.live import load_finished
 from frontend.panel import replay_figures
 from tests.backend.test_execute import _rooms, _run, pg_url  # noqa: F401

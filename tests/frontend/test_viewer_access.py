@@ -20,14 +20,14 @@ from fastapi.testclient import TestClient
 from websockets.sync.client import connect
 
 from backend.core.config import Settings
+from backend.core.viewer_tokens import issue, sign
 from backend.db.arrays import pack_array
 from backend.db.migrate import upgrade
 from backend.db.models import Run, RunMap, RunTrajectory, User
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, create_job, save_world
-from backend.viewer_tokens import issue, sign
 from frontend.viewer import ViewerApp, run_link
+from mapqual.app import create_app
 from tests.frontend.conftest import free_port
 from tests.services import scratch_database
 from tests.summaries import summary_doc

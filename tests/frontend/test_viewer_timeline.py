@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 import redis
 
+from backend.core.viewer_tokens import issue
 from backend.db.arrays import pack_array
 from backend.db.migrate import upgrade
 from backend.db.models import RunMap, RunTrajectory
 from backend.db.session import session_scope
 from backend.store import add_user, create_job, save_world
-from backend.viewer_tokens import issue
 from frontend.viewer import ViewerApp, run_link
 from tests.frontend.conftest import free_port
 from tests.frontend.test_browser import _wait

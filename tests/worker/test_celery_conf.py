@@ -39,8 +39,10 @@ def test_producer_and_worker_speak_the_same_wire_on_the_same_queue():
 
 
 def test_the_worker_registers_the_task_the_api_sends():
-    from worker.tasks import app, run_task
+    from backend.services.worker_host import install
+    from worker.tasks import run_task
 
+    app = install()
     assert run_task.name == RUN_TASK
     assert RUN_TASK in app.tasks
     assert app.conf.task_default_queue == QUEUE and app.conf.worker_prefetch_multiplier == 1

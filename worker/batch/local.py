@@ -1,6 +1,6 @@
 """Running a batch's runs in a local process pool: each process executes a run (`execute`, or
-the run service that stores it: `backend.batch`), and the parent tells a sink (the database)
-how each ended and then writes its record (OUT)."""
+the run service that stores it: `backend.services.batch`), and the parent tells a sink (the
+database) how each ended and then writes its record (OUT)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
 """A batch on Celery workers: send the unfinished runs, then poll their state and record each
-as it finishes. The database is reached through a `RunQueue` (`backend.batch` is the one)."""
+as it finishes. The database is reached through a `RunQueue` (`backend.services.batch` is the
+one)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """Estimates from strangers: a rosbag2 zip unpacked with every byte counted, SQLite storage
 files inspected read-only under a deadline, compressed rosbag2 refused, then `read_estimate`.
 
-Meant to run in the upload sandbox (`backend.sandbox`), whose process limits catch what these
-checks do not foresee; the checks turn the foreseen attacks into one-line reasons.
+Meant to run in the upload sandbox (`backend.sandbox.manager`), whose process limits catch what
+these checks do not foresee; the checks turn the foreseen attacks into one-line reasons.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """A floorplan's files read into what `World.from_array` needs, and its byte form.
 
-An upload is read once, in the API's upload sandbox (`backend.sandbox`): there its images
+An upload is read once, in the API's upload sandbox (`backend.sandbox.manager`): there its images
 are decoded and its YAML or Stage file parsed into a `Floorplan`; the API stores that
 floorplan's bytes (`pack_floorplan`), never the raw upload, and the world's analysis (the
 grid's regions, clearance, start pose) starts from them. `unpack_floorplan` checks every

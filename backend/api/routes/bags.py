@@ -13,12 +13,12 @@ import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile, status
 from fastapi.responses import Response
 
-from backend import quotas
 from backend.api.artifacts import built, report_files, unavailable
 from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
-from backend.api.routes.runs import _run
-from backend.sandbox import Sandbox, sandbox
-from backend.store_estimates import list_estimates, save_estimate
+from backend.sandbox.manager import Sandbox, sandbox
+from backend.services import quotas
+from backend.services.runs import run_of
+from backend.store.estimates import list_estimates, save_estimate
 from worker.errors import InputError
 from worker.storage import RunFiles, StorageError
 
@@ -49,7 +49,7 @@ def get_bag(
     streamed from there; where the run's folder cannot be written, built for this response."""
     from worker.export.bag import SIM_LOG_NAMES
 
-    files = report_files(_run(session, user, run_id))
+    files = report_files(run_of(session, user, run_id))
     log_name = next((n for n in SIM_LOG_NAMES if files.has(n)), None)
     if log_name is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no sim.log")
@@ -100,7 +100,7 @@ def post_estimate(
     upload_name = Path(file.filename or "").name
     if not _FILE_NAME.match(upload_name):
         raise HTTPException(status.HTTP_400_BAD_REQUEST, f"unsafe file name {file.filename!r}")
-    run = _run(session, user, run_id)
+    run = run_of(session, user, run_id)
     files = report_files(run)
     data = file.file.read()  # the body limit (BodyLimit) bounds it
     settings = request.app.state.settings
@@ -155,5 +155,5 @@ def _score_into_storage(
 @router.get("/runs/{run_id}/estimates")
 def get_estimates(run_id: IdPath, session: SessionDep, user: CurrentUser) -> list[dict[str, Any]]:
     """The external estimates scored on the run, by name."""
-    run = _run(session, user, run_id)
+    run = run_of(session, user, run_id)
     return [_estimate_out(r) for r in list_estimates(session, [run.id])]

@@ -9,8 +9,8 @@ from fastapi import APIRouter, Path, Query
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
 from backend.api.deps import CurrentUser, SessionDep, SettingsDep
-from backend.datasets import bundled, import_bundled
-from backend.schemas import DatasetOut, WorldOut
+from backend.core.schemas import DatasetOut, WorldOut
+from backend.services.datasets import bundled, import_bundled
 
 router = APIRouter(tags=["datasets"])
 

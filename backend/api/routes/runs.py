@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import tempfile
 from pathlib import Path
 from typing import Any, Literal
@@ -11,25 +10,12 @@ from fastapi import APIRouter, HTTPException, Query, status
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
 from backend.api.artifacts import built, maybe_files, report_files, serve
-from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep, owned
-from backend.db.models import Run
-from backend.schemas import RunOut
-from backend.store import load_map, load_trajectory
-from worker.report.summary import RunSummary, summary_json_schema
-from worker.status import RunStatus
+from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
+from backend.core.schemas import RunOut
+from backend.services import runs
+from worker.report.summary import summary_json_schema
 
 router = APIRouter(tags=["runs"])
-
-
-def _run(session, user, run_id: int) -> Run:
-    return owned(user, session.get(Run, run_id), "run", run_id)
-
-
-def _require_done(run: Run) -> None:
-    if run.status != RunStatus.DONE:
-        raise HTTPException(
-            status.HTTP_404_NOT_FOUND, f"run {run.id} is {run.status}: no results yet"
-        )
 
 
 @router.get("/schemas/summary")
@@ -42,7 +28,7 @@ def get_summary_schema() -> dict[str, Any]:
 @router.get("/runs/{run_id}", response_model=RunOut)
 def get_run(run_id: IdPath, session: SessionDep, user: CurrentUser) -> RunOut:
     """A run: status, progress, and once done its summary and metrics."""
-    return RunOut.of(_run(session, user, run_id))
+    return RunOut.of(runs.run_of(session, user, run_id))
 
 
 @router.get("/runs/{run_id}/trajectory")
@@ -57,9 +43,8 @@ def get_trajectory(
     from worker.evaluate.trajectory import Trajectory
     from worker.evaluate.trajio import write_carmen, write_tum
 
-    run = _run(session, user, run_id)
-    _require_done(run)
-    t, poses = load_trajectory(session, run.id, kind)
+    run = runs.done_run(session, user, run_id)
+    t, poses = runs.trajectory(session, run, kind)
     if format == "json":
         return JSONResponse({"kind": kind, "t": t.tolist(), "poses": poses.tolist()})
     writer = write_tum if format == "tum" else write_carmen
@@ -71,31 +56,17 @@ def get_trajectory(
     return PlainTextResponse(text, headers={"Content-Disposition": f'inline; filename="{name}"'})
 
 
-def _map_files(run: Run, session) -> dict[str, bytes]:
-    from worker.report.folder import error_lines
-    from worker.report.plots import map_png
-    from worker.slam.grid import map_server_files
-
-    grid, res, origin = load_map(session, run.id)
-    pgm, yaml = map_server_files(grid, res, origin, "map.pgm")
-    buf = io.BytesIO()
-    summary = RunSummary.load(run.summary)
-    map_png(buf, grid, error_lines(summary) if summary and summary.relations else [])
-    return {"pgm": pgm, "yaml": yaml, "png": buf.getvalue()}
-
-
 @router.get("/runs/{run_id}/map.{ext}")
 def get_map(
     run_id: IdPath, ext: Literal["png", "pgm", "yaml"], session: SessionDep, user: CurrentUser
 ) -> Response:
     """The final SLAM map as map_server files (PGM + YAML) or PNG (with its errors written
     on it when the report folder is there)."""
-    run = _run(session, user, run_id)
-    _require_done(run)
+    run = runs.done_run(session, user, run_id)
     files = maybe_files(run)
     if files is not None and files.has(f"map.{ext}"):
         return serve(files, f"map.{ext}", _MEDIA[ext], run.id, inline=True)
-    return Response(_map_files(run, session)[ext], media_type=_MEDIA[ext])
+    return Response(runs.map_files(session, run)[ext], media_type=_MEDIA[ext])
 
 
 _MEDIA = {"png": "image/png", "pgm": "image/x-portable-graymap", "yaml": "application/yaml"}
@@ -109,7 +80,7 @@ def get_relations(
     kind: Literal["A", "B", "SM"] = Query("B"),
 ) -> Response:
     """The run's relations file of that kind (`t1 t2 x y z roll pitch yaw`)."""
-    files, name = report_files(_run(session, user, run_id)), f"relations_{kind}.txt"
+    files, name = report_files(runs.run_of(session, user, run_id)), f"relations_{kind}.txt"
     if not files.has(name):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {kind} relations")
     return serve(files, name, "text/plain; charset=utf-8", run_id, name)
@@ -124,7 +95,7 @@ def get_report(
     once now and kept beside the report."""
     from worker.report.folder import REPORT_ZIP, write_report_zip
 
-    files = report_files(_run(session, user, run_id))
+    files = report_files(runs.run_of(session, user, run_id))
 
     def build(work: Path) -> Path:
         folder = files.local_path("") or files.fetch(files.names(), work / "report")

@@ -12,8 +12,8 @@ from fastapi.testclient import TestClient
 
 from backend.core.config import Settings
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user
+from mapqual.app import create_app
 from tests.services import ensure_redis
 
 

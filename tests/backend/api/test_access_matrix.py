@@ -19,8 +19,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Job, Run
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user, create_job, save_world
+from mapqual.app import create_app
 from tests.backend.finished_runs import store_finished_run
 from tests.services import ensure_redis, scratch_database
 from worker.pipeline import run_one
@@ -376,7 +376,7 @@ def _viewer_links(html: str) -> dict[int, str]:
 
 @pytest.mark.parametrize("owner", OWNERS)
 def test_the_viewer_admits_a_run_through_its_owners_or_an_admins_link_only(site, owner):
-    from backend.viewer_tokens import InvalidToken, authorise, signing_key
+    from backend.core.viewer_tokens import InvalidToken, authorise, signing_key
 
     key = signing_key(site.url, None)
     run_id, other_run = site.owned[owner].run, site.owned[_other(owner)].run

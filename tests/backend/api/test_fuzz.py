@@ -27,8 +27,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import Job, Run, User, World
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import add_user
+from mapqual.app import create_app
 from tests.services import ensure_redis, scratch_database
 
 # The issue asks for at least this many generated requests in CI.

@@ -12,8 +12,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import User
 from backend.db.session import session_scope
-from backend.main import create_app
 from backend.store import hash_key
+from mapqual.app import create_app
 from tests.services import scratch_database
 
 

@@ -31,7 +31,7 @@ MB = 1 << 20
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    """A migrated database, alice with a finished run, and `uvicorn backend.main:app` whose
+    """A migrated database, alice with a finished run, and `uvicorn mapqual.app:app` whose
     temporary folder (TMPDIR) is one of the test's, to be measured."""
     runs_dir, tmp = tmp_path_factory.mktemp("runs"), tmp_path_factory.mktemp("servertmp")
     report = tmp_path_factory.mktemp("run") / "report"

@@ -21,7 +21,7 @@ _SCRIPT = """
 import json, sys
 from fastapi.testclient import TestClient
 from backend.core.config import Settings
-from backend.main import create_app
+from mapqual.app import create_app
 
 def numba_modules():
     return sorted(m for m in sys.modules if m.split(".")[0] in ("numba", "llvmlite"))

@@ -10,7 +10,6 @@ from concurrent.futures import ThreadPoolExecutor
 from datetime import timedelta
 
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 from sqlalchemy import func, select, update
@@ -18,9 +17,8 @@ from sqlalchemy import func, select, update
 from backend.core.config import Settings
 from backend.db.models import Job, Run, World, utcnow
 from backend.db.session import session_scope
-from backend.main import create_app
-from backend.quotas import time_limit_s
 from backend.store import add_job_runs
+from mapqual.app import create_app
 
 
 def _client(api, **limits) -> TestClient:
@@ -157,15 +155,6 @@ def test_the_forms_show_the_quota_message(api):
     r = client.post("/worlds", files=files, data={"resolution": "0.05"}, headers=_auth(api))
     assert r.status_code == 429 and "MAPQUAL_QUOTA_WORLDS" in r.text and 'role="alert"' in r.text
     assert _count(api, Job) == 0 and _count(api, World) == 1
-
-
-@pytest.mark.parametrize(
-    ("params", "seconds"),
-    [({"explore": {"time_limit": 90}}, 90.0), ({}, 7200.0),
-     ({"explore": {"time_limit": "x"}}, 7200.0), (None, 7200.0)],
-)  # fmt: skip
-def test_a_runs_time_limit_from_its_parameters(params, seconds):
-    assert time_limit_s(params) == seconds
 
 
 def test_parallel_requests_of_one_owner_cannot_all_pass(api):

@@ -147,7 +147,7 @@ def _left_behind(server) -> list[str]:
             cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
             stat = Path(f"/proc/{pid}/stat").read_text()
             parent = int(stat[stat.rindex(")") + 2 :].split()[1])
-            if b"backend.sandbox_child" not in cmd or parent != server["pid"]:
+            if b"backend.sandbox.child" not in cmd or parent != server["pid"]:
                 out.append(cmd.replace(b"\0", b" ").decode(errors="replace"))
     return out
 

@@ -33,7 +33,7 @@ MB = 1024 * 1024
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    """A migrated PostgreSQL database, users alice and bob, and `uvicorn backend.main:app`."""
+    """A migrated PostgreSQL database, users alice and bob, and `uvicorn mapqual.app:app`."""
     runs_dir = tmp_path_factory.mktemp("runs")
     with scratch_database("mapqual_limits") as db_url:
         upgrade(db_url)
@@ -239,7 +239,7 @@ def test_analysis_and_prediction_run_in_limited_processes_and_the_api_never_load
     maps = Path(f"/proc/{server['pid']}/maps").read_text()
     assert "llvmlite" not in maps and "/numba/" not in maps
     out = subprocess.run(
-        [sys.executable, "-X", "importtime", "-c", "import backend.main"],
+        [sys.executable, "-X", "importtime", "-c", "import mapqual.app"],
         capture_output=True,
         text=True,
         check=True,

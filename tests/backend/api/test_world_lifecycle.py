@@ -18,9 +18,9 @@ from sqlalchemy import select
 from backend.core.config import Settings
 from backend.db.models import User, World
 from backend.db.session import session_scope
-from backend.main import create_app
+from backend.services.world_analysis import WorldPool, pack_upload
 from backend.store import create_pending_world
-from backend.world_analysis import WorldPool, pack_upload
+from mapqual.app import create_app
 
 
 def _png(value: int | None = None, shape: tuple[int, int] = (40, 60)) -> bytes:
@@ -118,7 +118,7 @@ def test_worlds_left_pending_are_analysed_when_the_api_starts(api):
 
 
 def _analysis_processes() -> list[int]:
-    """This process's analysis zygotes (`backend.sandbox_child analysis`)."""
+    """This process's analysis zygotes (`backend.sandbox.child analysis`)."""
     found = []
     for proc in Path("/proc").iterdir():
         try:
@@ -127,7 +127,7 @@ def _analysis_processes() -> list[int]:
         except OSError:
             continue
         ppid = int(stat[stat.rindex(")") + 2 :].split()[1])
-        if ppid == os.getpid() and b"backend.sandbox_child\0analysis" in cmd:
+        if ppid == os.getpid() and b"backend.sandbox.child\0analysis" in cmd:
             found.append(int(proc.name))
     return found
 

@@ -233,7 +233,7 @@ def test_unreachable_broker_is_503_and_stores_no_job(api):
     from fastapi.testclient import TestClient
 
     from backend.core.config import Settings
-    from backend.main import create_app
+    from mapqual.app import create_app
 
     w = _world(api)
     settings = Settings(DATABASE_URL=api.url, REDIS_URL="redis://127.0.0.1:1/0")

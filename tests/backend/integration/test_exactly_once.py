@@ -27,13 +27,13 @@ from PIL import Image
 from sqlalchemy import func, select
 
 from backend.core.config import Settings
+from backend.core.queue import EPOCH_KEY
 from backend.db.migrate import upgrade
 from backend.db.models import Run, RunEvent, RunTrajectory
 from backend.db.session import get_engine, session_scope
-from backend.lifecycle import history, history_faults
-from backend.main import create_app
-from backend.queue import EPOCH_KEY
 from backend.store import add_user
+from backend.store.lifecycle import history, history_faults
+from mapqual.app import create_app
 from tests.backend.plans import rooms_occupancy
 from tests.services import ensure_redis, scratch_database
 
@@ -294,7 +294,7 @@ def test_a_redis_restart_loses_no_run_and_runs_none_twice(tmp_path, db_url, own_
 
 
 def test_nothing_is_sent_again_while_the_broker_keeps_its_queue(service):
-    from backend.recovery import sweep
+    from backend.services.sweeper import sweep
 
     svc = service
     run_ids = svc.job(_rooms_png(2, 1), [1, 2, 3], "odometry", 30.0)

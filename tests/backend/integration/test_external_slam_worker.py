@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.core.config import Settings
-from backend.main import create_app
+from mapqual.app import create_app
 from tests.backend.integration.test_queue import Service, two_rooms
 from tests.worker.slam.external.helpers import example, fake
 

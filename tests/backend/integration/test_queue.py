@@ -25,8 +25,8 @@ from backend.core.config import Settings
 from backend.db.migrate import upgrade
 from backend.db.models import RunTrajectory
 from backend.db.session import get_engine, session_scope
-from backend.main import create_app
 from backend.store import add_user, world_model
+from mapqual.app import create_app
 from tests.services import ensure_postgres, ensure_redis
 from worker.pipeline import run_one
 from worker.run_params import RunParams

@@ -24,8 +24,8 @@ from fastapi.testclient import TestClient
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.lifecycle import history, history_faults
-from backend.main import create_app
+from backend.store.lifecycle import history, history_faults
+from mapqual.app import create_app
 from tests.backend.integration.test_exactly_once import Service, _rooms_png, db_url  # noqa: F401
 from tests.s3server import make_bucket, raw_client, s3_server, slow_proxy
 from tests.services import ensure_redis

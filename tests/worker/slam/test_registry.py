@@ -87,7 +87,7 @@ def test_the_dashboard_form_lists_the_registry(scratch_registry):
 
 def test_the_api_schema_lists_the_registry_when_it_is_made(scratch_registry, tmp_path):
     from backend.core.config import Settings
-    from backend.main import create_app
+    from mapqual.app import create_app
 
     registry.register("plugin", lambda laser, p, rng: None, "a plugin SLAM")
     settings = Settings(DATABASE_URL=f"sqlite:///{tmp_path / 'x.db'}", MAPQUAL_AUTH="on")

@@ -1,7 +1,7 @@
 """The workers' sweeper: runs whose message a broker lost (Redis restarted without
 persistence) are sent again, and nothing is sent again while the broker keeps its queue.
 
-A run sent to the queue carries the broker's epoch (`backend.queue.enqueue_runs`). Every few
+A run sent to the queue carries the broker's epoch (`backend.core.queue.enqueue_runs`). Every few
 seconds each worker reads the current epoch; a run still queued, or running with no sign of
 life for the lease, that carries another epoch had its message in a queue that no longer
 exists. Each such run is re-stamped by a conditional update (so that of two sweepers, one
@@ -18,12 +18,12 @@ from datetime import timedelta
 
 from sqlalchemy import and_, or_, select, update
 
+from backend.core.queue import broker_epoch, enqueue_run
 from backend.db.models import Run, utcnow
 from backend.db.session import session_scope
-from backend.queue import broker_epoch, enqueue_run
 from worker.status import RunStatus
 
-log = logging.getLogger("mapqual.recovery")
+log = logging.getLogger("mapqual.sweeper")
 SWEEP_EVERY_S = 3.0  # [s]
 
 

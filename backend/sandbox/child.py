@@ -1,14 +1,14 @@
 """The sandbox's processes: a zygote that loads the parsers (or the world analysis) once, and
 per task a forked child that limits itself, runs the task and writes a typed result.
 
-The zygote is started by `backend.sandbox` with an allow-listed environment (no database or
+The zygote is started by `backend.sandbox.manager` with an allow-listed environment (no database or
 broker URL, no secret key). Each child works in a temporary folder of its own (`in/` the
 uploaded files, `out/` the result, `tmp/` its TMPDIR), in a session of its own, and sets its
 hard limits before it reads a byte of the upload: address space, CPU seconds, bytes a file
 may grow to, open files, no core dumps; and the decompression budget. The result is
 `out/result.json` ({"ok": true, ...} or {"ok": false, "kind": ..., "error": one line}) and,
 for an estimate, `out/trajectory.npy` (N x 4 float64: t, x, y, yaw); for a floorplan,
-`out/result.bin` (`worker.world.floorplan`). The tasks are `backend.sandbox_tasks`'.
+`out/result.bin` (`worker.world.floorplan`). The tasks are `backend.sandbox.tasks`'.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def limit_self(limits: dict[str, int]) -> None:
 
 def run(req: dict[str, Any]) -> dict[str, Any]:
     """The task's outcome as the result's JSON (every failure a one-line reason)."""
-    from backend.sandbox_tasks import TASKS
+    from backend.sandbox.tasks import TASKS
     from worker.decompress_budget import set_budget
     from worker.errors import InputError
     from worker.export.bounded import bound_bag_readers
@@ -95,7 +95,7 @@ def zygote(kind: str, warm: str) -> int:
     CPU time} out. `kind`:
     which code it loads first ("sandbox": the upload parsers, "analysis": world analysis),
     trying it on tiny inputs written to the folder `warm`."""
-    from backend.sandbox_tasks import warm_up
+    from backend.sandbox.tasks import warm_up
 
     warm_up(kind, Path(warm))
     out = sys.stdout.buffer

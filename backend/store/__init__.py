@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from sqlalchemy import select
@@ -14,7 +13,8 @@ from sqlalchemy.orm import Session
 
 from backend.db.arrays import pack_array, unpack_array
 from backend.db.models import Job, Run, RunMap, RunTrajectory
-from backend.lifecycle import (
+from backend.store.jobs import NewJob, create_job
+from backend.store.lifecycle import (
     TransitionRefused,
     claim_run,
     fail_run,
@@ -23,8 +23,8 @@ from backend.lifecycle import (
     new_attempt,
     requeue,
 )
-from backend.lifecycle import refresh_job_status as _refresh_job_status
-from backend.store_users import (
+from backend.store.lifecycle import refresh_job_status as _refresh_job_status
+from backend.store.users import (
     LOCAL_USER,
     add_user,
     create_web_session,
@@ -38,7 +38,7 @@ from backend.store_users import (
     user_for_key,
     web_session_user,
 )
-from backend.store_worlds import (
+from backend.store.worlds import (
     create_pending_world,
     get_or_create_world,
     mark_world_invalid,
@@ -50,10 +50,11 @@ from backend.store_worlds import (
     world_occupancy,
     world_upload,
 )
-from worker.status import JobStatus, RunStatus
+from worker.status import RunStatus
 
 __all__ = [
     "LOCAL_USER",
+    "NewJob",
     "TRAJECTORY_KINDS",
     "add_job_runs",
     "add_user",
@@ -90,55 +91,6 @@ __all__ = [
 from worker.report.summary import RunSummary
 
 TRAJECTORY_KINDS = ("gt", "est")
-
-
-def create_job(
-    session: Session,
-    *,
-    owner_id: int,
-    world_id: int,
-    slam: str,
-    params: dict[str, Any],
-    seeds: Sequence[int],
-    idempotency_key: str | None = None,
-    broker_epoch: str | None = None,
-) -> Job:
-    """A queued job with one queued run per seed; every call makes new runs, never reuses old
-    (except a repeated `idempotency_key` of the same owner, which returns the first job).
-    `broker_epoch`: the epoch of the broker the runs are about to be sent to (see
-    `backend.queue`), stamped as they are made."""
-    if not seeds:
-        raise ValueError("a job needs at least one seed")
-    if idempotency_key is not None:
-        found = session.scalars(
-            select(Job).where(Job.owner_id == owner_id, Job.idempotency_key == idempotency_key)
-        ).first()
-        if found is not None:
-            return found
-    job = Job(
-        owner_id=owner_id,
-        world_id=world_id,
-        slam=slam,
-        params=params,
-        status=JobStatus.QUEUED,
-        idempotency_key=idempotency_key,
-    )
-    # Runs built through the relationship: one flush inserts the job, then all runs in one
-    # batched statement, and job.runs needs no second query afterwards.
-    job.runs = [
-        Run(
-            owner_id=owner_id,
-            world_id=world_id,
-            seed=int(seed),
-            slam=slam,
-            params=params,
-            broker_epoch=broker_epoch,
-        )  # fmt: skip
-        for seed in seeds
-    ]
-    session.add(job)
-    session.flush()
-    return job
 
 
 def mark_run_started(

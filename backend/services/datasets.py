@@ -14,16 +14,16 @@ from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 
-from fastapi import HTTPException, status
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from backend import quotas
-from backend.api.deps import Principal
 from backend.core.config import Settings
 from backend.db.models import World
-from backend.store_worlds import save_world
+from backend.services import quotas
+from backend.services.access import Principal
+from backend.services.errors import NotFound
+from backend.store.worlds import save_world
 from worker.world.catalogue import default_worlds_dir
 from worker.world.datasets import (
     BundledWorld,
@@ -81,21 +81,19 @@ class BundledCatalogue:
         self._current = [d for _, d in loaded.values()]
 
     def dataset(self, name: str) -> Dataset:
-        """The data set called `name`; 404 if there is none (the name is compared, never
+        """The data set called `name`; NotFound if there is none (the name is compared, never
         made into a path)."""
         found = next((d for d in self.datasets() if d.name == name), None)
         if found is None:
-            raise HTTPException(status.HTTP_404_NOT_FOUND, f"no bundled data set {name[:100]!r}")
+            raise NotFound(f"no bundled data set {name[:100]!r}")
         return found
 
     def world(self, dataset: str, name: str) -> tuple[Dataset, BundledWorld]:
-        """The data set and its world called `name`; 404 if either does not exist."""
+        """The data set and its world called `name`; NotFound if either does not exist."""
         d = self.dataset(dataset)
         w = d.world(name)
         if w is None:
-            raise HTTPException(
-                status.HTTP_404_NOT_FOUND, f"no world {name[:100]!r} in the data set {d.name!r}"
-            )
+            raise NotFound(f"no world {name[:100]!r} in the data set {d.name!r}")
         return d, w
 
     def thumbnail(self, dataset: str, name: str, max_px: int | None) -> bytes:

@@ -13,19 +13,26 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
-from backend.attempt_files import AttemptFiles
 from backend.core.config import Settings
 from backend.db.models import Run, World
 from backend.db.session import session_scope
-from backend.lifecycle import TransitionRefused, claim_run, new_attempt
-from backend.progress import ProgressReporter
+from backend.services.attempt_files import AttemptFiles
+from backend.services.progress import ProgressReporter
 from backend.store import mark_run_failed, store_run_result, world_model
+from backend.store.lifecycle import TransitionRefused, claim_run, new_attempt
 from worker.report.folder import SIM_LOG
 from worker.report.summary import RunSummary
 from worker.status import RunStatus
 from worker.storage import StorageError
+
+if TYPE_CHECKING:  # the pipeline (numba) loads only when a run is executed
+    from redis import Redis
+
+    from worker.pipeline import RunProgress, RunResult
+    from worker.run_params import RunParams
+    from worker.world.world import World as WorldModel
 
 log = logging.getLogger("mapqual.execute")
 # besides the run's status when the delivery ended it: done | cancelled | failed
@@ -69,11 +76,11 @@ WORKER = Placement()
 def execute_run(
     run_id: int,
     settings: Settings,
-    redis_client: Any | None = None,
+    redis_client: Redis | None = None,
     *,
     place: Placement = WORKER,
-    on_progress: Callable[[Any], None] | None = None,
-    world: Any | None = None,
+    on_progress: Callable[[RunProgress], None] | None = None,
+    world: WorldModel | None = None,
 ) -> Outcome:
     """Claim, run, and store run `run_id` (see the module's docstring). Progress goes to
     `on_progress`, or (None) to the database and Redis, where cancellation is noticed;
@@ -160,7 +167,11 @@ class _Job:
     files: AttemptFiles  # where the attempt writes its report, and where it is kept
     place: Placement
 
-    def run_and_store(self, job: tuple[Any, Any, int], on_progress: Callable[[Any], None]) -> Any:
+    def run_and_store(
+        self,
+        job: tuple[WorldModel, RunParams, int],
+        on_progress: Callable[[RunProgress], None],
+    ) -> RunResult:
         """Run the pipeline on `job` = (world, RunParams, seed) writing into the folder, write
         the report there (and upload it, S3), and store the result as this attempt's in one
         transaction, the local folder renamed into place inside it. The `RunResult`;

@@ -1,4 +1,5 @@
-"""The FastAPI application: `uvicorn backend.main:app` (or `mapqual serve`)."""
+"""The REST API as a FastAPI application; `mapqual.app` adds the dashboard above it (backend
+imports no frontend)."""
 
 from __future__ import annotations
 
@@ -12,15 +13,15 @@ from fastapi.responses import JSONResponse
 from sqlalchemy.exc import SQLAlchemyError
 from starlette.concurrency import run_in_threadpool
 
+from backend.api import errors
+from backend.api.deps import recover_pending, world_pool
 from backend.api.limits import BodyLimit
+from backend.api.manual import MOUNT as MANUAL_MOUNT
+from backend.api.manual import Manual
 from backend.api.routes import bags, datasets, health, jobs, runs, stats, worlds
 from backend.core.config import Settings, get_settings
-from backend.manual import MOUNT as MANUAL_MOUNT
-from backend.manual import Manual
-from backend.sandbox import sandbox, scrub_paths, server_folders
-from backend.schemas import API_PREFIX
-from backend.world_analysis import recover_pending, world_pool
-from frontend.dashboard import install as install_dashboard
+from backend.core.schemas import API_PREFIX
+from backend.sandbox.manager import sandbox, scrub_paths, server_folders
 from worker.errors import InputError
 
 log = logging.getLogger("mapqual.api")
@@ -58,8 +59,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
         await run_in_threadpool(sandbox(app).shutdown)
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """A configured app; tests pass their own settings (database, broker, auth)."""
+def create_api(settings: Settings | None = None) -> FastAPI:
+    """A configured API; tests pass their own settings (database, broker, auth)."""
     settings = settings or get_settings()
     app = FastAPI(
         title="mapqual",
@@ -79,17 +80,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # no server path in an answer: the temporary, sandbox and runs folders shortened
         return JSONResponse({"detail": scrub_paths(str(exc), *server_folders(settings))}, 400)
 
+    errors.install(app)  # the services' typed errors as HTTP answers
     app.include_router(health.router)
     # jobs first: routes are matched in order, and GET /jobs/{id} and POST /jobs are the hot
     # paths (each route tried before them costs every such request a match)
     for module in (jobs, worlds, datasets, runs, bags, stats):
         app.include_router(module.router, prefix=API_PREFIX)
-    # the manual at /manual/, before the dashboard's catch-all pages
+    # the manual at /manual/, before the dashboard's catch-all pages (`mapqual.app`)
     app.mount(MANUAL_MOUNT, Manual(), name="manual")
-    install_dashboard(app)  # the dashboard at /
     # outermost: bodies are counted before any parser (or other middleware) reads them
     app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes)
     return app
-
-
-app = create_app()

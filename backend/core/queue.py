@@ -2,8 +2,8 @@
 
 Each run sent is stamped with the broker's epoch: a random id kept in a Redis key beside the
 queue, made when missing. A broker that lost its queue (Redis restarted without persistence)
-lost that key too, and the workers' sweeper (`backend.recovery`) sends again the runs stamped
-with an older epoch.
+lost that key too, and the workers' sweeper (`backend.services.sweeper`) sends again the runs
+stamped with an older epoch.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import secrets
 import time
 from collections.abc import Sequence
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING
 
 from celery import Celery
 from sqlalchemy import update
@@ -20,6 +20,9 @@ from sqlalchemy.orm import Session
 
 from backend.db.models import Run
 from worker.celery_conf import RUN_TASK, producer_conf
+
+if TYPE_CHECKING:
+    from redis import Redis
 
 EPOCH_KEY = "mapqual:broker_epoch"
 
@@ -33,7 +36,7 @@ def _client(broker_url: str) -> Celery:
 
 
 @lru_cache(maxsize=4)
-def _redis(broker_url: str) -> Any:
+def _redis(broker_url: str) -> Redis:
     import redis
 
     return redis.Redis.from_url(broker_url, socket_connect_timeout=2, socket_timeout=5)

@@ -68,7 +68,7 @@ class WorldOut(BaseModel):
         return out
 
 
-API_PREFIX = "/api/v1"  # where the routes below live (backend.main mounts them there)
+API_PREFIX = "/api/v1"  # where the routes below live (`backend.api.app` mounts them there)
 
 
 class BundledWorldOut(BaseModel):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sqlalchemy import select, true, update
@@ -27,6 +27,9 @@ from worker.live_wire import (
 from worker.pipeline import RunCancelled, RunProgress, RunSuperseded
 from worker.status import RunStatus
 
+if TYPE_CHECKING:
+    from redis import Redis
+
 
 class ProgressReporter:
     """The `on_progress` callback of a run executed by a worker.
@@ -44,7 +47,7 @@ class ProgressReporter:
         self,
         database_url: str,
         run_id: int,
-        redis_client: Any | None = None,
+        redis_client: Redis | None = None,
         attempt: str | None = None,
         store_every_s: float = 2.0,
         publish_every_s: float = 0.2,

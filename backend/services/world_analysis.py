@@ -1,7 +1,7 @@
 """Uploaded worlds analysed off the request thread: `world_workers` threads per API process
 turn a `pending` world into `ready` (geometry stored) or `invalid` (reason), each analysis in
-a limited process of its own (`backend.sandbox`, kind "analysis": address space, CPU and wall
-time from the `analysis_*` settings), forked from a warm process that loaded the analysis
+a limited process of its own (`backend.sandbox.manager`, kind "analysis": address space, CPU
+and wall time from the `analysis_*` settings), forked from a warm process that loaded the analysis
 once. The API process never imports what the analysis needs (numba).
 
 The analysis starts from the floorplan the upload sandbox read (`worker.world.floorplan`),
@@ -21,12 +21,15 @@ import logging
 import threading
 import zipfile
 from collections import OrderedDict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from backend.sandbox import Sandbox, shared_sandbox
+from backend.sandbox.manager import Sandbox, shared_sandbox
 from worker.status import WorldStatus
+
+if TYPE_CHECKING:
+    from backend.core.config import Settings
 
 log = logging.getLogger("mapqual.worlds")
 
@@ -44,7 +47,7 @@ def pack_upload(files: dict[str, bytes]) -> bytes:
     return buf.getvalue()
 
 
-# Analyses made where small uploads were read (`backend.sandbox_tasks.floorplan`), by the
+# Analyses made where small uploads were read (`backend.sandbox.tasks.floorplan`), by the
 # floorplan bytes' digest, until their world's analysis takes them; the oldest dropped past
 # KNOWN_MAX (a world whose entry is gone is analysed in the analysis sandbox instead).
 KNOWN_MAX = 256
@@ -129,7 +132,7 @@ def _analysed(box: Sandbox, blob: bytes, resolution: float | None, main: str):
 def _read_stored_upload(box: Sandbox, blob: bytes, main: str, resolution: float | None) -> bytes:
     """A floorplan's bytes from `pack_upload`'s zip (stored by this server, its names plain
     file names), read in the upload sandbox."""
-    from backend.api.routes.worlds import read_upload
+    from backend.services.worlds import read_upload
 
     with zipfile.ZipFile(io.BytesIO(blob)) as zf:
         files = {name: zf.read(name) for name in zf.namelist()}
@@ -141,7 +144,7 @@ class WorldPool:
     processes; a world whose analysis failed on our side is marked invalid (it can be
     uploaded again)."""
 
-    def __init__(self, settings: Any):
+    def __init__(self, settings: Settings):
         self.database_url = settings.database_url
         self.box = shared_sandbox(settings, "analysis")
         self._lock = threading.Lock()
@@ -204,24 +207,3 @@ class WorldPool:
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
         self.box.shutdown()
-
-
-def world_pool(app: Any) -> WorldPool:
-    """The app's pool (made on first use, with the app's settings)."""
-    pool = getattr(app.state, "world_pool", None)
-    if pool is None:
-        pool = app.state.world_pool = WorldPool(app.state.settings)
-    return pool
-
-
-def recover_pending(app: Any) -> list[int]:
-    """Hand every world left `pending` (by a process that died) to the pool again."""
-    from backend.db.session import session_scope
-    from backend.store import pending_world_ids
-
-    with session_scope(app.state.settings.database_url) as s:
-        ids = pending_world_ids(s)
-    pool = world_pool(app)
-    for world_id in ids:
-        pool.submit(world_id)
-    return ids

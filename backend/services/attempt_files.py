@@ -17,7 +17,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from backend.lifecycle import attempt_dir, remove_attempt_dirs
+from backend.store.lifecycle import attempt_dir, remove_attempt_dirs
 from worker.report.folder import REPORT_ZIP, write_report_zip
 from worker.storage import Storage, join
 from worker.storage.local import LocalStorage

@@ -1,4 +1,4 @@
-"""What the sandbox's children do (`backend.sandbox_child`), by task, and how each kind of
+"""What the sandbox's children do (`backend.sandbox.child`), by task, and how each kind of
 zygote warms up. Every task runs in a forked child that has limited itself, in its folder's
 `in/`; it writes `../out/result.bin` or `../out/trajectory.npy` and returns the facts of
 `out/result.json`.

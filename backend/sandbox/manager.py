@@ -1,7 +1,7 @@
 """The one way the API reads untrusted bytes: a separate, limited process per upload.
 
 Each upload (an estimate in any format, a floorplan with its files) is parsed by a process
-forked for it from a warm zygote (`python -m backend.sandbox_child`, its parsers loaded once),
+forked for it from a warm zygote (`python -m backend.sandbox.child`, its parsers loaded once),
 in a temporary folder of its own, with an allow-listed environment (no database or broker
 URL, no secret key), hard rlimits it sets on itself first (address space, CPU seconds, file
 size, open files), a wall-clock deadline and a byte quota on its folder enforced from here
@@ -29,13 +29,16 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from fastapi import HTTPException, status
 
 from backend.core.config import Settings
 from worker.errors import InputError
+
+if TYPE_CHECKING:
+    from fastapi import FastAPI
 
 MiB = 1 << 20
 OPEN_FILES = 64  # descriptors a sandbox may hold: the upload, a bag's few files, Python's own
@@ -94,7 +97,7 @@ class Limits:
 
 
 class Zygote:
-    """One warm parser process (`backend.sandbox_child`) serving one task at a time."""
+    """One warm parser process (`backend.sandbox.child`) serving one task at a time."""
 
     def __init__(self, root: Path | None, kind: str = "sandbox"):
         env = {k: os.environ[k] for k in PASS_ENV if k in os.environ}
@@ -104,7 +107,7 @@ class Zygote:
         # process may be killed in the middle of its warm-up (a server stopped at once)
         self.warm = Path(tempfile.mkdtemp(prefix="mapqual-warm-", dir=root))
         self.proc = subprocess.Popen(
-            [sys.executable, "-P", "-m", "backend.sandbox_child", kind, str(self.warm)],
+            [sys.executable, "-P", "-m", "backend.sandbox.child", kind, str(self.warm)],
             cwd=root, env=env,
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             close_fds=True, start_new_session=True,
@@ -389,6 +392,6 @@ def shared_sandbox(settings: Settings, kind: str = "sandbox") -> Sandbox:
         return found[1]
 
 
-def sandbox(app: Any) -> Sandbox:
+def sandbox(app: FastAPI) -> Sandbox:
     """The app's sandbox (made on first use, with the app's settings)."""
     return shared_sandbox(app.state.settings)

@@ -1,4 +1,4 @@
-"""Per-owner quotas on runs and uploads, read from the settings and answered with 429.
+"""Per-owner quotas on runs and uploads, read from the settings; QuotaExceeded (HTTP 429).
 
 Admins are held to the same limits: the quotas protect the service (its queue, workers and
 disk), which a runaway script of an admin's fills as surely as anyone's; an operator who needs
@@ -7,17 +7,16 @@ more raises the setting the message names.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from datetime import timedelta
-from typing import Any
 
-from fastapi import HTTPException, status
 from sqlalchemy import bindparam, func, select, update
 from sqlalchemy.orm import Session
 
 from backend.core.config import Settings
 from backend.db.models import Run, RunEstimate, User, World, utcnow
+from backend.services.errors import QuotaExceeded
 from worker.explore.params import ExploreParams
+from worker.run_params import RunParams
 from worker.status import RunStatus
 
 ACTIVE = (RunStatus.QUEUED, RunStatus.RUNNING)
@@ -45,14 +44,15 @@ def check_runs(
     owner_id: int,
     settings: Settings,
     n_new: int,
-    params: Mapping[str, Any],
+    params: RunParams,
     *,
     locked: bool = False,
 ) -> None:
-    """429 unless `n_new` more runs with `params` keep the owner within `quota_active_runs`
-    (runs queued or running at once) and `quota_sim_hours` (the simulated time those runs may
-    take in all, from each run's `explore.time_limit`). Call before storing anything; `locked`:
-    the transaction holds the owner's lock already (`lock_owner`, or a statement of its own)."""
+    """QuotaExceeded unless `n_new` more runs with `params` keep the owner within
+    `quota_active_runs` (runs queued or running at once) and `quota_sim_hours` (the simulated
+    time those runs may take in all, from each run's `explore.time_limit`). Call before storing
+    anything; `locked`: the transaction holds the owner's lock already (`lock_owner`, or a
+    statement of its own)."""
     if not locked:
         lock_owner(session, owner_id)
     active, seconds = (
@@ -67,7 +67,7 @@ def check_runs(
             "quota_active_runs",
         )
     hours_active = float(seconds) / 3600.0
-    hours_new = n_new * time_limit_s(params) / 3600.0
+    hours_new = n_new * params.explore.time_limit / 3600.0
     if hours_active + hours_new > settings.quota_sim_hours:
         _refuse(
             f"{n_new} runs asking for {hours_new:g} simulated hours, with {hours_active:g} h "
@@ -78,8 +78,8 @@ def check_runs(
 
 
 def check_upload(session: Session, owner_id: int, settings: Settings) -> None:
-    """429 unless one more world keeps the owner within `quota_worlds` (worlds stored) and
-    `quota_uploads_per_day` (worlds created in the last 24 hours)."""
+    """QuotaExceeded unless one more world keeps the owner within `quota_worlds` (worlds
+    stored) and `quota_uploads_per_day` (worlds created in the last 24 hours)."""
     lock_owner(session, owner_id)
     since = utcnow() - timedelta(days=1)
     stored, recent = session.execute(
@@ -102,8 +102,9 @@ def check_upload(session: Session, owner_id: int, settings: Settings) -> None:
 def check_estimates(
     session: Session, owner_id: int, settings: Settings, run_id: int, name: str, new_bytes: int = 0
 ) -> None:
-    """429 unless one more estimate of `new_bytes` (stored trajectory) keeps the owner within
-    `quota_estimates` (estimates stored) and `quota_estimate_mb` (their trajectories' bytes).
+    """QuotaExceeded unless one more estimate of `new_bytes` (stored trajectory) keeps the owner
+    within `quota_estimates` (estimates stored) and `quota_estimate_mb` (their trajectories'
+    bytes).
     The estimate it replaces (the same run and name) does not count."""
     lock_owner(session, owner_id)
     others = (RunEstimate.owner_id == owner_id) & ~(
@@ -125,15 +126,6 @@ def check_estimates(
         )
 
 
-def time_limit_s(params: Mapping[str, Any] | None) -> float:
-    """A run's simulated-time limit [s] from its stored parameters (the default if absent)."""
-    explore = (params or {}).get("explore") or {}
-    try:
-        return float(explore.get("time_limit", DEFAULT_TIME_LIMIT_S))
-    except (TypeError, ValueError, AttributeError):
-        return DEFAULT_TIME_LIMIT_S
-
-
 def lock_owner(session: Session, user_id: int) -> None:
     """Take the owner's row until the transaction ends, so two requests of one owner at the
     same time cannot both pass on the same count."""
@@ -150,7 +142,4 @@ def lock_owner(session: Session, user_id: int) -> None:
 
 def _refuse(what: str, setting: str) -> None:
     env = Settings.model_fields[setting].alias
-    raise HTTPException(
-        status.HTTP_429_TOO_MANY_REQUESTS,
-        f"quota exceeded: {what} (setting {setting}, environment {env})",
-    )
+    raise QuotaExceeded(f"quota exceeded: {what} (setting {setting}, environment {env})")

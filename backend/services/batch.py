@@ -8,12 +8,12 @@ import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
-from backend.execute import Placement, execute_run
+from backend.services.execute import Placement, execute_run
 from backend.store import (
     add_job_runs,
     create_job,
@@ -30,6 +30,9 @@ from worker.batch.pool import TaskFailed
 from worker.batch.remote import RunState
 from worker.status import RunStatus
 from worker.world.world import World
+
+if TYPE_CHECKING:
+    from worker.pipeline import RunProgress
 
 log = logging.getLogger("mapqual.batch")
 
@@ -116,7 +119,7 @@ class DbBatch:
     def send(self, run_id: int, requeue: bool) -> None:
         """Queue the run for the Celery workers (`requeue`: a failed run back to queued first:
         the task runs queued runs only)."""
-        from backend.queue import enqueue_runs
+        from backend.core.queue import enqueue_runs
 
         with session_scope(self.url) as s:
             if requeue:
@@ -132,7 +135,7 @@ class PoolRun:
     settings: Settings
     run_ids: dict[str, int]  # run key -> the database's run id
 
-    def __call__(self, task: Task, progress: Callable[[Any], None]) -> RunOutput:
+    def __call__(self, task: Task, progress: Callable[[RunProgress], None]) -> RunOutput:
         spec = task.spec
         place = Placement(
             report_dir=Path(task.report_dir), own_folder=True,
