@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from worker.distance_kernels import inflate_region
 from worker.evaluate.ate import align_se2
 
 _FOUR = ndimage.generate_binary_structure(2, 1)
@@ -31,8 +32,13 @@ def reachable_free(
     """
     clearance = half_side if clearance is None else clearance
     free = ~occ
-    dist = ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
-    centre_ok = (dist - 0.5) * resolution > clearance
+    # the centre is clear where the nearest obstacle (the plan's edge too) lies farther than
+    # `clearance` + half a cell: (d - 0.5) * resolution > clearance, d between cell centres
+    obstacles = np.pad(occ, 1, constant_values=True)
+    blocked = _near(obstacles, clearance / resolution + 0.5,
+                    lambda d: (d - 0.5) * resolution <= clearance)  # fmt: skip
+    centre_ok = ~blocked[1:-1, 1:-1]
+    del obstacles, blocked
     labels, _ = ndimage.label(centre_ok, structure=_FOUR)
     ix, iy = start_cell
     lab = labels[iy, ix] if (0 <= iy < occ.shape[0] and 0 <= ix < occ.shape[1]) else 0
@@ -43,8 +49,29 @@ def reachable_free(
         _, (ny, nx) = ndimage.distance_transform_edt(~centre_ok, return_indices=True)
         lab = labels[ny[iy, ix], nx[iy, ix]]
     reach = labels == lab
-    to_reach = ndimage.distance_transform_edt(~reach) * resolution
-    return free & (to_reach <= half_side * math.sqrt(2.0) + resolution)
+    del labels, centre_ok
+    sweep = half_side * math.sqrt(2.0) + resolution  # [m] the body's reach from its centre
+    return free & _near(reach, sweep / resolution, lambda d: d * resolution <= sweep)
+
+
+_BAND = 256  # rows per kernel call: its row distances cover a band, not the whole plan
+
+
+def _near(sources: np.ndarray, reach_cells: float, test) -> np.ndarray:
+    """`(H, W) bool`: whether `test(d)` holds for each cell's distance d [cells, between
+    centres] to the nearest `sources` cell, False where none lies within `reach_cells` (`test`
+    must be False past it). `test` gets `np.sqrt` of the exact integer squared distance, as
+    scipy's exact transform computes it, so the answer is the whole-plan transform's, in one
+    byte a cell plus a band's row distances."""
+    r = int(math.ceil(reach_cells)) + 1
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    d2 = dy * dy + dx * dx
+    stamp = (test(np.sqrt(d2.astype(np.float64))) & (d2 <= r * r)).astype(np.uint8)
+    out = np.zeros(sources.shape, dtype=np.uint8)
+    h, w = sources.shape
+    for y0 in range(0, h, _BAND):
+        inflate_region(sources, stamp, out, y0, min(h, y0 + _BAND), 0, w)
+    return out.view(np.bool_)
 
 
 def align_map_to_world(pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
