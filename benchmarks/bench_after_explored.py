@@ -9,10 +9,11 @@ The stop rules that end a finished run (no_frontier after explore.no_frontier_ti
 after stuck_timeout, map_unchanged every snapshot_period) are pushed past the time limit, so
 the robot stands with no frontier to go to until then, as a run whose frontiers are all out
 of reach does for up to stuck_timeout. Per 0.1 s step: the navigation stack's CPU time
-(`ExplorationResult.nav_cpu_s`, this thread) in the steps whose status is "no_frontier" and
-in the others. `oracle`: the odometry SLAM fed the true pose (a perfect map). Uses only what
-benchmarks/explore_digest.py uses (load_world, Simulator, make_slam, explore), so one driver
-times both trees.
+(`ExplorationResult.nav_cpu_s`, this thread) and the whole step's wall time (everything the
+loop does, the wall clock: read it under the load it was taken at) in the steps whose status
+is "no_frontier" and in the others. `oracle`: the odometry SLAM fed the true pose (a perfect
+map). Uses only what benchmarks/explore_digest.py uses (load_world, Simulator, make_slam,
+explore), so one driver times both trees.
 """
 
 from __future__ import annotations
@@ -61,18 +62,27 @@ def main() -> None:
         stuck_timeout=never, snapshot_period=never,
     )  # fmt: skip
     statuses: list[str] = []
+    stamps: list[float] = []  # [s] wall clock at each step's progress call
+
+    def on_progress(p) -> None:
+        statuses.append(p.status)
+        stamps.append(time.perf_counter())
+
     wall0 = time.perf_counter()
-    ex = explore(
-        world, sim, slam, params, oracle=oracle, on_progress=lambda p: statuses.append(p.status)
-    )
+    ex = explore(world, sim, slam, params, oracle=oracle, on_progress=on_progress)
     wall = time.perf_counter() - wall0
     rest = np.array([s == "no_frontier" for s in statuses], dtype=bool)
     cpu = ex.nav_cpu_s[: len(rest)]
+    # each step's whole wall time (simulator, SLAM, navigation, stop rules), from one
+    # progress call to the next
+    step_wall = np.diff(np.array([wall0, *stamps]))
     first = float(ex.t[np.argmax(rest)]) if rest.any() else None
     ms = {
         "nav_cpu_ms_exploring": float(np.mean(cpu[~rest])) * 1e3,
         "nav_cpu_ms_no_frontier": float(np.mean(cpu[rest])) * 1e3 if rest.any() else None,
         "nav_cpu_ms_no_frontier_max": float(np.max(cpu[rest])) * 1e3 if rest.any() else None,
+        "step_wall_ms_exploring": float(np.mean(step_wall[~rest])) * 1e3,
+        "step_wall_ms_no_frontier": float(np.mean(step_wall[rest])) * 1e3 if rest.any() else None,
     }
     out = {
         "tree": str(tree), "world": args.world, "slam": args.slam, "reason": ex.reason,
