@@ -45,9 +45,10 @@ def _room() -> np.ndarray:
 
 def _finished_run(s, owner_id: int, world_id: int, seed: int) -> int:
     """A done run with a straight 10 s path and a small map, written as a worker would."""
-    run = create_job(
+    job = create_job(
         s, owner_id=owner_id, world_id=world_id, slam="odometry", params={}, seeds=[seed]
-    ).runs[0]
+    )
+    run = s.get_one(Run, job.runs[0].id)  # the stored row, to write a worker's results on
     t = np.arange(0.0, 10.0, 0.1)
     gt = np.column_stack([1.0 + 0.3 * t, np.full_like(t, 2.0), np.zeros_like(t)])
     for kind, poses in (("gt", gt), ("est", gt + 0.02)):

@@ -20,7 +20,7 @@ import redis
 from backend.core.viewer_tokens import issue
 from backend.db.arrays import pack_array
 from backend.db.migrate import upgrade
-from backend.db.models import RunMap, RunTrajectory
+from backend.db.models import Run, RunMap, RunTrajectory
 from backend.db.session import session_scope
 from backend.store import add_user, create_job, save_world
 from frontend.viewer import ViewerApp, run_link
@@ -52,9 +52,8 @@ def _timeline() -> Timeline:
 
 
 def _done_run(s, owner: int, world: int, report_dir: str | None) -> int:
-    run = create_job(s, owner_id=owner, world_id=world, slam="odometry", params={}, seeds=[1]).runs[
-        0
-    ]
+    job = create_job(s, owner_id=owner, world_id=world, slam="odometry", params={}, seeds=[1])
+    run = s.get_one(Run, job.runs[0].id)  # the stored row, to write a worker's results on
     t = np.round(np.arange(int(DURATION * 10)) * 0.1, 1)
     gt = np.column_stack([1.0 + 0.08 * t, 2.0 + 0.02 * t, np.zeros_like(t)])
     for kind, poses in (("gt", gt), ("est", gt + [0.05, 0.0, 0.01])):
@@ -89,8 +88,9 @@ def env(tmp_path_factory, own_redis):
                            sha256="room", source_format="image")  # fmt: skip
             runs = {"new": _done_run(s, user.id, w.id, str(new)),
                     "old": _done_run(s, user.id, w.id, str(old))}  # fmt: skip
-            live = create_job(s, owner_id=user.id, world_id=w.id, slam="rbpf", params={},
-                              seeds=[2]).runs[0]  # fmt: skip
+            job = create_job(s, owner_id=user.id, world_id=w.id, slam="rbpf", params={},
+                             seeds=[2])  # fmt: skip
+            live = s.get_one(Run, job.runs[0].id)
             live.status = "running"
             s.flush()
             runs["live"], uid = live.id, user.id

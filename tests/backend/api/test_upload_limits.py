@@ -234,8 +234,8 @@ def test_analysis_and_prediction_run_in_limited_processes_and_the_api_never_load
     assert p.status_code == 200 and p.json()["features"]["free_area_m2"] > 0, p.text
     children = Path(f"/proc/{server['pid']}/task/{server['pid']}/children").read_text().split()
     cmdlines = [Path(f"/proc/{pid}/cmdline").read_bytes() for pid in children]
-    assert sum(b"sandbox_child\0analysis" in c for c in cmdlines) == 1  # world_workers
-    assert sum(b"sandbox_child\0sandbox" in c for c in cmdlines) == 2  # sandbox_workers
+    assert sum(b"sandbox.child\0analysis" in c for c in cmdlines) == 1  # world_workers
+    assert sum(b"sandbox.child\0sandbox" in c for c in cmdlines) == 2  # sandbox_workers
     maps = Path(f"/proc/{server['pid']}/maps").read_text()
     assert "llvmlite" not in maps and "/numba/" not in maps
     out = subprocess.run(
