@@ -27,15 +27,8 @@ from pathlib import Path
 import numpy as np
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tree", type=Path, required=True, help="the checkout whose code runs")
-    ap.add_argument("--world", default="office_a", help="a Bormann world's name")
-    ap.add_argument("--slam", default="rbpf")
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--time-limit", type=float, default=950.0, help="[s] simulated")
-    args = ap.parse_args()
-    tree = args.tree.resolve()
+def _tree_api(tree: Path):
+    """The functions this benchmark calls, from `tree`'s own code (either layout)."""
     sys.path.insert(0, str(tree))
     from worker.explore.loop import ExploreParams, explore
     from worker.sim.simulator import SimParams, Simulator
@@ -50,6 +43,21 @@ def main() -> None:
     from worker.slam.params import SlamParams
     from worker.world.loader import load_world
 
+    return explore, explore_params, make_slam, load_world, SimParams, Simulator, SlamParams
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tree", type=Path, required=True, help="the checkout whose code runs")
+    ap.add_argument("--world", default="office_a", help="a Bormann world's name")
+    ap.add_argument("--slam", default="rbpf")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--time-limit", type=float, default=950.0, help="[s] simulated")
+    args = ap.parse_args()
+    tree = args.tree.resolve()
+    explore, explore_params, make_slam, load_world, SimParams, Simulator, SlamParams = _tree_api(
+        tree
+    )
     world = load_world(tree / "worlds" / "bormann" / f"{args.world}.yaml")
     rng = np.random.default_rng(args.seed)
     sim_params = SimParams()
