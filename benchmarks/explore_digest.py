@@ -97,8 +97,9 @@ def digest(name: str, slam_name: str, seed: int, time_limit: float, other: dict)
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(steps).encode())
     h.update(repr([dataclasses.astuple(g) for g in r.goals]).encode())
-    # the outcome as its plain string: an enum member and its value digest alike
-    tail = (str(r.outcome), r.reason, r.stop_detail, r.path_length_m, r.coverage, r.collision)
+    # the outcome and the reason as plain strings: an enum member and its value digest alike
+    reason = None if r.reason is None else str(r.reason)
+    tail = (str(r.outcome), reason, r.stop_detail, r.path_length_m, r.coverage, r.collision)
     counts = (r.goals_reached, r.goals_failed, r.safety_triggers, r.recoveries)
     h.update(repr((tail, counts)).encode())
     statuses = Counter(s[1] for s in steps)
