@@ -6,8 +6,10 @@ they list runs, store a new run of a loaded world, and store scored estimates.""
 from __future__ import annotations
 
 import io
+import tempfile
 from dataclasses import dataclass
 from datetime import datetime
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,11 +20,12 @@ from backend import store
 from backend.db.models import Run, World
 from backend.services import users
 from backend.services.access import Principal, owned
-from backend.services.errors import NotFound
+from backend.services.errors import NotFound, Unavailable
 from backend.store import load_map, load_trajectory
 from backend.store.estimates import save_estimate
 from worker.report.summary import RunSummary
 from worker.status import RunStatus
+from worker.storage import RunFiles, StorageError, run_files
 
 if TYPE_CHECKING:
     from worker.run_params import RunParams
@@ -62,9 +65,49 @@ def done_run(session: Session, user: Principal, run_id: int) -> Run:
     return run
 
 
+def unreachable(run_id: int, exc: Exception) -> Unavailable:
+    """The error of a done run whose files cannot be reached now."""
+    return Unavailable(f"run {run_id}: its report cannot be reached ({exc})")
+
+
+def report_files(run: Run) -> RunFiles:
+    """The done run's report folder: NotFound when it has none, Unavailable when it cannot be
+    reached."""
+    if run.status != RunStatus.DONE or not run.report_dir:
+        raise NotFound(f"run {run.id} has no report (yet)")
+    try:
+        files = run_files(run.report_dir)
+        files.check()
+    except (StorageError, OSError) as exc:
+        raise unreachable(run.id, exc) from None
+    return files
+
+
+def relations_file(run: Run, kind: str) -> tuple[RunFiles, str]:
+    """(the done run's report folder, the name of its relations file of `kind` A | B | SM):
+    NotFound when the report has none."""
+    files, name = report_files(run), f"relations_{kind}.txt"
+    if not files.has(name):
+        raise NotFound(f"run {run.id} has no {kind} relations")
+    return files, name
+
+
 def trajectory(session: Session, run: Run, kind: str) -> tuple[np.ndarray, np.ndarray]:
     """A done run's trajectory `kind` (gt | est): (t (N,) [s], poses (N, 3) [x, y, theta])."""
     return load_trajectory(session, run.id, kind)
+
+
+def trajectory_text(t: np.ndarray, poses: np.ndarray, fmt: str) -> str:
+    """A trajectory as a text file: TUM (`fmt` tum, evo reads it) or CARMEN FLASER (carmen,
+    the thesis's)."""
+    from worker.evaluate.trajectory import Trajectory
+    from worker.evaluate.trajio import write_carmen, write_tum
+
+    writer = write_tum if fmt == "tum" else write_carmen
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "traj.txt"
+        writer(path, Trajectory(t, poses))
+        return path.read_text()
 
 
 def map_files(session: Session, run: Run) -> dict[str, bytes]:
