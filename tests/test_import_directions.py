@@ -95,3 +95,15 @@ def test_the_services_speak_no_http():
         and _top(b) in ("fastapi", "starlette")
     }
     assert wrong == set()
+
+
+def test_the_cli_reaches_the_database_through_the_services():
+    # `mapqual users|runs|score|run` call backend.services; the CLI holds no session, model or
+    # store function of its own (the settings and `mapqual db upgrade` aside)
+    allowed = ("backend.services", "backend.core.config", "backend.db.migrate")
+    wrong = {
+        (a, b)
+        for a, b in edges("mapqual/cli")
+        if _top(b) == "backend" and not (b in allowed or b.startswith(f"{allowed[0]}."))
+    }
+    assert wrong == set()

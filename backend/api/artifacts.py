@@ -1,5 +1,5 @@
-"""A done run's report files as the API serves them, through the storage layer: 404 for a run
-with no report, 503 (with the reason) for a done run whose files cannot be reached, files
+"""A done run's report files as the API serves them, through the storage layer (found by
+`backend.services.runs.report_files`): 503 (with the reason) for files that cannot be read, files
 streamed (never loaded whole), and things made on demand (a bag, a zip) built once, kept in
 the storage, one build at a time per run and kind."""
 
@@ -17,8 +17,9 @@ from starlette.background import BackgroundTask
 
 from backend.core.single_flight import single_flight
 from backend.db.models import Run
-from worker.status import RunStatus
-from worker.storage import CHUNK, RunFiles, StorageError, run_files
+from backend.services.errors import ServiceError
+from backend.services.runs import report_files
+from worker.storage import CHUNK, RunFiles, StorageError
 
 
 def unavailable(run_id: int, exc: Exception) -> HTTPException:
@@ -28,23 +29,11 @@ def unavailable(run_id: int, exc: Exception) -> HTTPException:
     )
 
 
-def report_files(run: Run) -> RunFiles:
-    """The done run's report folder: 404 when it has none, 503 when it cannot be reached."""
-    if run.status != RunStatus.DONE or not run.report_dir:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run.id} has no report (yet)")
-    try:
-        files = run_files(run.report_dir)
-        files.check()
-    except (StorageError, OSError) as exc:
-        raise unavailable(run.id, exc) from None
-    return files
-
-
 def maybe_files(run: Run) -> RunFiles | None:
     """The done run's report folder when it can be reached now, else None (no error)."""
     try:
         return report_files(run)
-    except HTTPException:
+    except ServiceError:
         return None
 
 

@@ -20,9 +20,9 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.config import Settings, get_settings
 from backend.core.schemas import MAX_ID
 from backend.db.session import get_sessionmaker, session_scope
+from backend.services import users
 from backend.services.access import Principal
 from backend.services.world_analysis import WorldPool
-from backend.store import hash_key, local_user, user_for_key, web_session_user
 
 if TYPE_CHECKING:
     from worker.predict.service import PredictionCache
@@ -156,9 +156,8 @@ _LOCAL = "local"  # the cache entry of the local user (auth off); no key hash lo
 
 def _lookup(session: Session, settings: Settings, key: str | None) -> Principal | None:
     if settings.auth == "off":
-        return Principal.of(local_user(session))
-    user = user_for_key(session, key)
-    return None if user is None else Principal.of(user)
+        return users.local(session)
+    return users.by_key(session, key)
 
 
 def _cache_entry(
@@ -168,7 +167,7 @@ def _cache_entry(
     if settings.auth == "off":
         return _LOCAL, None
     key = _key_from_request(authorization, x_api_key)
-    return hash_key(key), key
+    return users.key_digest(key), key
 
 
 def _remember(request: Request, entry: str, user: Principal | None) -> Principal:
@@ -202,15 +201,10 @@ async def current_user(
     return user
 
 
-def _session_lookup(session: Session, token: str) -> tuple[Principal, str] | None:
-    found = web_session_user(session, token)
-    return None if found is None else (Principal.of(found[0]), found[1])
-
-
 async def _session_user(request: Request, settings: Settings, token: str) -> Principal:
     """The user of a live dashboard session (401 otherwise); its CSRF token is kept on
     `request.state.csrf_token` for the pages' forms, and checked on unsafe methods."""
-    found = await run_in_threadpool(in_session, settings, _session_lookup, token)
+    found = await run_in_threadpool(in_session, settings, users.session_user, token)
     if found is None:
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,

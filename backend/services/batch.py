@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, Any
 from backend.core.config import Settings
 from backend.db.models import Run
 from backend.db.session import session_scope
+from backend.services import users
 from backend.services.execute import Placement, execute_run
 from backend.store import (
     add_job_runs,
     create_job,
     get_runs,
-    local_user,
     mark_run_failed,
     requeue_run,
     save_world,
@@ -50,7 +50,7 @@ class DbBatch:
         self.run_ids: dict[str, int] = {}
         self.job_ids: dict[str, int] = {}
         with session_scope(url) as s:
-            owner = local_user(s).id
+            owner = users.local(s).id
             world_ids: dict[str, int] = {}
             for path, world in worlds.items():
                 row = save_world(

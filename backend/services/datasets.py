@@ -96,6 +96,12 @@ class BundledCatalogue:
             raise NotFound(f"no world {name[:100]!r} in the data set {d.name!r}")
         return d, w
 
+    def licence(self, name: str) -> str:
+        """The text of the data set's licence file (its source and terms), or one line saying
+        it has none; NotFound for no such data set."""
+        d = self.dataset(name)
+        return d.licence_text() or f"{d.name}: no licence file"
+
     def thumbnail(self, dataset: str, name: str, max_px: int | None) -> bytes:
         """The world's picture as a PNG (see occupancy_png), made once per content and size."""
         d, w = self.world(dataset, name)

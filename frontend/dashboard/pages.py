@@ -29,10 +29,10 @@ from backend.core.schemas import JobIn, WorldOut
 from backend.db.models import Run, World
 from backend.services import jobs as jobs_service
 from backend.services import runs as runs_service
+from backend.services import users
 from backend.services import worlds as worlds_service
 from backend.services.access import Principal
 from backend.services.errors import QuotaExceeded, ServiceError
-from backend.store import create_web_session, delete_web_session, user_for_key, web_session_user
 from frontend.dashboard.explore_data import group, job_result, load_runs, settings_used
 from worker.errors import InputError
 from worker.explore.params import ExploreParams
@@ -134,10 +134,9 @@ def login(
         return render(request, "login.html", 403, next=target, error=msg)
     if settings.auth == "off":
         return RedirectResponse(target, status_code=303)
-    user = user_for_key(session, key.strip())
-    if user is None:
+    token = users.sign_in(session, key.strip(), settings.session_ttl_s)
+    if token is None:
         return render(request, "login.html", 401, next=target, error="unknown API key")
-    token, _ = create_web_session(session, user.id, settings.session_ttl_s)
     resp = RedirectResponse(target, status_code=303)
     # SameSite=Lax, not Strict: a link to a job page from elsewhere (mail, the viewer) opens
     # signed in; every unsafe request needs the CSRF token anyway.
@@ -159,10 +158,10 @@ def logout(
     """End the session (its row is deleted: the same cookie is refused from now on, on every
     server process) and clear the cookie; the form must carry the session's CSRF token."""
     token = request.cookies.get(SESSION_COOKIE)
-    live = web_session_user(session, token) if token else None
+    live = users.session_user(session, token) if token else None
     if live is not None:
         require_csrf(request.headers.get(CSRF_HEADER) or csrf_token, live[1])
-        delete_web_session(session, token)
+        users.sign_out(session, token)
     resp = RedirectResponse("/login", status_code=303)
     resp.delete_cookie(SESSION_COOKIE, httponly=True, secure=settings.cookie_secure, samesite="lax")
     return resp

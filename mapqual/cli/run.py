@@ -146,20 +146,11 @@ def _execute(
 
 def _store_job(url: str, world: WorldModel, suffix: str, params: RunParams, seed: int) -> int:
     """The world (found again by its content) and a new job of one run for it: the run's id."""
-    from backend.db.session import session_scope
-    from backend.store import create_job, local_user, save_world, world_fingerprint
+    from backend.services import runs
+    from backend.services.database import transaction
 
-    with session_scope(url) as s:
-        owner = local_user(s).id
-        row = save_world(
-            s, owner_id=owner, world=world, sha256=world_fingerprint(world),
-            source_format=suffix.lstrip(".") or "image",
-        )  # fmt: skip
-        job = create_job(
-            s, owner_id=owner, world_id=row.id, slam=params.algorithm,
-            params=params, seeds=[seed],
-        )  # fmt: skip
-        return job.runs[0].id
+    with transaction(url) as s:
+        return runs.create_local_run(s, world, suffix.lstrip(".") or "image", params, seed)
 
 
 def _print_summary(s: RunSummary, run_id: int, report_dir: str) -> None:

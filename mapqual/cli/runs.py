@@ -16,15 +16,6 @@ app.add_typer(runs_app, name="runs")
 app.add_typer(db_app, name="db")
 
 
-def _database_url() -> str:
-    from backend.core.config import get_settings
-    from backend.db.migrate import upgrade
-
-    url = get_settings().database_url
-    upgrade(url)  # the embedded database is created and kept current on first use
-    return url
-
-
 def _fmt(v: float | None, spec: str) -> str:
     return "-" if v is None else format(v, spec)
 
@@ -44,33 +35,17 @@ def runs_list(
 
 def _run_rows(limit: int) -> list[dict[str, Any]]:
     """The newest `limit` runs, one plain mapping each."""
-    from backend.db.models import World
-    from backend.db.session import session_scope
-    from backend.store import list_runs
+    from dataclasses import asdict
 
-    with session_scope(_database_url()) as s:
-        rows = []
-        for r in list_runs(s, limit=limit):
-            world = s.get(World, r.world_id)
-            rows.append(
-                {
-                    "id": r.id,
-                    "job_id": r.job_id,
-                    "world": world.name if world else None,
-                    "seed": r.seed,
-                    "slam": r.slam,
-                    "status": r.status,
-                    "outcome": r.outcome,
-                    "reason": r.reason,
-                    "coverage": r.coverage,
-                    "b_mean_t": r.b_mean_t,
-                    "b_mean_r": r.b_mean_r,
-                    "sim_time": r.sim_time,
-                    "wall_time": r.wall_time,
-                    "created_at": r.created_at.isoformat() if r.created_at else None,
-                }
-            )
-    return rows
+    from backend.services import runs
+    from backend.services.database import transaction
+
+    with transaction() as s:  # the embedded database is created and kept current on first use
+        found = runs.recent(s, limit)
+    return [
+        asdict(r) | {"created_at": r.created_at.isoformat() if r.created_at else None}
+        for r in found
+    ]
 
 
 def _print_runs(rows: list[dict[str, Any]]) -> None:
@@ -117,13 +92,15 @@ def runs_show(
     as_json: Annotated[bool, typer.Option("--json", help="The run's summary as JSON.")] = False,
 ) -> None:
     """One run: its summary (the report's summary.json) and where its report folder is."""
-    from backend.db.models import Run
-    from backend.db.session import session_scope
+    from backend.services import runs
+    from backend.services.database import transaction
+    from backend.services.errors import NotFound
 
-    with session_scope(_database_url()) as s:
-        run = s.get(Run, run_id)
-        if run is None:
-            raise InputError(f"no run with id {run_id}")
+    with transaction() as s:
+        try:
+            run = runs.any_run(s, run_id)
+        except NotFound as exc:
+            raise InputError(exc.detail) from None
         doc = {
             "id": run.id,
             "job_id": run.job_id,

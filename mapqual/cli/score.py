@@ -35,15 +35,16 @@ def _reachable(location: str) -> bool:
 def _resolve_run(run: str) -> tuple[Path | str, int | None]:
     """(report folder, database run id or None) of RUN: a stored run's id, or a run folder
     (then the database run whose report folder it is, if there is one)."""
-    from backend.db.models import Run
-    from backend.db.session import session_scope
-    from mapqual.cli.runs import _database_url
+    from backend.services import runs
+    from backend.services.database import migrated_url, transaction
+    from backend.services.errors import NotFound
 
     if run.isdigit():
-        with session_scope(_database_url()) as s:
-            row = s.get(Run, int(run))
-            if row is None:
-                raise InputError(f"no run {run} in the database")
+        with transaction() as s:
+            try:
+                row = runs.any_run(s, int(run))
+            except NotFound:
+                raise InputError(f"no run {run} in the database") from None
             if not row.report_dir or not _reachable(row.report_dir):
                 raise InputError(f"run {run} has no report folder (yet)")
             return row.report_dir, row.id
@@ -52,11 +53,11 @@ def _resolve_run(run: str) -> tuple[Path | str, int | None]:
         raise InputError("no such run folder (or run id)", path=folder)
     want = folder.resolve()
     try:
-        url = _database_url()
+        url = migrated_url()
     except Exception:  # no database to record it in: the folder alone is scored
         return folder, None
-    with session_scope(url) as s:
-        rows = s.query(Run.id, Run.report_dir).filter(Run.report_dir.is_not(None)).all()
+    with transaction(url) as s:
+        rows = runs.report_dirs(s)
     found = [rid for rid, d in rows if not d.startswith("s3://") and Path(d).resolve() == want]
     return folder, (found[-1] if found else None)
 
@@ -79,14 +80,12 @@ def _score_stored(location: str, traj, name: str, source: str, **kw) -> tuple[ob
 
 
 def _store(run_id: int, score, est, location: str) -> None:
-    from backend.db.models import Run
-    from backend.db.session import session_scope
-    from backend.store.estimates import save_estimate
-    from mapqual.cli.runs import _database_url
+    from backend.services import runs
+    from backend.services.database import transaction
 
-    with session_scope(_database_url()) as s:
-        save_estimate(s, s.get_one(Run, run_id), summary=score.summary, t=est.t, poses=est.poses,
-                      report_dir=location)  # fmt: skip
+    with transaction() as s:
+        runs.store_estimate(s, run_id, summary=score.summary, t=est.t, poses=est.poses,
+                            report_dir=location)  # fmt: skip
 
 
 @app.command("score")

@@ -3,12 +3,17 @@ administer the service."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from mapqual.cli import app
 from worker.errors import InputError
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session
 
 users_app = typer.Typer(
     rich_markup_mode=None, help="API users and their keys.", no_args_is_help=True
@@ -60,21 +65,18 @@ def worker(
     )
 
 
-def _users_db() -> str:
-    """The settings' database URL, migrated to the current schema."""
-    from backend.core.config import get_settings
-    from backend.db.migrate import upgrade
+@contextmanager
+def _users() -> Iterator[Session]:
+    """A transaction on the settings' (migrated) database; a refusal of the users service is
+    bad input: one line, exit code 2."""
+    from backend.services.database import transaction
+    from backend.services.errors import ServiceError
 
-    url = get_settings().database_url
-    upgrade(url)
-    return url
-
-
-def _not_local(name: str) -> None:
-    from backend.store import LOCAL_USER
-
-    if name == LOCAL_USER:
-        raise InputError(f"the name {LOCAL_USER!r} is reserved for embedded use")
+    try:
+        with transaction() as s:
+            yield s
+    except ServiceError as exc:
+        raise InputError(exc.detail) from None
 
 
 @users_app.command("add")
@@ -83,17 +85,11 @@ def users_add(
     admin: Annotated[bool, typer.Option("--admin", help="Sees every user's data.")] = False,
 ) -> None:
     """Create a user; the new API key is printed on the last line (shown only once)."""
-    from backend.db.session import session_scope
-    from backend.store import add_user
+    from backend.services import users
 
-    _not_local(name)
-    url = _users_db()
-    try:
-        with session_scope(url) as s:
-            user, key = add_user(s, name, is_admin=admin)
-            role = "admin" if user.is_admin else "user"
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
+    with _users() as s:
+        user, key = users.add(s, name, is_admin=admin)
+    role = "admin" if user.is_admin else "user"
     typer.echo(f"created {role} {name!r}; API key (shown only once):", err=True)
     typer.echo(key)
 
@@ -101,15 +97,14 @@ def users_add(
 @users_app.command("list")
 def users_list() -> None:
     """Every user: name, admin, when revoked, when created (never a key)."""
-    from backend.db.session import session_scope
-    from backend.store import list_users
+    from backend.services import users
 
-    with session_scope(_users_db()) as s:
+    with _users() as s:
         rows = [
             (u.name, "yes" if u.is_admin else "no",
              u.revoked_at.strftime("%Y-%m-%d %H:%M") if u.revoked_at else "no",
              u.created_at.strftime("%Y-%m-%d %H:%M"))
-            for u in list_users(s)
+            for u in users.list_all(s)
         ]  # fmt: skip
     width = max([4, *(len(r[0]) for r in rows)])
     typer.echo(f"{'name':<{width}}  admin  {'revoked':<16}  created")
@@ -121,15 +116,10 @@ def users_list() -> None:
 def users_revoke(name: Annotated[str, typer.Argument(help="The user's name.")]) -> None:
     """Revoke a user: their dashboard sessions end at once, their API key within the API's
     key cache time (5 s); `users rotate` lets them back in with a new key."""
-    from backend.db.session import session_scope
-    from backend.store import revoke_user
+    from backend.services import users
 
-    _not_local(name)
-    try:
-        with session_scope(_users_db()) as s:
-            revoke_user(s, name)
-    except LookupError as exc:
-        raise InputError(str(exc.args[0])) from None
+    with _users() as s:
+        users.revoke(s, name)
     typer.echo(f"revoked {name!r}: sessions ended, API key refused")
 
 
@@ -138,14 +128,9 @@ def users_rotate(name: Annotated[str, typer.Argument(help="The user's name.")]) 
     """Give a user a new API key, printed on the last line (shown only once): the old key
     stops working (within the API's key cache time, 5 s), sessions end at once, and a revoked
     user is reinstated."""
-    from backend.db.session import session_scope
-    from backend.store import rotate_user_key
+    from backend.services import users
 
-    _not_local(name)
-    try:
-        with session_scope(_users_db()) as s:
-            _, key = rotate_user_key(s, name)
-    except LookupError as exc:
-        raise InputError(str(exc.args[0])) from None
+    with _users() as s:
+        key = users.rotate(s, name)
     typer.echo(f"new API key of {name!r} (shown only once; the old one is dead):", err=True)
     typer.echo(key)

@@ -28,8 +28,7 @@ def list_datasets(user: CurrentUser) -> list[DatasetOut]:
 @router.get("/datasets/{dataset}/licence", response_class=PlainTextResponse)
 def dataset_licence(dataset: DatasetName, user: CurrentUser) -> PlainTextResponse:
     """The text of the data set's licence file (its source and terms)."""
-    d = bundled().dataset(dataset)
-    return PlainTextResponse(d.licence_text() or f"{d.name}: no licence file")
+    return PlainTextResponse(bundled().licence(dataset))
 
 
 @router.get("/datasets/{dataset}/worlds/{name:path}/image", response_class=Response)

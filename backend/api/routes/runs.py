@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any, Literal
 
-from fastapi import APIRouter, HTTPException, Query, status
+from fastapi import APIRouter, Query
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
-from backend.api.artifacts import built, maybe_files, report_files, serve
+from backend.api.artifacts import built, maybe_files, serve
 from backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep
 from backend.core.schemas import RunOut
 from backend.services import runs
@@ -40,18 +39,11 @@ def get_trajectory(
     format: Literal["tum", "carmen", "json"] = Query("tum"),
 ) -> Response:
     """A trajectory at 10 Hz: TUM (evo reads it), CARMEN FLASER (the thesis), or JSON."""
-    from worker.evaluate.trajectory import Trajectory
-    from worker.evaluate.trajio import write_carmen, write_tum
-
     run = runs.done_run(session, user, run_id)
     t, poses = runs.trajectory(session, run, kind)
     if format == "json":
         return JSONResponse({"kind": kind, "t": t.tolist(), "poses": poses.tolist()})
-    writer = write_tum if format == "tum" else write_carmen
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "traj.txt"
-        writer(path, Trajectory(t, poses))
-        text = path.read_text()
+    text = runs.trajectory_text(t, poses, format)
     name = f"run{run.id}_{kind}.{'tum' if format == 'tum' else 'log'}"
     return PlainTextResponse(text, headers={"Content-Disposition": f'inline; filename="{name}"'})
 
@@ -80,9 +72,7 @@ def get_relations(
     kind: Literal["A", "B", "SM"] = Query("B"),
 ) -> Response:
     """The run's relations file of that kind (`t1 t2 x y z roll pitch yaw`)."""
-    files, name = report_files(runs.run_of(session, user, run_id)), f"relations_{kind}.txt"
-    if not files.has(name):
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no {kind} relations")
+    files, name = runs.relations_file(runs.run_of(session, user, run_id), kind)
     return serve(files, name, "text/plain; charset=utf-8", run_id, name)
 
 
@@ -95,7 +85,7 @@ def get_report(
     once now and kept beside the report."""
     from worker.report.folder import REPORT_ZIP, write_report_zip
 
-    files = report_files(runs.run_of(session, user, run_id))
+    files = runs.report_files(runs.run_of(session, user, run_id))
 
     def build(work: Path) -> Path:
         folder = files.local_path("") or files.fetch(files.names(), work / "report")
