@@ -269,20 +269,20 @@ class PatchMaps:
         self._recount()
         return need
 
+    def _assembled(self, particle: int) -> MapAssembly:
+        """The incremental assembly brought up to date with `particle`'s map."""
+        a = self._assembly
+        a.update(
+            self.visits, self.hslot, self.hits, self.tables[particle], self.tpx0, self.tpy0,
+            self.dirty,
+        )  # fmt: skip
+        return a
+
     def occupancy(self, particle: int, with_hits: bool = False) -> OccupancyGrid:
         """The map of one particle, cropped to its seen cells (a 1 x 1 unknown grid if none);
         with_hits: with its cells' end-point counts (`OccupancyGrid.hits`). Only the patches
         written or re-pointed since the previous call are reassembled (MapAssembly)."""
-        a = self._assembly
-        a.update(
-            self.visits,
-            self.hslot,
-            self.hits,
-            self.tables[particle],
-            self.tpx0,
-            self.tpy0,
-            self.dirty,
-        )
+        a = self._assembled(particle)
         side = self.resolution * PATCH
         origin = np.array([self.tpx0 * side, self.tpy0 * side])
         crop = a.crop()
@@ -302,16 +302,7 @@ class PatchMaps:
         every cell of `occupancy(particle)` that differs from the map the previous call of
         `changes` saw (at the first call: every seen cell); (0, 4) when none does. The map
         is brought up to date as `occupancy` does (the same incremental assembly)."""
-        a = self._assembly
-        a.update(
-            self.visits,
-            self.hslot,
-            self.hits,
-            self.tables[particle],
-            self.tpx0,
-            self.tpy0,
-            self.dirty,
-        )
+        a = self._assembled(particle)
         rects = a.take_changes()
         side = self.resolution * PATCH
         return (rects + np.array([a.tpx0, a.tpy0, a.tpx0, a.tpy0])) * side
