@@ -107,3 +107,10 @@ def test_the_cli_reaches_the_database_through_the_services():
         if _top(b) == "backend" and not (b in allowed or b.startswith(f"{allowed[0]}."))
     }
     assert wrong == set()
+
+
+def test_the_dashboard_reads_and_writes_through_the_services():
+    # the pages call backend.services for every read and write (the models' classes, the
+    # API's request dependencies and schemas aside): no store function of their own
+    wrong = {(a, b) for a, b in edges("frontend/dashboard") if b.startswith("backend.store")}
+    assert wrong == set()

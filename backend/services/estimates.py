@@ -109,6 +109,12 @@ def _score_into_storage(
         return score.summary, target.location
 
 
+def estimates_of_runs(session: Session, run_ids: list[int]) -> list[RunEstimate]:
+    """The external estimates of these runs (the caller was allowed to read them), by run then
+    name."""
+    return list_estimates(session, run_ids)
+
+
 def estimates_of(session: Session, user: Principal, run_id: int) -> list[RunEstimate]:
     """The external estimates scored on the run, by name."""
     run = run_of(session, user, run_id)

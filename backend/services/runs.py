@@ -92,9 +92,10 @@ def relations_file(run: Run, kind: str) -> tuple[RunFiles, str]:
     return files, name
 
 
-def trajectory(session: Session, run: Run, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """A done run's trajectory `kind` (gt | est): (t (N,) [s], poses (N, 3) [x, y, theta])."""
-    return load_trajectory(session, run.id, kind)
+def trajectory(session: Session, run: Run | int, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """A done run's trajectory `kind` (gt | est): (t (N,) [s], poses (N, 3) [x, y, theta]);
+    `run` a Run or the id of one the caller was allowed to read."""
+    return load_trajectory(session, run if isinstance(run, int) else run.id, kind)
 
 
 def trajectory_text(t: np.ndarray, poses: np.ndarray, fmt: str) -> str:

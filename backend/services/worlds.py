@@ -186,3 +186,8 @@ def world_prediction_of(
     """Predicted errors of a ready world (`cache`: per content) and its measured ones."""
     out = cache.get((w.id, w.sha256), lambda: stored_floorplan(w), slam)
     return {**out, "world_id": w.id, "measured": measured_errors(session, w.id, slam)}
+
+
+def occupancy(world: World) -> np.ndarray:
+    """A stored world's occupancy grid `(H, W) bool`, `[iy, ix]` bottom row first."""
+    return world_occupancy(world)

@@ -114,10 +114,10 @@ def success_png(out, groups: list[Group], _session: Any = None) -> None:
 
 def _pose_error(session, run_id: int) -> tuple[np.ndarray, np.ndarray]:
     """(t, |gt - est|) [s, m]: the recorded estimate against the ground truth, unaligned."""
-    from backend.store import load_trajectory
+    from backend.services.runs import trajectory
 
-    t, gt = load_trajectory(session, run_id, "gt")
-    _, est = load_trajectory(session, run_id, "est")
+    t, gt = trajectory(session, run_id, "gt")
+    _, est = trajectory(session, run_id, "est")
     n = min(len(gt), len(est))
     return t[:n], np.hypot(*(gt[:n, :2] - est[:n, :2]).T)
 
@@ -150,7 +150,8 @@ def paths_png(out, groups: list[Group], session: Any) -> None:
     from matplotlib.collections import LineCollection
 
     from backend.db.models import Run, World
-    from backend.store import load_trajectory, world_occupancy
+    from backend.services.runs import trajectory
+    from backend.services.worlds import occupancy
 
     plt = _plt()
     n = max(1, len(groups))
@@ -162,12 +163,12 @@ def paths_png(out, groups: list[Group], session: Any) -> None:
         r = min(g.runs, key=lambda r: r.seed)
         run = session.get(Run, r.id)
         w = session.get(World, run.world_id)
-        occ = world_occupancy(w)
+        occ = occupancy(w)
         h, wd = occ.shape
         x0, y0, res = w.origin_x, w.origin_y, w.resolution
         ext = (x0, x0 + wd * res, y0, y0 + h * res)
         ax.imshow(occ, cmap="Greys", origin="lower", extent=ext, vmin=0, vmax=1.6)
-        _, gt = load_trajectory(session, r.id, "gt")
+        _, gt = trajectory(session, r.id, "gt")
         t, e = _pose_error(session, r.id)
         pts = gt[: len(e), :2]
         segs = np.stack((pts[:-1], pts[1:]), axis=1)

@@ -311,11 +311,11 @@ def _run_row(run: Run, viewer_link: str) -> dict[str, Any]:
 def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
     """Each run row's algorithms, (name, relation summaries by kind): its own, then the external
     estimates scored on its relations; and whether it has a sim.log to export as a bag."""
-    from backend.store.estimates import list_estimates
+    from backend.services.estimates import estimates_of_runs
     from worker.export.bag import SIM_LOG_NAMES
 
     by_run: dict[int, list] = {}
-    for e in list_estimates(session, [row["run"].id for row in rows]):
+    for e in estimates_of_runs(session, [row["run"].id for row in rows]):
         by_run.setdefault(e.run_id, []).append(e)
     for row in rows:
         run = row["run"]
@@ -330,7 +330,6 @@ def _add_estimates(session, rows: list[dict[str, Any]]) -> None:
 def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> Response:
     """The run's trajectories, errors or map-overlay plot: the report's file, else (trajectories
     only) drawn from the database."""
-    from backend.store import load_trajectory, world_occupancy
     from worker.report.plots import trajectories_png
 
     if name not in ("trajectories", "errors", "map_overlay"):
@@ -342,11 +341,11 @@ def run_plot(run_id: IdPath, name: str, session: SessionDep, user: PageUser) -> 
     if name in ("errors", "map_overlay"):
         raise HTTPException(404, f"run {run_id} has no report folder with its {name} plot")
     w = session.get_one(World, run.world_id)
-    _, gt = load_trajectory(session, run_id, "gt")
-    _, est = load_trajectory(session, run_id, "est")
+    _, gt = runs_service.trajectory(session, run_id, "gt")
+    _, est = runs_service.trajectory(session, run_id, "est")
     buf = io.BytesIO()
     trajectories_png(
-        buf, world_occupancy(w), w.resolution, (w.origin_x, w.origin_y), gt, est,
+        buf, worlds_service.occupancy(w), w.resolution, (w.origin_x, w.origin_y), gt, est,
         f"{w.name}, seed {run.seed}, {run.slam}: {run.outcome}",
     )  # fmt: skip
     return Response(buf.getvalue(), media_type="image/png")
