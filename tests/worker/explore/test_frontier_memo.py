@@ -9,16 +9,14 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.worker.explore.test_incremental import FREE, OCC, ORIGIN, RES, H, W, _apply
 from worker.explore.costmap import GlobalCostmap
 from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
 from worker.explore.planner import GlobalPlanner
 
-RES = 0.05
-H, W = 56, 64
-ORIGIN = (1.0, -2.0)
-FREE, OCC = 0.05, 0.9
+# the incremental costmap test's map and edit writer (the same 2.8 m x 3.2 m grid)
 # robot positions [m] in the starting room (a few, so that questions repeat)
 SPOTS = [(ORIGIN[0] + (30 + 0.5) * RES, ORIGIN[1] + (26 + 0.5) * RES), (2.62, -0.61), (2.9, -0.3)]
 
@@ -44,16 +42,8 @@ def _params() -> ExploreParams:
 
 
 def _window(prob: np.ndarray, op) -> tuple[float, float, float, float]:
-    """Write the edit into prob; the window [m] that holds it (as the loop's beam box)."""
-    _, y0, x0, h, w, value = op
-    y1, x1 = min(H, y0 + h), min(W, x0 + w)
-    prob[y0:y1, x0:x1] = value
-    return (
-        ORIGIN[0] + x0 * RES,
-        ORIGIN[1] + y0 * RES,
-        ORIGIN[0] + (x1 - 0.5) * RES,
-        ORIGIN[1] + (y1 - 0.5) * RES,
-    )
+    """Write the edit `("edit", y0, x0, h, w, value)` into prob; the window [m] that holds it."""
+    return _apply(prob, op[1:])
 
 
 def _from_scratch(prob: np.ndarray, seen: np.ndarray, question) -> FrontierGoal | None:
