@@ -91,35 +91,52 @@ def align_map_to_world(pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
 
 
 class ReachCells:
-    """The centres [m] of the `reachable (H, W) bool` world cells, found once: the coverage
-    read every coverage_period costs the reachable cells, not a pass over the world grid."""
+    """The `reachable (H, W) bool` world cells, found once: the coverage read every
+    coverage_period costs the reachable cells, not a pass over the world grid. Held as int32
+    indices (8 bytes a cell) and mapped onto the SLAM grid `_CHUNK` cells at a time, so a
+    whole-plan read holds a chunk's float64 scratch, not the whole set's."""
 
     def __init__(self, reachable: np.ndarray, world_resolution: float, world_origin):
         self.shape = reachable.shape
-        self.iy, self.ix = np.nonzero(reachable)
-        self.xw = world_origin[0] + (self.ix + 0.5) * world_resolution
-        self.yw = world_origin[1] + (self.iy + 0.5) * world_resolution
+        ys, xs = [], []
+        for y0 in range(0, reachable.shape[0], _BAND):  # np.nonzero's order, band by band
+            iy, ix = np.nonzero(reachable[y0 : y0 + _BAND])
+            ys.append((iy + y0).astype(np.int32))
+            xs.append(ix.astype(np.int32))
+        self.iy = np.concatenate(ys) if ys else np.zeros(0, dtype=np.int32)
+        self.ix = np.concatenate(xs) if xs else np.zeros(0, dtype=np.int32)
+        self.resolution = float(world_resolution)
+        self.origin = np.asarray(world_origin, dtype=np.float64)
 
-    def free(self, prob, map_resolution, map_origin, occ_thresh, T_world_map):
-        """`(inside (N,) bool, free (M,) bool)`: which reachable cells' centres fall on the
-        map, and of those, which on a free map cell (arguments as `seen_free`)."""
-        xw = self.xw - T_world_map[0]
-        yw = self.yw - T_world_map[1]
+    def chunks(self, prob, map_resolution, map_origin, occ_thresh, T_world_map):
+        """`(iy, ix, free)` per chunk of the reachable cells: the world cells whose centre
+        falls on the map, and whether on a free map cell (arguments as `seen_free`)."""
         c, s = math.cos(T_world_map[2]), math.sin(T_world_map[2])
-        xm = c * xw + s * yw  # R^T (p_world - t)
-        ym = -s * xw + c * yw
-        mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
-        my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
         h, w = prob.shape
-        inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
-        p = prob[my[inside], mx[inside]]
-        return inside, ~np.isnan(p) & (p <= occ_thresh)
+        for a in range(0, self.iy.size, _CHUNK):
+            iy, ix = self.iy[a : a + _CHUNK], self.ix[a : a + _CHUNK]
+            xw = self.origin[0] + (ix + 0.5) * self.resolution - T_world_map[0]
+            yw = self.origin[1] + (iy + 0.5) * self.resolution - T_world_map[1]
+            xm = c * xw + s * yw  # R^T (p_world - t)
+            ym = -s * xw + c * yw
+            del xw, yw
+            mx = np.floor((xm - map_origin[0]) / map_resolution).astype(np.int64)
+            my = np.floor((ym - map_origin[1]) / map_resolution).astype(np.int64)
+            del xm, ym
+            inside = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
+            p = prob[my[inside], mx[inside]]
+            yield iy[inside], ix[inside], ~np.isnan(p) & (p <= occ_thresh)
 
     def coverage(self, *args) -> float:
         """Share of the reachable cells whose centre falls on a free map cell (arguments as
         `seen_free`)."""
         n = self.iy.size
-        return 0.0 if n == 0 else np.count_nonzero(self.free(*args)[1]) / n
+        if n == 0:
+            return 0.0
+        return sum(np.count_nonzero(free) for _, _, free in self.chunks(*args)) / n
+
+
+_CHUNK = 1 << 18  # reachable cells mapped at a time (about 20 MiB of float64 scratch)
 
 
 def seen_free(
@@ -131,18 +148,19 @@ def seen_free(
     map_origin: np.ndarray,
     occ_thresh: float,
     T_world_map: np.ndarray,
+    cells: ReachCells | None = None,
 ) -> np.ndarray:
     """`(H, W) bool`: the `reachable` world cells whose centre falls on a free map cell.
 
     prob: (h, w) SLAM probabilities (NaN unknown; free at or below occ_thresh), in the map
-    frame placed in the world by T_world_map `(3,)`.
+    frame placed in the world by T_world_map `(3,)`. cells: `ReachCells(reachable, ...)`
+    when the caller holds it already.
     """
     out = np.zeros_like(reachable, dtype=np.bool_)
-    cells = ReachCells(reachable, world_resolution, world_origin)
-    if cells.iy.size == 0:
-        return out
-    inside, free = cells.free(prob, map_resolution, map_origin, occ_thresh, T_world_map)
-    out[cells.iy[inside], cells.ix[inside]] = free
+    if cells is None:
+        cells = ReachCells(reachable, world_resolution, world_origin)
+    for iy, ix, free in cells.chunks(prob, map_resolution, map_origin, occ_thresh, T_world_map):
+        out[iy, ix] = free
     return out
 
 

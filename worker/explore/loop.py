@@ -246,7 +246,7 @@ class Exploration:
         T = align_map_to_world(pose_est, pose_gt)
         seen = seen_free(
             self.reach, world.resolution, world.origin, grid.prob, grid.resolution, grid.origin,
-            grid.occ_thresh, T,
+            grid.occ_thresh, T, self.reach_cells,
         )  # fmt: skip
         n_reach = np.count_nonzero(self.reach)
         cov = np.count_nonzero(seen) / n_reach if n_reach else 0.0
