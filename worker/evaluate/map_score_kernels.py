@@ -216,34 +216,79 @@ def _ridge(
     `ridge_walls`): not below a candidate neighbour along the normal, or with no normal.
     concave: only where the smoothed `p` curves down across the normal more than it curves
     up along it, and with no normal only at a peak (down in every direction, not below any
-    neighbour): a ridge, not a shoulder or the rounded end of a wall."""
+    neighbour): a ridge, not a shoulder or the rounded end of a wall.
+
+    Computed `_ROWS` rows at a time: every quantity but the smoothed map (kept whole for its
+    maximum) is a band's, and each band reads the rows its sums reach, so the cells are the
+    whole map's."""
     if not cand.any():
         return cand
+    h = p.shape[0]
+    s = np.empty(p.shape)
+    for y0 in range(0, h, _ROWS):
+        s[y0 : y0 + _ROWS] = _smooth(p, sigma_cells, (0, 0), y0, min(h, y0 + _ROWS))
+    eps = 1e-9 * max(float(s.max()), 1.0)  # floating-point ties (symmetric corners)
+    out = np.zeros_like(cand)
+    for y0 in range(0, h, _ROWS):
+        y1 = min(h, y0 + _ROWS)
+        out[y0:y1] = _ridge_rows(p, s, cand, sigma_cells, concave, eps, y0, y1)
+    return out
 
-    def g(order: tuple[int, int]) -> np.ndarray:
-        return ndimage.gaussian_filter(p, sigma_cells, order=order, mode="constant")
 
+_ROWS = 256  # map rows per band of `_ridge`
+
+
+def _smooth(p: np.ndarray, sigma: float, order: tuple[int, int], y0: int, y1: int) -> np.ndarray:
+    """`gaussian_filter(p, sigma, order, mode="constant")[y0:y1]` from the rows its sums
+    reach (scipy's radius, int(4 sigma + 0.5), and two more): each output row is the same sum
+    of the same inputs in the same order, so the values are the whole map's."""
+    r = int(4.0 * float(sigma) + 0.5) + 2
+    a, b = max(0, y0 - r), min(p.shape[0], y1 + r)
+    g = ndimage.gaussian_filter(p[a:b], sigma, order=order, mode="constant")
+    return g[y0 - a : y1 - a]
+
+
+def _rows_padded(
+    a: np.ndarray, y0: int, y1: int, fill: float, mask: np.ndarray | None = None
+) -> np.ndarray:
+    """Rows y0-1 .. y1 of `a (H, W)` with a column on each side, `fill` outside `a` (and
+    where `mask (H, W)` is False): the band of `np.pad(a, 1, constant_values=fill)` around
+    rows y0 .. y1-1."""
+    h, w = a.shape
+    out = np.full((y1 - y0 + 2, w + 2), fill, dtype=a.dtype)
+    lo, hi = max(0, y0 - 1), min(h, y1 + 1)
+    rows = a[lo:hi] if mask is None else np.where(mask[lo:hi], a[lo:hi], fill)
+    out[lo - y0 + 1 : hi - y0 + 1, 1:-1] = rows
+    return out
+
+
+def _ridge_rows(
+    p: np.ndarray, s_all: np.ndarray, cand_all: np.ndarray, sigma_cells: float,
+    concave: bool, eps: float, y0: int, y1: int,
+) -> NDArray[np.bool_]:  # fmt: skip
+    """`_ridge`'s rows y0 .. y1-1, given the whole smoothed map `s_all` and its `eps`."""
+    s, cand = s_all[y0:y1], cand_all[y0:y1]
     if concave:
         # the Hessian by central differences of the smoothed values: the truncated Gaussian's
         # own second derivatives do not sum to zero, and along a straight wall that hair of
         # curvature can outweigh the real one across it near the peak's shoulders
-        s = g((0, 0))
-        q = np.pad(s, 1)
+        q = _rows_padded(s_all, y0, y1, 0.0)
         hyy = q[2:, 1:-1] - 2.0 * s + q[:-2, 1:-1]
         hxx = q[1:-1, 2:] - 2.0 * s + q[1:-1, :-2]
         hxy = 0.25 * (q[2:, 2:] - q[2:, :-2] - q[:-2, 2:] + q[:-2, :-2])
+        del q
     else:
-        s, hyy, hxx, hxy = g((0, 0)), g((2, 0)), g((0, 2)), g((1, 1))
+        hyy, hxx, hxy = (_smooth(p, sigma_cells, o, y0, y1) for o in ((2, 0), (0, 2), (1, 1)))
     half_gap = np.hypot(0.5 * (hxx - hyy), hxy)  # half the eigenvalues' difference
     lam_min = 0.5 * (hxx + hyy) - half_gap
     line = 2.0 * half_gap > 0.5 * np.abs(lam_min)  # lam_max - lam_min > |lam_min| / 2
     # angle of the larger eigenvalue's eigenvector; the normal is at right angles to it
     normal = 0.5 * np.arctan2(2.0 * hxy, hxx - hyy) + 0.5 * np.pi
     bins = np.round(normal / (0.25 * np.pi)).astype(np.int64) % 4
-    padded = np.pad(np.where(cand, s, -np.inf), 1, constant_values=-np.inf)
-    h, w = p.shape
+    del normal, hxx, hyy, hxy
+    padded = _rows_padded(s_all, y0, y1, -np.inf, mask=cand_all)
+    h, w = s.shape
     keep = np.zeros_like(cand)
-    eps = 1e-9 * max(float(s.max()), 1.0)  # floating-point ties (symmetric corners)
     for b, (dy, dx) in enumerate(_ACROSS):
         fwd = padded[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
         bwd = padded[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w]
