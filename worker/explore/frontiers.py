@@ -65,14 +65,14 @@ class FrontierSearch:
         self.n_frontier_cells = 0
         self.search = search if search is not None else DijkstraSearch()
         self._target = np.zeros((0, 0), dtype=np.bool_)
+        # (H, W) int32: the cluster of each goal candidate (`_search`), and before that the
+        # labelling's scratch (`clusters`); the passes' visited marks are the Dijkstra
+        # buffers' stamps (`DijkstraSearch.new_stamp`)
         self._owner = np.zeros((0, 0), dtype=np.int32)
-        self._labels = np.zeros((0, 0), dtype=np.int32)
-        self._stamp = np.zeros((0, 0), dtype=np.int32)
         self._unk_state = np.zeros((0, 0), dtype=np.int8)
-        self._unk_stamp = np.zeros((0, 0), dtype=np.int32)
         self.seen = np.zeros((0, 0), dtype=np.uint8)  # close looks at each frontier cell
         self._seen_origin = np.zeros(2)
-        self._run_id = 0
+        self._unk_id = 0  # the stamp id of the unknown regions' flood (`open_cells`)
         self._frame_id = -1
         # frontier cells per _TILE x _TILE block: the clusters are read from the blocks
         # that hold some, not map-wide
@@ -88,10 +88,7 @@ class FrontierSearch:
             self.frontier = np.zeros((h, w), dtype=np.bool_)
             self._target = np.zeros((h, w), dtype=np.bool_)
             self._owner = np.zeros((h, w), dtype=np.int32)
-            self._labels = np.zeros((h, w), dtype=np.int32)
-            self._stamp = np.zeros((h, w), dtype=np.int32)
             self._unk_state = np.zeros((h, w), dtype=np.int8)
-            self._unk_stamp = np.zeros((h, w), dtype=np.int32)
             self._carry_seen(costmap)
             self._frame_id = costmap.frame_id
             self.n_frontier_cells = 0
@@ -152,8 +149,11 @@ class FrontierSearch:
     def clusters(self) -> tuple[np.ndarray, np.ndarray]:
         """Frontier cells `(K, 2) [iy, ix]` and their 8-connected cluster labels `(K,)`."""
         cells = fk.frontier_cells(self.frontier, self._counts, _TILE, self.n_frontier_cells)
-        self._run_id += 1
-        labels = fk.label_clusters(self.frontier, cells, self._labels, self._stamp, self._run_id)
+        shape = self.frontier.shape
+        run_id = self.search.new_stamp(shape)
+        stamp = self.search.stamp  # new buffers when the grid's shape changed
+        labels = fk.label_clusters(self.frontier, cells, self._owner, stamp, run_id)
+        self._unk_id = self.search.new_stamp(shape)
         return cells, labels
 
     def open_cells(
@@ -165,7 +165,7 @@ class FrontierSearch:
         area = self.params.min_unknown_area if area is None else area
         max_cells = int(area / costmap.resolution**2)
         return fk.open_frontier_cells(
-            cells, costmap.unknown, self._unk_state, self._unk_stamp, self._run_id, max_cells
+            cells, costmap.unknown, self._unk_state, self.search.stamp, self._unk_id, max_cells
         )
 
     def choose(

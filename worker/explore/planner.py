@@ -17,6 +17,7 @@ class DijkstraSearch:
     """Reusable Dijkstra buffers sized to the costmap (valid cells are marked by a run stamp)."""
 
     def __init__(self):
+        # stamp (H, W) int32: cells visited by the pass whose id is run_id (`new_stamp`)
         self.shape = (0, 0)
         self.run_id = 0
         self.potential = np.zeros((0, 0))
@@ -39,12 +40,7 @@ class DijkstraSearch:
         escape_m: the escape radius [m] (default params.escape_radius); a wider one lets the
         plan cross cells under the margin that far, inscribed cells only within
         params.escape_radius."""
-        if costmap.shape != self.shape:
-            self.shape = costmap.shape
-            self.potential = np.zeros(self.shape)
-            self.parent = np.zeros(self.shape, dtype=np.int32)
-            self.stamp = np.zeros(self.shape, dtype=np.int32)
-            self.run_id = 0
+        self._fit(costmap.shape)
         self.run_id += 1
         allow = params.allow_unknown if allow_unknown is None else allow_unknown
         escape = params.escape_radius if escape_m is None else escape_m  # [m]
@@ -68,6 +64,24 @@ class DijkstraSearch:
             int(round(escape / costmap.resolution)),
             int(round(min(escape, params.escape_radius) / costmap.resolution)),
         )
+
+    def _fit(self, shape: tuple[int, int]) -> None:
+        """Buffers of `shape` (new ones, all stamps 0, when the costmap's shape changed)."""
+        if shape != self.shape:
+            self.shape = shape
+            self.potential = np.zeros(shape)
+            self.parent = np.zeros(shape, dtype=np.int32)
+            self.stamp = np.zeros(shape, dtype=np.int32)
+            self.run_id = 0
+
+    def new_stamp(self, shape: tuple[int, int]) -> int:
+        """An id no cell of `stamp` holds yet, for a pass of another search over the same
+        grid (the frontier clusters, the unknown regions' flood) that marks the cells it
+        visited in `stamp`: one stamp buffer for all of a run's searches, each pass telling
+        its own marks by its id."""
+        self._fit(shape)
+        self.run_id += 1
+        return self.run_id
 
     def sealed_off(
         self,
