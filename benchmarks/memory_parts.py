@@ -28,9 +28,11 @@ _COSTMAP = ("costmap", "local")
 _MAX_DEPTH = 8
 
 
-def array_bytes(obj: Any, seen: set[int], depth: int = 0) -> int:
+def array_bytes(obj: Any, seen: set[int], depth: int = 0, resident: bool = False) -> int:
     """Bytes of the numpy arrays reachable from obj (attributes, slots, containers), each
-    buffer counted once across calls sharing `seen` (a view counts as its base)."""
+    buffer counted once across calls sharing `seen` (a view counts as its base). resident:
+    only the bytes of the pages the kernel has mapped (`resident_bytes`), not `nbytes`: a
+    zeroed buffer whose pages were never written weighs nothing."""
     if depth > _MAX_DEPTH or isinstance(obj, str | bytes | int | float | bool | type(None)):
         return 0
     if isinstance(obj, np.ndarray):
@@ -40,7 +42,7 @@ def array_bytes(obj: Any, seen: set[int], depth: int = 0) -> int:
         if id(base) in seen:
             return 0
         seen.add(id(base))
-        return int(base.nbytes)
+        return resident_bytes(base) if resident else int(base.nbytes)
     if id(obj) in seen or callable(obj) and not hasattr(obj, "__dict__"):
         return 0
     seen.add(id(obj))
@@ -54,7 +56,7 @@ def array_bytes(obj: Any, seen: set[int], depth: int = 0) -> int:
             for name in getattr(cls, "__slots__", ()):
                 if hasattr(obj, name):
                     children.append(getattr(obj, name))
-    return sum(array_bytes(c, seen, depth + 1) for c in children)
+    return sum(array_bytes(c, seen, depth + 1, resident) for c in children)
 
 
 def _exploration() -> Any:
@@ -68,18 +70,36 @@ def _exploration() -> Any:
     return None
 
 
-def sample(run: Any) -> dict[str, int]:
-    """Bytes per component of one exploration loop now."""
+def sample(run: Any, resident: bool = False) -> dict[str, int]:
+    """Bytes per component of one exploration loop now (resident: see `array_bytes`)."""
     seen: set[int] = set()
     nav = run.nav
-    out = {"particle maps": array_bytes(run.slam, seen)}
-    out["costmap"] = sum(array_bytes(getattr(nav, n, None), seen) for n in _COSTMAP)
+    out = {"particle maps": array_bytes(run.slam, seen, 0, resident)}
+    out["costmap"] = sum(array_bytes(getattr(nav, n, None), seen, 0, resident) for n in _COSTMAP)
     rest = {k: v for k, v in vars(nav).items() if k not in _COSTMAP}
-    out["planners"] = array_bytes(rest, seen)
+    out["planners"] = array_bytes(rest, seen, 0, resident)
     sim = (run.sim, run.world, getattr(run, "reach", None), getattr(run, "passable", None))
-    out["simulator"] = array_bytes(sim, seen)
-    out["recording"] = array_bytes(getattr(run, "rec", None), seen)
+    out["simulator"] = array_bytes(sim, seen, 0, resident)
+    out["recording"] = array_bytes(getattr(run, "rec", None), seen, 0, resident)
     return out
+
+
+def resident_bytes(a: np.ndarray) -> int:
+    """Bytes of the pages under `a`'s buffer that are resident (Linux /proc/self/pagemap: bit
+    63 of each page's entry), at most `a.nbytes`; `a.nbytes` where the map cannot be read."""
+    if a.nbytes == 0:
+        return 0
+    page = os.sysconf("SC_PAGE_SIZE")
+    addr = a.__array_interface__["data"][0]
+    first, last = addr // page, (addr + a.nbytes - 1) // page
+    try:
+        with open("/proc/self/pagemap", "rb") as f:
+            f.seek(first * 8)
+            entries = np.frombuffer(f.read((last - first + 1) * 8), dtype=np.uint64)
+    except OSError:
+        return int(a.nbytes)
+    # a small array shares its pages with others: at most its own bytes
+    return min(int(np.count_nonzero(entries >> np.uint64(63))) * page, int(a.nbytes))
 
 
 def resident_mb() -> float:

@@ -2,11 +2,18 @@
 evaluation, the map score, the summary), sampled every 2 ms: where a large plan's peak is set.
 
     python benchmarks/probe_phases.py PLAN.yaml [--time-limit S] [--slam rbpf] [--seed 1]
+        [--parts 60]
+
+--parts P also prints, every P seconds simulated, the coverage, the resident size and each
+component's resident bytes (memory_parts.py: the pages of its arrays the kernel has mapped) and
+array bytes: what grows along the run, and what of the resident size no component holds.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -15,6 +22,9 @@ from pathlib import Path
 import worker.pipeline as pl
 from worker.run_params import RunParams
 from worker.world.loader import load_world
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from memory_parts import _exploration, sample  # noqa: E402
 
 
 class Sampler:
@@ -49,12 +59,51 @@ def _timed(rss: Sampler, name: str, f: Callable) -> Callable:
     return phase
 
 
+class _Mallinfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in (
+        "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+        "fordblks", "keepcost")]  # fmt: skip
+
+
+def heap_mb() -> str:
+    """glibc's own view (mallinfo2): bytes in use from its heaps and mmaps, and bytes free in
+    its heaps that it has not given back to the system."""
+    try:
+        f = ctypes.CDLL(None).mallinfo2
+    except (AttributeError, OSError):
+        return "heap ?"
+    f.restype = _Mallinfo2
+    m = f()
+    used, kept = (m.uordblks + m.hblkhd) / 2**20, m.fordblks / 2**20
+    return f"malloc in use {used:.0f} MiB, free kept {kept:.0f} MiB"
+
+
+def parts_printer(period: float, rss: Sampler) -> Callable:
+    """An on_progress callback printing the components every `period` simulated seconds."""
+    next_t = [0.0]
+
+    def on_progress(progress) -> None:
+        t = float(getattr(progress, "t", 0.0))
+        run = _exploration()
+        if run is None or t < next_t[0]:
+            return
+        next_t[0] = t + period
+        res, arr = sample(run, resident=True), sample(run)
+        cells = " ".join(f"{k} {res[k] / 2**20:.0f}/{arr[k] / 2**20:.0f}" for k in res)
+        cov = float(getattr(progress, "coverage", 0.0))
+        print(f"t {t:6.0f} s  coverage {cov:.3f}  resident {rss.now():6.0f} MiB  "
+              f"(resident/array MiB) {cells}; {heap_mb()}", flush=True)  # fmt: skip
+
+    return on_progress
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("plan", type=Path, help="a map_server YAML")
     ap.add_argument("--time-limit", type=float, default=120.0, help="[s] simulated")
     ap.add_argument("--slam", default="rbpf")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--parts", type=float, default=None, help="[s] simulated between prints")
     args = ap.parse_args()
     rss = Sampler()
     for name in ("explore", "_evaluate", "_map_score", "_summary"):
@@ -63,7 +112,8 @@ def main() -> None:
     params = RunParams.from_json(
         {"algorithm": args.slam, "explore": {"time_limit": args.time_limit}}
     )
-    pl.run_one(world, params, args.seed)
+    on_progress = None if args.parts is None else parts_printer(args.parts, rss)
+    pl.run_one(world, params, args.seed, on_progress)
 
 
 if __name__ == "__main__":
