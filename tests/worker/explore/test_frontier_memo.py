@@ -14,7 +14,7 @@ from worker.explore.costmap import GlobalCostmap
 from worker.explore.flat_params import explore_params
 from worker.explore.frontiers import FrontierGoal, FrontierSearch
 from worker.explore.params import ExploreParams
-from worker.explore.planner import GlobalPlanner
+from worker.explore.planner import DijkstraSearch, GlobalPlanner
 
 # the incremental costmap test's map and edit writer (the same 2.8 m x 3.2 m grid)
 # robot positions [m] in the starting room (a few, so that questions repeat)
@@ -162,3 +162,41 @@ def test_a_plan_asked_again_on_the_same_map_is_not_searched_again():
     planner.map_changed()
     assert np.array_equal(planner.plan(cm, SPOTS[0], SPOTS[2]), first)
     assert planner.search.run_id > searches
+
+
+def _shared(ops) -> None:
+    """The frontier search and the planner on one set of Dijkstra buffers, as the navigator
+    builds them (the clusters' labelling, the unknown flood, the goal search and the plans
+    all mark the same stamp grid, each pass with its own id): every choice and plan equals
+    the one of a search or planner with buffers of its own, on a costmap built anew."""
+    p = _params()
+    prob = np.full((H, W), np.nan, dtype=np.float32)
+    prob[20:36, 24:40] = FREE
+    prob[20:36, 23] = OCC
+    search = DijkstraSearch()
+    cm = GlobalCostmap(p.costmap)
+    fs = FrontierSearch(p.frontiers, p.planner, search=search)
+    planner = GlobalPlanner(p.planner, search=search)
+    fs.update(cm, cm.update(prob, RES, ORIGIN))
+    for op in ops:
+        if op[0] == "edit":
+            fs.update(cm, cm.update(prob, RES, ORIGIN, window_m=_window(prob, op)))
+        elif op[0] == "plan":
+            _, a, b, squeeze = op
+            got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
+            fresh = GlobalCostmap(p.costmap)
+            fresh.update(prob, RES, ORIGIN)
+            want = GlobalPlanner(p.planner).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
+            assert (got is None and want is None) or np.array_equal(got, want)
+        else:
+            _, spot, _, look_through, squeeze = op
+            got = fs.find_goal(cm, SPOTS[spot], [], [], look_through, squeeze)
+            assert _same(
+                got, _from_scratch(prob, fs.seen, (SPOTS[spot], [], look_through, squeeze))
+            )
+
+
+@SETTINGS
+@given(st.lists(st.one_of(edit, ask, plan), min_size=1, max_size=16))
+def test_searches_sharing_one_stamp_grid_answer_as_with_their_own(ops):
+    _shared(ops)
