@@ -9,8 +9,10 @@ skipped, so an interrupted invocation resumes where it stopped.
 
     .venv/bin/python benchmarks/bench_plans.py --out plans.jsonl [--largest N]
         [--time-limit S] [--slam rbpf] [--seed 1] [--threads N] [--list]
-        [--exclude worlds/schools/virginia_cross.yaml ...]
+        [--exclude worlds/schools/virginia_cross.yaml ...] [--shard K/N]
 
+--shard K/N runs every N-th plan from the K-th, so that N invocations (one a core, each with
+its own --out) share the list; the memory a run holds does not depend on the load.
 --time-limit left out: each run's own limit (explore.time_limit, 7,200 s simulated), i.e.
 whole runs; on a 2-core machine the 63 plans take most of a day. --list prints the plans and
 their cells without running anything. Each line holds the run_once.py figures (sim_s, wall_s,
@@ -91,8 +93,11 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None, help="slam.threads")
     ap.add_argument("--list", action="store_true", help="print the plans and stop")
     ap.add_argument("--exclude", nargs="*", default=[], help="plans to leave out (paths)")
+    ap.add_argument("--shard", default="0/1", help="K/N: every N-th plan from the K-th (0-based)")
     args = ap.parse_args()
+    k, n = (int(v) for v in args.shard.split("/"))
     todo = [p for p in plans(args.folder)[: args.largest] if p["world"] not in args.exclude]
+    todo = todo[k::n]
     if args.list:
         for p in todo:
             print(f"{p['world']:<50} {p['plan_cells']:>11,} {p['slam_cells']:>11,}")
