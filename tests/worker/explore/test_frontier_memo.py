@@ -139,13 +139,20 @@ def _plans(ops) -> tuple[GlobalPlanner, GlobalCostmap]:
             if changed[1] > changed[0]:
                 planner.map_changed()
             continue
-        _, a, b, squeeze = op
-        got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
-        fresh = GlobalCostmap(p.costmap)
-        fresh.update(prob, RES, ORIGIN)
-        want = GlobalPlanner(p.planner).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
-        assert (got is None and want is None) or np.array_equal(got, want)
+        _check_plan(planner, cm, prob, op)
     return planner, cm
+
+
+def _check_plan(planner: GlobalPlanner, cm: GlobalCostmap, prob: np.ndarray, op) -> None:
+    """The plan of `op` ("plan", start spot, goal spot, squeeze) equals a new planner's on a
+    costmap built anew from `prob`."""
+    p = _params()
+    _, a, b, squeeze = op
+    got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
+    fresh = GlobalCostmap(p.costmap)
+    fresh.update(prob, RES, ORIGIN)
+    want = GlobalPlanner(p.planner).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
+    assert (got is None and want is None) or np.array_equal(got, want)
 
 
 @SETTINGS
@@ -182,12 +189,7 @@ def _shared(ops) -> None:
         if op[0] == "edit":
             fs.update(cm, cm.update(prob, RES, ORIGIN, window_m=_window(prob, op)))
         elif op[0] == "plan":
-            _, a, b, squeeze = op
-            got = planner.plan(cm, SPOTS[a], SPOTS[b], squeeze)
-            fresh = GlobalCostmap(p.costmap)
-            fresh.update(prob, RES, ORIGIN)
-            want = GlobalPlanner(p.planner).plan(fresh, SPOTS[a], SPOTS[b], squeeze)
-            assert (got is None and want is None) or np.array_equal(got, want)
+            _check_plan(planner, cm, prob, op)
         else:
             _, spot, _, look_through, squeeze = op
             got = fs.find_goal(cm, SPOTS[spot], [], [], look_through, squeeze)
