@@ -9,7 +9,7 @@ Uses only what every checkout since 39ad88e has (load_world, RunParams.from_json
 so the same driver times both trees:
 
     OTHER/.venv/bin/python THIS/benchmarks/run_once.py --tree OTHER [--world W] [--slam rbpf]
-        [--seed 1] [--time-limit S] [--threads N] [--slam-params JSON]
+        [--seed 1] [--time-limit S] [--threads N] [--slam-params JSON] [--explore JSON]
 
 --threads N sets slam.threads (left out: the tree's own default). The numba caches are warmed
 by a 5 s run first; the report files are not written (the same in both trees). After the
@@ -44,6 +44,7 @@ def main() -> None:
     ap.add_argument("--slam-params", type=json.loads, default={}, help="more slam settings, JSON")
     ap.add_argument("--realtime", type=float, default=None, help="real-time SLAM at this speed")
     ap.add_argument("--cold", action="store_true", help="no warm-up run")
+    ap.add_argument("--explore", type=json.loads, default={}, help="explore settings, JSON")
     args = ap.parse_args()
     sys.path.insert(0, str(args.tree.resolve()))
     from worker.pipeline import run_one
@@ -64,8 +65,11 @@ def main() -> None:
     if not args.cold:
         run_one(world, RunParams.from_json({**data, "explore": {"time_limit": 5.0}}), args.seed)
         _fresh_peak()
+    explore = dict(args.explore)
     if args.time_limit is not None:
-        data["explore"] = {"time_limit": args.time_limit}
+        explore["time_limit"] = args.time_limit
+    if explore:
+        data["explore"] = explore
     if args.realtime is not None:  # issue 51's option (absent from older trees)
         data["realtime"] = {"speed": args.realtime}
     params = RunParams.from_json(data)
@@ -82,6 +86,7 @@ def main() -> None:
         "peak_mb": _peak_mb(),
         "parts_mb": {k: round(v / 2**20, 1) for k, v in parts.items()},
         "stop": s.get("stop"), "coverage": s.get("coverage"), "ate": s.get("ate"), "trace": trace,
+        "reason": s.get("reason"), "stop_detail": s.get("stop_detail"),
     }, default=str))  # fmt: skip
 
 
