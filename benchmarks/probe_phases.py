@@ -2,11 +2,13 @@
 evaluation, the map score, the summary), sampled every 2 ms: where a large plan's peak is set.
 
     python benchmarks/probe_phases.py PLAN.yaml [--time-limit S] [--slam rbpf] [--seed 1]
-        [--parts 60]
+        [--parts 60] [--stacks]
 
 --parts P also prints, every P seconds simulated, the coverage, the resident size and each
 component's resident bytes (memory_parts.py: the pages of its arrays the kernel has mapped) and
 array bytes: what grows along the run, and what of the resident size no component holds.
+--stacks prints, after each phase, the main thread's Python stack (its 8 innermost frames) at
+the moment the phase's peak was reached, sampled every millisecond: which step sets the peak.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import ctypes
 import sys
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 
@@ -28,10 +31,14 @@ from memory_parts import _exploration, sample  # noqa: E402
 
 
 class Sampler:
-    """The process's resident size [MiB], its highest value since `reset`."""
+    """The process's resident size [MiB], its highest value since `reset`; with `stacks`, the
+    main thread's Python stack where that highest value was reached."""
 
-    def __init__(self) -> None:
+    def __init__(self, stacks: bool = False) -> None:
         self.top = 0.0
+        self.main = threading.get_ident()
+        self.stacks = stacks
+        self.where: list[str] = []  # the stack at `top`, innermost last
         threading.Thread(target=self._loop, daemon=True).start()
 
     @staticmethod
@@ -40,13 +47,19 @@ class Sampler:
             return int(f.read().split()[1]) * 4096 / 2**20
 
     def reset(self) -> float:
-        self.top = self.now()
+        self.top, self.where = self.now(), []
         return self.top
 
     def _loop(self) -> None:
         while True:
-            self.top = max(self.top, self.now())
-            time.sleep(0.002)
+            now = self.now()
+            if now > self.top:
+                self.top = now
+                frame = sys._current_frames().get(self.main) if self.stacks else None
+                if frame is not None:
+                    self.where = [f"{Path(f.filename).name}:{f.lineno} {f.name}"
+                                  for f in traceback.extract_stack(frame)[-8:]]  # fmt: skip
+            time.sleep(0.001 if self.stacks else 0.002)
 
 
 def _timed(rss: Sampler, name: str, f: Callable) -> Callable:
@@ -54,6 +67,8 @@ def _timed(rss: Sampler, name: str, f: Callable) -> Callable:
         before = rss.reset()
         out = f(*args, **kwargs)
         print(f"{name:12s} before {before:6.0f}  peak {rss.top:6.0f}  after {rss.now():6.0f} MiB")
+        if rss.where:
+            print("    peak reached in: " + " > ".join(rss.where))
         return out
 
     return phase
@@ -104,8 +119,9 @@ def main() -> None:
     ap.add_argument("--slam", default="rbpf")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--parts", type=float, default=None, help="[s] simulated between prints")
+    ap.add_argument("--stacks", action="store_true", help="where each phase's peak was reached")
     args = ap.parse_args()
-    rss = Sampler()
+    rss = Sampler(args.stacks)
     for name in ("explore", "_evaluate", "_map_score", "_summary"):
         setattr(pl, name, _timed(rss, name.strip("_"), getattr(pl, name)))
     world = _timed(rss, "load_world", load_world)(args.plan)
