@@ -6,7 +6,7 @@ blacklist retry, look-through, squeeze, closed gaps reopened). Each question tha
 reachable goal floods everything the robot can reach, several times over: work of the size
 of the explored map, ten times a second, while nothing changes. `FrontierSearch.choose` is a
 pure function of the costmap's layers, the frontier cells and their look counts, the
-question's lists (blacklist, avoid, closed gaps), its pass and the robot's position, so
+question's lists (blacklist, avoid, spent, closed gaps), its pass and the robot's position, so
 its answer can be kept until one of these changes. The robot's position enters a choice only
 through its cell, except for the heading of a goal that lies on its frontier cell
 (`FrontierSearch._goal`): an answer with a goal is reused only for the very same position.
@@ -45,7 +45,7 @@ class ChoiceMemo:
         self._answers.clear()
 
     @staticmethod
-    def question(cell, blacklist, avoid, closed_points, look_through, squeeze) -> tuple:
+    def question(cell, blacklist, avoid, closed_points, look_through, squeeze, spent=()) -> tuple:
         """The key of one question: the robot's cell `(ix, iy)` and everything else a choice
         reads besides the map state."""
         return (
@@ -55,6 +55,7 @@ class ChoiceMemo:
             _points_key(closed_points),
             bool(look_through),
             bool(squeeze),
+            _points_key(spent),
         )
 
     def get(self, key: tuple, robot_xy) -> tuple[bool, object]:

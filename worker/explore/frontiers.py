@@ -176,14 +176,17 @@ class FrontierSearch:
         avoid: list[np.ndarray] = (),
         look_through: bool = False,
         squeeze: bool = False,
+        spent: list[np.ndarray] = (),
     ) -> FrontierGoal | None:
         """`find_goal`'s answer, from memory when the same question was asked on the same map
         state (`frontier_memo`: nothing map-sized is done while nothing changes)."""
         cell = costmap.world_to_cell(robot_xy[0], robot_xy[1])
-        key = self.memo.question(cell, blacklist, avoid, self.closed.points, look_through, squeeze)
+        key = self.memo.question(
+            cell, blacklist, avoid, self.closed.points, look_through, squeeze, spent
+        )
         found, goal = self.memo.get(key, robot_xy)
         if not found:
-            goal = self.find_goal(costmap, robot_xy, blacklist, avoid, look_through, squeeze)
+            goal = self.find_goal(costmap, robot_xy, blacklist, avoid, look_through, squeeze, spent)
             self.memo.put(key, robot_xy, goal)
         return goal
 
@@ -195,13 +198,16 @@ class FrontierSearch:
         avoid: list[np.ndarray] = (),
         look_through: bool = False,
         squeeze: bool = False,
+        spent: list[np.ndarray] = (),
     ) -> FrontierGoal | None:
         """Nearest frontier cluster by travel cost through known space, backed off from walls.
 
         Clusters shorter than min_frontier_size and clusters with a cell within blacklist_radius
-        of a blacklisted point are ignored; so are goal cells within blacklist_radius of an
-        `avoid` point (goals already reached without the frontier going away). None when no
-        frontier can be reached.
+        of a blacklisted point are ignored; so are the frontier cells within blacklist_radius
+        of a `spent` point (frontier cells arrived at without their going away; the rest of
+        the cluster stays) and goal cells within blacklist_radius of an `avoid` point (goals
+        already reached without the frontier going away). None when no frontier can be
+        reached.
 
         look_through: the last pass, for frontiers no goal within goal_radius reaches (a room
         behind a door too narrow for the robot's centre to pass): goals up to
@@ -218,7 +224,9 @@ class FrontierSearch:
             return None
         cells, labels = self.clusters()
         area = self.params.look_through_min_area if look_through else None
-        sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist, area)
+        # the cells near spent points: no goal serves them, no goal faces them
+        spent_cells = self._near(costmap, cells, spent) if len(spent) else None
+        sizes, cell_valid = self._valid_cells(costmap, cells, labels, blacklist, area, spent_cells)
         if not cell_valid.any():
             return None
         found, squeezed = self._search(
@@ -226,6 +234,8 @@ class FrontierSearch:
         )
         if found.size == 0:
             return None
+        if spent_cells is not None:  # the goal faces the nearest cell it may serve
+            cells, labels = cells[~spent_cells], labels[~spent_cells]
         goal = self._goal(costmap, robot_xy, found, cells, labels, sizes, look_through)
         return dataclasses.replace(goal, squeeze=True) if squeezed else goal
 
@@ -236,11 +246,13 @@ class FrontierSearch:
         labels: np.ndarray,
         blacklist,
         area: float | None = None,
+        spent_cells: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Cluster sizes [m] (open cells only) and `(K,) bool` the cells a goal may serve.
 
-        A cell is open when it borders unknown space larger than min_unknown_area and was not
-        looked at dead_frontier_looks times; clusters are measured by their open cells. A
+        A cell is open when it borders unknown space larger than min_unknown_area, was not
+        looked at dead_frontier_looks times and is not one of `spent_cells` (`(K,) bool`, or
+        None: none); clusters are measured by their open cells. A
         goal may serve an open cell of a big enough cluster that lies outside the inscribed
         radius of every obstacle, where the robot's centre could be. That keeps out the free
         cells a particle filter's map leaves inside a wall's face, between occupied cells,
@@ -252,18 +264,25 @@ class FrontierSearch:
         p = self.params
         is_open = self.open_cells(costmap, cells, area)
         is_open &= self.seen[cells[:, 0], cells[:, 1]] < p.dead_frontier_looks
+        if spent_cells is not None:
+            is_open &= ~spent_cells
         sizes = np.bincount(labels, weights=is_open) * costmap.resolution
         clear = costmap.inflated[cells[:, 0], cells[:, 1]] < INSCRIBED
         cell_valid = is_open & clear & (sizes[labels] >= p.min_frontier_size)
         if blacklist:
             # A cluster with a cell near a failed goal is dropped whole: a shifted goal on the
             # same frontier would most likely fail the same way.
-            xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
-            near = np.zeros(len(cells), dtype=bool)
-            for b in blacklist:
-                near |= np.hypot(xs - b[0], ys - b[1]) <= p.blacklist_radius
+            near = self._near(costmap, cells, blacklist)
             cell_valid &= ~np.isin(labels, labels[near])
         return sizes, cell_valid
+
+    def _near(self, costmap: GlobalCostmap, cells: np.ndarray, points) -> np.ndarray:
+        """`(K,) bool`: the cells `(K, 2) [iy, ix]` within blacklist_radius of some point."""
+        xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
+        near = np.zeros(len(cells), dtype=bool)
+        for b in points:
+            near |= np.hypot(xs - b[0], ys - b[1]) <= self.params.blacklist_radius
+        return near
 
     def _search(
         self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid, look_through,

@@ -35,7 +35,7 @@ class GoalChooser:
     def choose(self, costmap: GlobalCostmap, pose: np.ndarray) -> FrontierGoal | None:
         """The goal for the robot at `pose (3,)`, or None: no reachable frontier is left."""
         mem = self.memory
-        new = self.frontiers.choose(costmap, pose[:2], mem.blacklist, mem.avoid())
+        new = self.frontiers.choose(costmap, pose[:2], mem.blacklist, mem.avoid(), spent=mem.spent)
         # before giving up on the building, give the blacklisted frontiers (and the closed
         # gaps) another chance
         if new is None and mem.retry():
@@ -50,7 +50,9 @@ class GoalChooser:
             # room it entered through a gap it then failed to leave by): open them once
             self._reopens_left -= 1
             self.closed.clear()
-            new = self.frontiers.choose(costmap, pose[:2], mem.blacklist, mem.avoid())
+            new = self.frontiers.choose(
+                costmap, pose[:2], mem.blacklist, mem.avoid(), spent=mem.spent
+            )
             if new is None:
                 new = self._look_through(costmap, pose)
             if new is None:
@@ -71,4 +73,6 @@ class GoalChooser:
         Last, because a robot that slipped in through such a door may not line up with it
         again from inside, and everything still to explore elsewhere would be lost."""
         mem = self.memory
-        return self.frontiers.choose(costmap, pose[:2], mem.blacklist, mem.avoid(), squeeze=True)
+        return self.frontiers.choose(
+            costmap, pose[:2], mem.blacklist, mem.avoid(), spent=mem.spent, squeeze=True
+        )

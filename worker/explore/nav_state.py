@@ -138,17 +138,25 @@ class FrontierMemory:
     # (2,) [m] frontiers the look-through pass gave up (its own blacklist: the frontiers it
     # looks at are those whose goals beyond a narrow door failed, on the blacklist above)
     looked: list[np.ndarray] = field(default_factory=list)
+    # (2,) [m] frontier cells the robot arrived at blacklist_arrivals times without them going
+    # away: those near them are left alone, the rest of their cluster is not. A viewpoint
+    # can fail where another does not: in a hall wider than the laser's range, beams with no
+    # return clear nothing, and the sector they span stays unknown until the robot looks
+    # from where they reach a wall
+    spent: list[np.ndarray] = field(default_factory=list)
 
     def avoid(self) -> list[np.ndarray]:
         """Goals already reached without their frontier going away: look from elsewhere."""
         return [g for _, g in self.arrived_at]
 
     def retry(self) -> bool:
-        """Forget the blacklist and the arrivals, if retries are left; True when it did."""
-        if not self.blacklist or self.retries <= 0:
+        """Forget the blacklist, the arrivals and the spent frontier cells, if retries are
+        left; True when it did."""
+        if not (self.blacklist or self.spent) or self.retries <= 0:
             return False
         self.retries -= 1
         self.blacklist.clear()
+        self.spent.clear()
         self.arrived_at.clear()
         return True
 
@@ -157,11 +165,11 @@ class FrontierMemory:
         look_through: bool = False,
     ):  # fmt: skip
         """A goal reached with its frontier still there: next time a goal elsewhere near it;
-        after n arrivals within 2 radius (the two blacklist discs overlap), drop the frontier
-        (from the look-through pass's list for its goals)."""
+        after n arrivals within 2 radius (the two blacklist discs overlap), leave the frontier
+        cells near it alone (`spent`; for a look-through goal, its frontier is looked at)."""
         self.arrived_at.append((frontier_xy.copy(), goal_xy.copy()))
         if sum(np.hypot(*(frontier_xy - q)) <= 2 * radius for q, _ in self.arrived_at) >= n:
-            self.give_up(frontier_xy, look_through)
+            (self.looked if look_through else self.spent).append(frontier_xy.copy())
 
     def give_up(self, frontier_xy: np.ndarray, look_through: bool = False) -> None:
         """Leave this frontier alone: blacklisted, or for a look-through goal, looked at."""

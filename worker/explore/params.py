@@ -321,6 +321,10 @@ class StopParams:
     # [-] times a run the snapshot rule waits one more period because the robot is on its way
     # to a frontier it chose since the earlier snapshot
     snapshot_holds: int = 1
+    # [m^2] one wait more for every this much of the map known (a big building's far wings);
+    # 0: snapshot_holds whatever the size. Floors up to 50 m x 50 m (the bundled offices and
+    # labs) keep snapshot_holds
+    snapshot_holds_area: float = 2500.0
     # [s] no reachable frontier for this long -> completed (`no_frontier`)
     no_frontier_time: float = 1.0
 
@@ -330,7 +334,8 @@ class StopParams:
                 f"exploration parameter snapshot_measure must be one of "
                 f"{', '.join(SNAPSHOT_MEASURES)}, not {self.snapshot_measure!r}"
             )
-        _check_positive(self, may_be_zero=("snapshot_tolerance", "snapshot_holds"))
+        _check_positive(self, may_be_zero=("snapshot_tolerance", "snapshot_holds",
+                                           "snapshot_holds_area"))  # fmt: skip
 
 
 @dataclass(frozen=True)

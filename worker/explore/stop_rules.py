@@ -65,11 +65,13 @@ class SnapshotChange:
     many cells in the old image, or the old class not within them in the new one).
     share [-]: changed_m2 over the area known (free or occupied) in either snapshot.
     mse [-]: the thesis's pixel MSE over all pixels of the common extent (map_saver levels).
+    known_m2 [m^2]: that known area.
     """
 
     changed_m2: float
     share: float
     mse: float
+    known_m2: float = 0.0
 
 
 _CLASSES = (_OCCUPIED, _FREE, _UNKNOWN)
@@ -101,7 +103,8 @@ def snapshot_change(
     n_known = np.count_nonzero((ca != _UNKNOWN) | (cb != _UNKNOWN))
     n_changed = int(np.count_nonzero(changed))
     share = n_changed / n_known if n_known else math.inf  # nothing known: not unchanged
-    return SnapshotChange(n_changed * resolution * resolution, share, mse)
+    cell_m2 = resolution * resolution
+    return SnapshotChange(n_changed * cell_m2, share, mse, n_known * cell_m2)
 
 
 class SnapshotRule:
@@ -279,16 +282,29 @@ class NotMovingRule:
 
 class MapUnchangedRule:
     """completed, map_unchanged (thesis g, e): two map snapshots `period` [s] apart differ by
-    little (SnapshotRule's measures). With `holds` > 0 (explore.stop.snapshot_holds, 1 by
-    default) the rule does not fire while the robot is on its way to a frontier it chose
-    since the earlier snapshot, at most `holds` times a run: a goal chosen in the last
-    period has not been tried yet (a big building's far wing, 80 m away, changes less than
-    a share of its known map while the robot drives there); it waits for the next snapshot."""
+    little (SnapshotRule's measures).
 
-    def __init__(self, period: float, mse: float, holds: int = 0, **measure):
+    With holds the rule does not fire while the robot is on its way to a frontier it chose
+    since the earlier snapshot: a goal chosen in the last period has not been tried yet, so it
+    waits for the next snapshot. A run has `holds` such waits (explore.stop.snapshot_holds, 1
+    by default), and one more for every `holds_area` [m^2] of the map known at the snapshot
+    (snapshot_holds_area; 0: none). The share of the known map a period must change grows
+    with the building, and so does the number of long drives to a far wing, each a period
+    that changes less than that share (the generated 200 m x 100 m warehouse, oracle: one
+    wait ended it at 5,100 s with 5 % of its floor unseen)."""
+
+    def __init__(self, period: float, mse: float, holds: int = 0, holds_area: float = 0.0,
+                 **measure):  # fmt: skip
         self.snapshots = SnapshotRule(period, mse, **measure)
-        self.holds = holds  # left
+        self.holds = holds  # waits a run has whatever its size
+        self.holds_area = holds_area
         self.held = 0  # times the rule waited for a goal
+
+    def allowed(self, known_m2: float) -> int:
+        """The waits a run has with `known_m2` [m^2] of its map known."""
+        if self.holds_area <= 0:
+            return self.holds
+        return self.holds + int(known_m2 // self.holds_area)
 
     def check(self, s: LoopState) -> StopReason | None:
         rule = self.snapshots
@@ -298,8 +314,7 @@ class MapUnchangedRule:
         if not rule.check(s.t, grid.prob, grid.origin, grid.resolution, grid.occ_thresh):
             return None
         fresh = s.goal_t0 is not None and s.goal_t0 > s.t - rule.period
-        if fresh and self.holds > 0:
-            self.holds -= 1
+        if fresh and self.held < self.allowed(rule.last.known_m2):
             self.held += 1
             return None
         detail = rule.describe()
@@ -335,6 +350,7 @@ def default_rules(
             p.snapshot_period,
             p.snapshot_mse,
             holds=p.snapshot_holds,
+            holds_area=p.snapshot_holds_area,
             measure=p.snapshot_measure,
             change=p.snapshot_change,
             tolerance=p.snapshot_tolerance,

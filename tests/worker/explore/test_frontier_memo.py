@@ -28,9 +28,14 @@ edit = st.tuples(
     st.integers(1, 12),
     st.sampled_from([np.nan, FREE, OCC]),
 )
-# (spot, blacklist the last answer's frontier, look_through, squeeze)
+# (spot, what becomes of the answer's frontier: nothing, blacklisted or spent, look_through,
+# squeeze)
 ask = st.tuples(
-    st.just("ask"), st.integers(0, len(SPOTS) - 1), st.booleans(), st.booleans(), st.booleans()
+    st.just("ask"),
+    st.integers(0, len(SPOTS) - 1),
+    st.sampled_from(["", "blacklist", "spent"]),
+    st.booleans(),
+    st.booleans(),
 )
 look = st.tuples(st.just("look"), st.integers(0, len(SPOTS) - 1), st.floats(-math.pi, math.pi))
 SETTINGS = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -53,8 +58,10 @@ def _from_scratch(prob: np.ndarray, seen: np.ndarray, question) -> FrontierGoal 
     cm, fs = GlobalCostmap(p.costmap), FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, ORIGIN))
     fs.seen[:] = seen
-    xy, blacklist, look_through, squeeze = question
-    return fs.find_goal(cm, xy, blacklist, [], look_through=look_through, squeeze=squeeze)
+    xy, blacklist, look_through, squeeze, spent = question
+    return fs.find_goal(
+        cm, xy, blacklist, [], look_through=look_through, squeeze=squeeze, spent=spent
+    )
 
 
 def _same(a: FrontierGoal | None, b: FrontierGoal | None) -> bool:
@@ -74,7 +81,7 @@ def _run(ops) -> FrontierSearch:
     prob[20:36, 23] = OCC
     cm, fs = GlobalCostmap(p.costmap), FrontierSearch(p.frontiers, p.planner)
     fs.update(cm, cm.update(prob, RES, ORIGIN))
-    blacklist: list[np.ndarray] = []
+    given_up: dict[str, list[np.ndarray]] = {"blacklist": [], "spent": []}
     for op in ops:
         if op[0] == "edit":
             fs.update(cm, cm.update(prob, RES, ORIGIN, window_m=_window(prob, op)))
@@ -83,11 +90,12 @@ def _run(ops) -> FrontierSearch:
             fs.observe(cm, np.array([x, y, op[2]]), math.radians(120.0))
         else:
             _, spot, drop, look_through, squeeze = op
-            question = (SPOTS[spot], list(blacklist), look_through, squeeze)
-            got = fs.choose(cm, SPOTS[spot], question[1], [], look_through, squeeze)
+            blacklist, spent = list(given_up["blacklist"]), list(given_up["spent"])
+            question = (SPOTS[spot], blacklist, look_through, squeeze, spent)
+            got = fs.choose(cm, SPOTS[spot], blacklist, [], look_through, squeeze, spent)
             assert _same(got, _from_scratch(prob, fs.seen, question))
             if drop and got is not None:
-                blacklist.append(got.frontier_xy)
+                given_up[drop].append(got.frontier_xy)
     return fs
 
 
@@ -107,6 +115,9 @@ def test_the_same_question_on_the_same_map_is_answered_from_memory():
     assert fs.memo.hits == 1
     fs = _run([ask0, ("edit", 0, 0, 2, 2, np.nan), ask0])  # nothing changed: unknown already
     assert fs.memo.hits == 1
+    # the answer's frontier blacklisted or spent: a new question (each checked from scratch)
+    for drop in ("blacklist", "spent"):
+        assert _run([("ask", 0, drop, False, False), ask0]).memo.hits == 0
     # the room's right side in view: a look is counted, a second makes its cells dead
     # (dead_frontier_looks = 2), which changes the choice
     fs = _run([ask0, ("look", 0, 0.0), ask0])
@@ -194,7 +205,7 @@ def _shared(ops) -> None:
             _, spot, _, look_through, squeeze = op
             got = fs.find_goal(cm, SPOTS[spot], [], [], look_through, squeeze)
             assert _same(
-                got, _from_scratch(prob, fs.seen, (SPOTS[spot], [], look_through, squeeze))
+                got, _from_scratch(prob, fs.seen, (SPOTS[spot], [], look_through, squeeze, []))
             )
 
 

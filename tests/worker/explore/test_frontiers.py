@@ -352,3 +352,26 @@ def test_goal_search_and_planner_sharing_buffers_give_what_separate_ones_give():
         assert a.travel_cost == b.travel_cost
     np.testing.assert_array_equal(p1, p2)
     np.testing.assert_array_equal(b1, b2)
+
+
+def test_spent_frontier_cells_leave_the_rest_of_their_cluster_a_blacklist_drops_it_whole():
+    # a 4 m x 3 m room open along its whole right side, x = 4 m, to unknown space: one
+    # frontier cluster 3 m long (the hall a laser without a return cannot fill from one spot)
+    prob = np.full((64, 120), np.nan)
+    prob[2:62, 2:80] = 0.0  # free: x 0.1..4.0 m, y 0.1..3.1 m
+    prob[0:2, 0:80] = prob[62:64, 0:80] = prob[:, 0:2] = 1.0  # walls below, above, left
+    cm, fs = _setup(prob)
+    robot = (1.0, 1.5)
+    first = fs.choose(cm, robot, [])
+    assert first is not None and abs(first.frontier_xy[0] - 4.0) < 0.1
+    r = ExploreParams().frontiers.blacklist_radius
+    # the cells near where the robot arrived in vain are spent: the next goal serves the same
+    # frontier, farther along it than blacklist_radius
+    second = fs.choose(cm, robot, [], spent=[first.frontier_xy])
+    assert second is not None and abs(second.frontier_xy[0] - 4.0) < 0.1
+    assert np.hypot(*(second.frontier_xy - first.frontier_xy)) > r
+    # the same point blacklisted (a goal that failed) drops the whole cluster: nothing left
+    assert fs.choose(cm, robot, [first.frontier_xy]) is None
+    # spent points every 0.5 m along the whole frontier: no open cell left
+    spent = [np.array([4.0, y]) for y in np.arange(0.0, 3.3, 0.5)]
+    assert fs.choose(cm, robot, [], spent=spent) is None

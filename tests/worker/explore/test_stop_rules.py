@@ -294,6 +294,36 @@ def test_map_unchanged_waits_once_for_a_goal_chosen_since_the_last_snapshot():
     assert rule.check(at(600.0, 450.0)).reason == "map_unchanged"
 
 
+def test_map_unchanged_waits_once_more_for_every_holds_area_of_the_known_map():
+    @dataclass
+    class Grid:  # 20 x 10 known cells of 0.5 m: 50 m^2
+        prob: np.ndarray = field(default_factory=lambda: np.full((10, 20), 0.1, np.float32))
+        origin: tuple = (0.0, 0.0)
+        resolution: float = 0.5
+        occ_thresh: float = 0.25
+
+    def waits(holds, holds_area):
+        """How many snapshots in a row, each with a goal chosen since the one before, the rule
+        lets pass before it fires."""
+        rule = MapUnchangedRule(period=300.0, mse=5.0, holds=holds, holds_area=holds_area)
+        rule.check(_state(300.0, occupancy=Grid))
+        for k in range(1, 20):
+            t = 300.0 * (k + 1)
+            stop = rule.check(_state(t, occupancy=Grid, goal_t0=t - 100.0))
+            if stop is not None:
+                assert stop.detail.endswith(f"(waited {k - 1} time(s) for a goal chosen "
+                                            "since the last snapshot)") or k == 1  # fmt: skip
+                return k - 1
+        return None
+
+    assert waits(1, 0.0) == 1  # off: the run's one wait
+    assert waits(1, 50.0) == 2  # 50 m^2 known: one more
+    assert waits(1, 50.0001) == 1  # not quite a whole holds_area
+    assert waits(1, 12.0) == 5  # 50 // 12 = 4 more
+    assert waits(0, 25.0) == 2  # the waits for the area alone
+    assert waits(0, 0.0) == 0
+
+
 def test_rules_are_asked_in_order_and_the_first_answer_wins():
     @dataclass
     class Hit:
