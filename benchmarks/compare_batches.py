@@ -8,10 +8,10 @@ Runs are paired by (world, variant, noise, slam, seed) from each folder's runs.c
 mean A, B and SM errors (translational and rotational), over the pairs where both runs have
 the figure: the mean of A - B with its paired-t interval (worker.batch.paired.mean_ci) and the
 two-sided p of the Wilcoxon signed-rank test (scipy), and the verdict "no clear difference"
-when the interval holds zero; the same for the coverage (issue 52). For the outcome:
-completed and "good" (completed and under the thesis's visually-good thresholds) counts, and
-the pairs where only one of the two succeeded, with McNemar's exact two-sided p (a binomial
-test on those discordant pairs). Exit 0; 2 on bad input.
+when the interval holds zero; the same for the coverage and the simulated duration (issue 52).
+For the outcome: completed and "good" (completed and under the thesis's visually-good
+thresholds) counts, and the pairs where only one of the two succeeded, with McNemar's exact
+two-sided p (a binomial test on those discordant pairs). Exit 0; 2 on bad input.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ METRICS = tuple(
     (f"{kind} {axis}", f"{prefix}_mean_{suffix}", unit)
     for kind, prefix in (("B", "b"), ("A", "a"), ("SM", "sm"))
     for axis, suffix, unit in (("trans.", "t", "m"), ("rot.", "r", "rad"))
-) + (("coverage", "coverage", "share"),)
+) + (("coverage", "coverage", "share"), ("duration", "sim_time_s", "s simulated"))
 
 
 def _runs(folder: Path) -> dict[tuple, dict[str, str]]:
