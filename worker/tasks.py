@@ -15,6 +15,7 @@ from celery.signals import worker_process_init
 
 from worker.celery_app import app, configure
 from worker.celery_conf import RUN_TASK, TaskLimits
+from worker.heap import release_free_heap
 
 
 class RunHost(Protocol):
@@ -53,7 +54,10 @@ def run_task(self: Task, run_id: int) -> str:
     back later (no retry cap), so that the run is finished even if that attempt dies; one
     that finds the run done, cancelled or failed does nothing."""
     host = _host()
-    busy, message = host.execute(run_id)
+    try:
+        busy, message = host.execute(run_id)
+    finally:
+        release_free_heap()  # the run's freed maps, back to the system while the worker idles
     if busy:
         # well within the visibility timeout: Redis would redeliver a longer countdown's
         # message (held unacknowledged by the worker) before it is due

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from worker.heap import release_free_heap
+
 POLL_S = 0.5  # [s] how often the parent checks its workers are alive
 
 
@@ -71,6 +73,8 @@ def _child(fn: Callable, conn: Connection, parent_pid: int) -> None:
             where = f" (at {last[0].filename}:{last[0].lineno})" if last else ""
             conn.send(("error", index, f"{type(exc).__name__}: {exc}{where}"))
             continue
+        finally:
+            release_free_heap()  # a run's freed maps, back to the system before the next
         conn.send(("result", index, out))
 
 
