@@ -322,8 +322,8 @@ class StopParams:
     # to a frontier it chose since the earlier snapshot
     snapshot_holds: int = 1
     # [m^2] one wait more for every this much of the map known (a big building's far wings);
-    # 0: snapshot_holds whatever the size. Floors up to 50 m x 50 m (the bundled offices and
-    # labs) keep snapshot_holds
+    # 0: snapshot_holds whatever the size. A map with less known (a 50 m x 50 m floor) keeps
+    # snapshot_holds alone
     snapshot_holds_area: float = 2500.0
     # [s] no reachable frontier for this long -> completed (`no_frontier`)
     no_frontier_time: float = 1.0
