@@ -39,8 +39,8 @@ def test_every_field_is_in_one_group_or_the_loops_own():
     assert len(names) == len(set(names)) == len(FLAT_KEYS)  # no name in two groups
     own = [f.name for f in dataclasses.fields(ExploreParams) if f.name not in GROUPS]
     assert "time_limit" in own and not set(own) & set(names)
-    # 120 settings before the groups, 120 after
-    assert len(names) + len(own) == 120
+    # 120 settings before the groups, 120 after; 121 with issue 52's snapshot_holds_area
+    assert len(names) + len(own) == 121
 
 
 def test_flat_keys_go_to_their_groups_and_nested_ones_stay():
