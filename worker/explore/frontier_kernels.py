@@ -347,3 +347,23 @@ def nearest_distance2(cy, cx, members):
                 best = d2
         out[k] = best
     return out
+
+
+def within_radius(xs: np.ndarray, ys: np.ndarray, points, radius: float) -> np.ndarray:
+    """`(K,) bool`: the positions `(xs, ys) (K,)` [m] with `hypot(x - px, y - py) <= radius` for
+    some point `(px, py)` of `points`. Each point tests only the positions of its x band, found
+    in the positions sorted by x (the band is 1e-6 m wider than the radius, far beyond
+    rounding at a building's coordinates), with the same test: the cells a blacklist or the
+    spent frontier cells leave alone, without a map-wide pass per point."""
+    near = np.zeros(len(xs), dtype=np.bool_)
+    if len(points) == 0 or len(xs) == 0:
+        return near
+    order = np.argsort(xs, kind="stable")
+    sorted_x = xs[order]
+    band = radius + 1e-6
+    for px, py in points:
+        lo = np.searchsorted(sorted_x, px - band, side="left")
+        hi = np.searchsorted(sorted_x, px + band, side="right")
+        idx = order[lo:hi]
+        near[idx] |= np.hypot(xs[idx] - px, ys[idx] - py) <= radius
+    return near

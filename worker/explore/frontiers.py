@@ -279,10 +279,7 @@ class FrontierSearch:
     def _near(self, costmap: GlobalCostmap, cells: np.ndarray, points) -> np.ndarray:
         """`(K,) bool`: the cells `(K, 2) [iy, ix]` within blacklist_radius of some point."""
         xs, ys = costmap.cell_to_world(cells[:, 1], cells[:, 0])
-        near = np.zeros(len(cells), dtype=bool)
-        for b in points:
-            near |= np.hypot(xs - b[0], ys - b[1]) <= self.params.blacklist_radius
-        return near
+        return fk.within_radius(xs, ys, points, self.params.blacklist_radius)
 
     def _search(
         self, costmap: GlobalCostmap, start, cells, labels, cell_valid, avoid, look_through,

@@ -375,3 +375,24 @@ def test_spent_frontier_cells_leave_the_rest_of_their_cluster_a_blacklist_drops_
     # spent points every 0.5 m along the whole frontier: no open cell left
     spent = [np.array([4.0, y]) for y in np.arange(0.0, 3.3, 0.5)]
     assert fs.choose(cm, robot, [], spent=spent) is None
+
+
+def test_cells_within_the_radius_of_points_match_a_test_of_every_cell_against_every_point():
+    from worker.explore.frontier_kernels import within_radius
+
+    rng = np.random.default_rng(5)
+    # cell centres of a 0.05 m grid far from the origin (as a big building's), in random
+    # order, and points on cell centres: many cells exactly 0.5 m (10 cells) from a point
+    iy, ix = np.divmod(rng.permutation(200 * 300), 300)
+    xs, ys = 150.0 + (ix + 0.5) * RES, 80.0 + (iy + 0.5) * RES
+    on_cells = [np.array([xs[k], ys[k]]) for k in rng.integers(0, len(xs), 12)]
+    anywhere = [rng.uniform((150.0, 80.0), (165.0, 90.0)) for _ in range(12)]
+    outside = [np.array([140.0, 85.0])]  # no cell within reach
+    for points in (on_cells, anywhere, on_cells + anywhere + outside, outside, []):
+        plain = np.zeros(len(xs), dtype=bool)
+        for p in points:
+            plain |= np.hypot(xs - p[0], ys - p[1]) <= 0.5
+        assert np.array_equal(within_radius(xs, ys, points, 0.5), plain)
+    got, (px, py) = within_radius(xs, ys, on_cells[:1], 0.5), on_cells[0]  # 10 cells off: in
+    dx, dy = np.round((xs - px) / RES).astype(int), np.round((ys - py) / RES).astype(int)
+    assert got[(dx == 10) & (dy == 0)].all() and not got[(dx == 11) & (dy == 0)].any()
