@@ -1,11 +1,11 @@
 """Give the C heap's free memory back to the system after a run.
 
 A run's map-sized arrays are freed when it ends, but glibc keeps much of the memory they came
-from (and the many small blocks freed with them) in its heap for the next allocation: a Celery
-worker process or a batch pool process that ran the generated 200 m x 100 m warehouse kept
-about 160 MiB resident that nothing used (docs/results/whole-runs.md). `malloc_trim(0)`
-returns every whole free page of the heap to the system. Other C libraries have no such call;
-there it does nothing.
+from (and the many small blocks freed with them) in its heap for the next allocation: a 5 s
+run on the generated 200 m x 100 m warehouse left 161 MiB of freed memory in the heap of its
+process (docs/results/whole-runs.md, "What a warm-up run leaves"), and a Celery worker or a
+batch pool process keeps such memory between runs. `malloc_trim(0)` returns every whole free
+page of the heap to the system. Other C libraries have no such call; there it does nothing.
 """
 
 from __future__ import annotations
