@@ -17,11 +17,12 @@ class DijkstraSearch:
     """Reusable Dijkstra buffers sized to the costmap (valid cells are marked by a run stamp)."""
 
     def __init__(self):
-        # stamp (H, W) int32: cells visited by the pass whose id is run_id (`new_stamp`)
+        # stamp (H, W) int32: cells visited by the pass whose id is run_id (`new_stamp`);
+        # parent (H, W) uint8: the step that reached each cell (planner_kernels.dijkstra)
         self.shape = (0, 0)
         self.run_id = 0
         self.potential = np.zeros((0, 0))
-        self.parent = np.zeros((0, 0), dtype=np.int32)
+        self.parent = np.zeros((0, 0), dtype=np.uint8)
         self.stamp = np.zeros((0, 0), dtype=np.int32)
         self.queue = np.zeros(0, dtype=np.int64)
 
@@ -70,7 +71,7 @@ class DijkstraSearch:
         if shape != self.shape:
             self.shape = shape
             self.potential = np.zeros(shape)
-            self.parent = np.zeros(shape, dtype=np.int32)
+            self.parent = np.zeros(shape, dtype=np.uint8)
             self.stamp = np.zeros(shape, dtype=np.int32)
             self.run_id = 0
 

@@ -11,6 +11,7 @@ _SQRT2 = math.sqrt(2.0)
 _DY = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DX = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 _DL = np.array([1.0, 1.0, 1.0, 1.0, _SQRT2, _SQRT2, _SQRT2, _SQRT2])
+NO_PARENT = 255  # `dijkstra`'s parent code of the start cell (the steps are 0-7)
 
 
 @njit(cache=True, inline="always")
@@ -111,8 +112,10 @@ def dijkstra(
     inflated: (H, W) uint8 costmap values from obstacles; unknown: (H, W) bool; target: (H, W)
     bool cells to reach. The search stops once a target cell is settled and the frontier of the
     search has gone `stop_extra` potential units past it (0: stop at the first). potential
-    (H, W) float64, parent (H, W) int32 (flat index) and stamp (H, W) int32 are reusable
-    buffers: a cell's entries are valid only where stamp == run_id, so no buffer is cleared.
+    (H, W) float64, parent (H, W) uint8 and stamp (H, W) int32 are reusable buffers: a cell's
+    entries are valid only where stamp == run_id, so no buffer is cleared. parent holds the
+    step k (`_DY[k]`, `_DX[k]`) that reached the cell, NO_PARENT at the start: 1 byte a cell
+    where a flat index took 4.
     The heap's arrays grow before a cell's neighbours are pushed, not inside `_push`: an
     array handed back from the inlined push on every step cost a third of the search.
     Returns `(K,) int64` flat indices of the target cells settled, nearest first.
@@ -135,7 +138,7 @@ def dijkstra(
     first = math.inf
     s = start_iy * w + start_ix
     potential[start_iy, start_ix] = 0.0
-    parent[start_iy, start_ix] = -1
+    parent[start_iy, start_ix] = NO_PARENT
     stamp[start_iy, start_ix] = run_id
     use_h = goal_iy >= 0
     escape2 = escape_cells * escape_cells
@@ -193,7 +196,7 @@ def dijkstra(
             if stamp[jy, jx] != run_id or nd < potential[jy, jx]:
                 stamp[jy, jx] = run_id
                 potential[jy, jx] = nd
-                parent[jy, jx] = idx
+                parent[jy, jx] = k
                 hk = nd + _octile(jy, jx, goal_iy, goal_ix, neutral) if use_h else nd
                 n = _push(keys, vals, n, hk, jy * w + jx)
     return found[:n_found]
@@ -251,21 +254,24 @@ def sealed_off(
 
 @njit(cache=True)
 def trace_path(parent, goal_idx, width):
-    """Cells `(K, 2) int64 [iy, ix]` from the start to `goal_idx` by following parents."""
-    n = 0
-    idx = goal_idx
-    while idx >= 0:
+    """Cells `(K, 2) int64 [iy, ix]` from the start to `goal_idx` by following the steps in
+    `parent` (as `dijkstra` writes them) back to the start."""
+    n = 1
+    iy = goal_idx // width
+    ix = goal_idx - iy * width
+    while parent[iy, ix] != NO_PARENT and n <= parent.size:
+        k = parent[iy, ix]
+        iy -= _DY[k]
+        ix -= _DX[k]
         n += 1
-        iy = idx // width
-        idx = parent[iy, idx - iy * width]
-        if n > parent.size:
-            break
     out = np.empty((n, 2), dtype=np.int64)
-    idx = goal_idx
+    iy = goal_idx // width
+    ix = goal_idx - iy * width
     for i in range(n - 1, -1, -1):
-        iy = idx // width
-        ix = idx - iy * width
         out[i, 0] = iy
         out[i, 1] = ix
-        idx = parent[iy, ix]
+        if i > 0:
+            k = parent[iy, ix]
+            iy -= _DY[k]
+            ix -= _DX[k]
     return out

@@ -227,3 +227,12 @@ def test_potentials_match_scipy_dijkstra_on_a_large_random_costmap():
     assert np.array_equal(settled, np.isfinite(ref))
     assert settled.sum() > 100_000
     np.testing.assert_allclose(search.potential[settled], ref[settled], rtol=1e-9)
+    # paths traced back from the 1-byte step codes: 8-connected chains from the start whose
+    # step costs sum to the cell's shortest distance (scipy's), so each is a shortest path
+    for flat in rng.choice(np.flatnonzero(settled), 200, replace=False):
+        path = search.path_to(int(flat))
+        assert tuple(path[0]) == (sy, sx) and path[-1, 0] * n + path[-1, 1] == flat
+        steps = np.diff(path, axis=0)
+        assert np.all(np.abs(steps).max(axis=1) == 1)
+        cost = enter[path[1:, 0], path[1:, 1]] * np.hypot(steps[:, 0], steps[:, 1])
+        np.testing.assert_allclose(cost.sum(), ref.reshape(-1)[flat], rtol=1e-9)
