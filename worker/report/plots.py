@@ -44,13 +44,16 @@ def map_png(
 
 def _floorplan_axes(ax, occ: np.ndarray, resolution: float, origin: Sequence[float]) -> None:
     """Draw the floorplan (walls dark) in world coordinates; `occ` is `[iy, ix]`, bottom first."""
+    import matplotlib
+
     h, w = occ.shape
     extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
+    # the two colours looked up once and the plan drawn as (H, W, 4) bytes, the same pixels:
+    # from a plan of values matplotlib makes (H, W, 4) float64 colours and copies of them
+    # (the figure took 142 MiB on virginia_cross's 1.7 M cells, 78 MiB this way)
+    colours = matplotlib.colormaps["gray"]([1.0, 0.25], bytes=True)
     ax.imshow(
-        np.where(occ, 0.25, 1.0),
-        cmap="gray",
-        vmin=0,
-        vmax=1,
+        colours[np.asarray(occ, dtype=np.bool_).view(np.uint8)],
         origin="lower",
         extent=extent,
         interpolation="nearest",

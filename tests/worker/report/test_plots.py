@@ -57,3 +57,47 @@ def test_errors_png_writes_an_image(tmp_path):
     path = tmp_path / "errors.png"
     errors_png(path, t2, t2 / 600 * rng.uniform(0, 1, 500), rng.uniform(0, 0.02, 500))
     assert Image.open(path).size[0] > 500
+
+
+def _matplotlib_floorplan(path, occ, resolution, origin, gt, est) -> None:
+    """trajectories_png as it was drawn before its colours were looked up once: the plan's
+    values through matplotlib's own grey colour map (the independent rendering)."""
+    import matplotlib.pyplot as plt
+
+    from worker.report import plots
+
+    def values_through_colour_map(ax, occ, resolution, origin) -> None:
+        h, w = occ.shape
+        extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
+        ax.imshow(np.where(occ, 0.25, 1.0), cmap="gray", vmin=0, vmax=1, origin="lower",
+                  extent=extent, interpolation="nearest")  # fmt: skip
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_aspect("equal")
+
+    own = plots._floorplan_axes
+    plots._floorplan_axes = values_through_colour_map
+    try:
+        plots.trajectories_png(path, occ, resolution, origin, gt, est)
+    finally:
+        plots._floorplan_axes = own
+        plt.close("all")
+
+
+def test_the_floorplan_is_drawn_pixel_for_pixel_as_through_the_colour_map(tmp_path):
+    """A plan smaller than the figure (matplotlib maps the values, then scales) and one far
+    larger (it scales the colours): the bytes drawn give the same image either way."""
+    rng = np.random.default_rng(3)
+    for shape in ((60, 90), (1400, 2100)):
+        occ = rng.random(shape) < 0.3
+        s = np.linspace(1, 4, 50)
+        gt = np.column_stack([s, s, np.zeros_like(s)])
+        ours, theirs = tmp_path / "ours.png", tmp_path / "theirs.png"
+        trajectories_png(ours, occ, 0.05, (-1.0, 2.0), gt, gt + 0.1)
+        _matplotlib_floorplan(theirs, occ, 0.05, (-1.0, 2.0), gt, gt + 0.1)
+        a = np.asarray(Image.open(ours).convert("RGB"))
+        b = np.asarray(Image.open(theirs).convert("RGB"))
+        assert a.shape == b.shape
+        assert np.array_equal(a, b)
+        greys = {tuple(v) for v in a[a.shape[0] // 2, a.shape[1] // 3 : a.shape[1] // 2]}
+        assert (64, 64, 64) in greys and (255, 255, 255) in greys  # walls and free space
