@@ -9,13 +9,18 @@ component's resident bytes (memory_parts.py: the pages of its arrays the kernel 
 array bytes: what grows along the run, and what of the resident size no component holds.
 --stacks prints, after each phase, the main thread's Python stack (its 8 innermost frames) at
 the moment the phase's peak was reached, sampled every millisecond: which step sets the peak.
+--report runs as `mapqual run` does: with a progress callback (so with the live coverage and
+the timeline) and then writes the report folder (worker.report.folder.write_report, a phase
+of its own) into a temporary folder.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -57,8 +62,11 @@ class Sampler:
                 self.top = now
                 frame = sys._current_frames().get(self.main) if self.stacks else None
                 if frame is not None:
-                    self.where = [f"{Path(f.filename).name}:{f.lineno} {f.name}"
-                                  for f in traceback.extract_stack(frame)[-8:]]  # fmt: skip
+                    # a frame numba's compiler swapped under us: this peak's stack is lost,
+                    # the sampling goes on
+                    with contextlib.suppress(AttributeError, ValueError):
+                        self.where = [f"{Path(f.filename).name}:{f.lineno} {f.name}"
+                                      for f in traceback.extract_stack(frame)[-8:]]  # fmt: skip
             time.sleep(0.001 if self.stacks else 0.002)
 
 
@@ -120,6 +128,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--parts", type=float, default=None, help="[s] simulated between prints")
     ap.add_argument("--stacks", action="store_true", help="where each phase's peak was reached")
+    ap.add_argument("--report", action="store_true", help="as `mapqual run`: progress, report")
     args = ap.parse_args()
     rss = Sampler(args.stacks)
     for name in ("explore", "_evaluate", "_map_score", "_summary"):
@@ -129,7 +138,25 @@ def main() -> None:
         {"algorithm": args.slam, "explore": {"time_limit": args.time_limit}}
     )
     on_progress = None if args.parts is None else parts_printer(args.parts, rss)
-    pl.run_one(world, params, args.seed, on_progress)
+    if args.report and on_progress is None:
+        on_progress = _ignore
+    result = pl.run_one(world, params, args.seed, on_progress)
+    if args.report:
+        from worker.report.folder import write_report
+
+        with tempfile.TemporaryDirectory() as folder:
+            _timed(rss, "report", write_report)(result, Path(folder))
+    print(f"whole process: peak {_hwm_mib():.0f} MiB (VmHWM)")
+
+
+def _ignore(progress) -> None:
+    """A progress callback that does nothing: the run measures what `mapqual run`'s does."""
+
+
+def _hwm_mib() -> float:
+    with open("/proc/self/status") as f:
+        line = next(x for x in f if x.startswith("VmHWM:"))
+    return int(line.split()[1]) / 1024
 
 
 if __name__ == "__main__":
