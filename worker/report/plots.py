@@ -42,25 +42,42 @@ def map_png(
     img.save(path, format="PNG")  # explicit: `path` may be a stream
 
 
-def _floorplan_axes(ax, occ: np.ndarray, resolution: float, origin: Sequence[float]) -> None:
-    """Draw the floorplan (walls dark) in world coordinates; `occ` is `[iy, ix]`, bottom first."""
+def _floorplan_axes(
+    ax, occ: np.ndarray, resolution: float, origin: Sequence[float], max_across: int
+) -> None:
+    """Draw the floorplan (walls dark) in world coordinates; `occ` is `[iy, ix]`, bottom first.
+
+    A plan more than `max_across` cells wide is drawn from blocks of k x k cells (k = its
+    width // max_across), a block dark where any of its cells is a wall: the figure cannot
+    show more (max_across is twice the figure's width in pixels), and its memory stays that
+    of a plan max_across wide. Narrower plans are drawn cell for cell."""
     import matplotlib
 
+    occ = np.asarray(occ, dtype=np.bool_)
+    k = max(1, occ.shape[1] // max_across)
+    if k > 1:
+        occ = wall_blocks(occ, k)
     h, w = occ.shape
-    extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
+    size = k * resolution  # [m] a drawn cell
+    extent = (origin[0], origin[0] + w * size, origin[1], origin[1] + h * size)
     # the two colours looked up once and the plan drawn as (H, W, 4) bytes, the same pixels:
     # from a plan of values matplotlib makes (H, W, 4) float64 colours and copies of them
     # (the figure took 142 MiB on virginia_cross's 1.7 M cells, 78 MiB this way)
     colours = matplotlib.colormaps["gray"]([1.0, 0.25], bytes=True)
-    ax.imshow(
-        colours[np.asarray(occ, dtype=np.bool_).view(np.uint8)],
-        origin="lower",
-        extent=extent,
-        interpolation="nearest",
-    )
+    ax.imshow(colours[occ.view(np.uint8)], origin="lower", extent=extent, interpolation="nearest")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")
+
+
+def wall_blocks(occ: np.ndarray, k: int) -> np.ndarray:
+    """`(ceil(H / k), ceil(W / k)) bool`: each k x k block of `occ (H, W) bool` a wall where any
+    of its cells is one (the last row and column of blocks padded with free cells)."""
+    h, w = occ.shape
+    hb, wb = -(-h // k), -(-w // k)
+    padded = np.zeros((hb * k, wb * k), dtype=np.bool_)
+    padded[:h, :w] = occ
+    return padded.reshape(hb, k, wb, k).any(axis=(1, 3))
 
 
 def trajectories_png(
@@ -79,9 +96,9 @@ def trajectories_png(
     import matplotlib.pyplot as plt
 
     h, w = occ.shape
-    fig_w = 9.0
-    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, fig_w * h / max(w, 1))), dpi=110)
-    _floorplan_axes(ax, occ, resolution, origin)
+    fig_w, dpi = 9.0, 110
+    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, fig_w * h / max(w, 1))), dpi=dpi)
+    _floorplan_axes(ax, occ, resolution, origin, max_across=int(2 * fig_w * dpi))
     ax.plot(pose_gt[:, 0], pose_gt[:, 1], color="#1a9e1a", lw=2.8, label="ground truth")
     ax.plot(pose_est[:, 0], pose_est[:, 1], color="#d62020", lw=1.3, label="estimate")
     if len(pose_gt):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-from worker.report.plots import errors_png, map_png, trajectories_png
+from worker.report.plots import errors_png, map_png, trajectories_png, wall_blocks
 from worker.slam.grid import ros_to_image
 
 
@@ -66,7 +66,7 @@ def _matplotlib_floorplan(path, occ, resolution, origin, gt, est) -> None:
 
     from worker.report import plots
 
-    def values_through_colour_map(ax, occ, resolution, origin) -> None:
+    def values_through_colour_map(ax, occ, resolution, origin, **_) -> None:
         h, w = occ.shape
         extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
         ax.imshow(np.where(occ, 0.25, 1.0), cmap="gray", vmin=0, vmax=1, origin="lower",
@@ -101,3 +101,38 @@ def test_the_floorplan_is_drawn_pixel_for_pixel_as_through_the_colour_map(tmp_pa
         assert np.array_equal(a, b)
         greys = {tuple(v) for v in a[a.shape[0] // 2, a.shape[1] // 3 : a.shape[1] // 2]}
         assert (64, 64, 64) in greys and (255, 255, 255) in greys  # walls and free space
+
+
+def test_wall_blocks_mark_a_block_dark_where_any_of_its_cells_is_a_wall():
+    rng = np.random.default_rng(5)
+    for shape, k in (((7, 11), 3), ((12, 12), 4), ((5, 9), 1), ((1, 13), 5)):
+        occ = rng.random(shape) < 0.05
+        out = wall_blocks(occ, k)
+        hb, wb = -(-shape[0] // k), -(-shape[1] // k)
+        assert out.shape == (hb, wb)
+        for by in range(hb):
+            for bx in range(wb):
+                assert out[by, bx] == occ[by * k : (by + 1) * k, bx * k : (bx + 1) * k].any()
+
+
+def test_a_plan_far_wider_than_the_figure_is_drawn_from_blocks_where_it_lies(tmp_path):
+    """4,001 cells across a 990-pixel figure, drawn from 2 x 2 blocks: the walls (1 m thick)
+    land on the pixels where matplotlib draws the whole plan cell by cell, within a pixel."""
+    occ = np.zeros((400, 4001), dtype=bool)
+    occ[:, 1200:1220] = True
+    occ[:, 3003:3023] = True
+    occ[:20, :] = True
+    # a path from the first wall's middle (x = -3 + 1210 * 0.05) to the second's
+    gt = np.array([[57.5, 10.0, 0.0], [147.65, 10.0, 0.0]])
+    ours, theirs = tmp_path / "ours.png", tmp_path / "theirs.png"
+    trajectories_png(ours, occ, 0.05, (-3.0, 1.0), gt, gt)
+    _matplotlib_floorplan(theirs, occ, 0.05, (-3.0, 1.0), gt, gt)
+    marks = []
+    for path in (ours, theirs):
+        rgb = np.asarray(Image.open(path).convert("RGB")).astype(int)
+        grey = (np.ptp(rgb, axis=2) < 8) & (rgb.max(axis=2) < 100)  # the walls' grey 64
+        red = (rgb[..., 0] > 150) & (rgb[..., 1] < 110) & (rgb[..., 2] < 110)
+        marks.append([np.flatnonzero(m.any(axis=a)) for m in (grey, red) for a in (0, 1)])
+    for a, b in zip(*marks, strict=True):
+        assert len(a) and len(b)
+        assert abs(a.min() - b.min()) <= 1 and abs(a.max() - b.max()) <= 1
