@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from collections.abc import Callable
@@ -238,7 +239,16 @@ class Exploration:
 
     def result(self, stop: StopReason) -> ExplorationResult:
         """The run, ended by `stop`: its recording, final map, coverage and counters."""
-        world, sim, nav, rec = self.world, self.sim, self.nav, self.rec
+        world, sim, rec = self.world, self.sim, self.rec
+        nav = self.nav
+        goals = tuple(nav.stats.goals)
+        safety_triggers, recoveries = nav.safety.n_triggers, nav.stats.recoveries
+        # the navigation's map-sized grids (costmap, planner and frontier buffers) and the stop
+        # rules' map snapshots are let go before the final map is assembled and judged: the
+        # peak of a large plan's run was here, with both alive (virginia_cross: about 100 MiB)
+        self.nav = nav = None
+        self.rules = ()
+        gc.collect()  # the navigator's parts refer to one another
         # with the end-point counts where the SLAM keeps them (the map score's walls)
         grid = getattr(self.slam, "occupancy_with_hits", self.slam.occupancy)()
         pose_gt = rec.buf[: rec.n, 1:4].copy()
@@ -255,7 +265,6 @@ class Exploration:
             detail += "; " + end_pose_error_line(T, pose_est[-1], pose_gt[-1])
         n0 = self.n_collisions0
         col = sim.collisions[n0] if len(sim.collisions) > n0 else None
-        goals = tuple(nav.stats.goals)
         final = getattr(self.slam, "final_trajectory", None)
         pose_final = None if final is None else np.asarray(final(), dtype=float)
         if pose_final is not None and pose_final.shape != pose_est.shape:
@@ -274,8 +283,8 @@ class Exploration:
             goals=goals,
             goals_reached=sum(g.status in ("reached", "explored") for g in goals),
             goals_failed=sum(g.status == "failed" for g in goals),
-            safety_triggers=nav.safety.n_triggers,
-            recoveries=nav.stats.recoveries,
+            safety_triggers=safety_triggers,
+            recoveries=recoveries,
             T_world_map=T,
             nav_wall_s=rec.nav[: rec.n].copy(),
             nav_cpu_s=rec.cpu[: rec.n].copy(),

@@ -145,3 +145,38 @@ def test_bormann_oracle_exploration_completes():
     _assert_clean_completion(result)
     assert result.goals_reached > 5
     assert result.path_length_m > 40.0  # it toured the building: rooms on both sides
+
+
+def test_the_navigation_grids_are_let_go_before_the_final_map_is_assembled():
+    """The run's end assembles and judges the final map: the costmap's and the planners'
+    map-sized grids are gone by then (nothing refers to them), and what the result reports of
+    the navigation (goals, safety triggers, recoveries) was read before."""
+    import weakref
+
+    from worker.explore.loop import Exploration
+
+    world = _dead_end_world()
+    rng = np.random.default_rng(3)
+    sim = Simulator(world, SimParams(), rng)
+    slam = make_slam("odometry", SimParams().laser, SlamParams(), rng)
+    run = Exploration(world, sim, slam, explore_params(time_limit=60.0), True, None)
+    stop = None
+    while stop is None:
+        stop = run.step()
+    nav = run.nav
+    navigator = weakref.ref(nav)  # its grids go with it
+    goals, triggers = tuple(nav.stats.goals), nav.safety.n_triggers
+    assert goals and nav.costmap.inflated.size > 10_000
+    seen_at_assembly = []
+    name = "occupancy_with_hits" if hasattr(slam, "occupancy_with_hits") else "occupancy"
+    occupancy = getattr(slam, name)
+
+    def assembly():
+        seen_at_assembly.append(navigator() is None)
+        return occupancy()
+
+    setattr(slam, name, assembly)
+    del nav
+    result = run.result(stop)
+    assert seen_at_assembly == [True]
+    assert result.goals == goals and result.safety_triggers == triggers
