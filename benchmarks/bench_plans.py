@@ -3,8 +3,9 @@
 Lists the plans under worlds/ (worker.world.catalogue.find_worlds: the Bormann plans and the
 schools), sorts them by the cells of the SLAM's map over the plan's extent (its area at
 slam.delta, 0.05 m: what the particle maps and the navigation's grids grow with), largest
-first, and runs each in a process of its own (benchmarks/run_once.py --cold: no warm-up, as
-`mapqual run` starts), appending one JSON line per plan to --out. Plans already in --out are
+first, and runs each in a process of its own (benchmarks/run_once.py --cold --report: no
+warm-up, as `mapqual run` starts, and the report folder written after the run, as it does),
+appending one JSON line per plan to --out. Plans already in --out are
 skipped, so an interrupted invocation resumes where it stopped.
 
     .venv/bin/python benchmarks/bench_plans.py --out plans.jsonl [--largest N]
@@ -68,6 +69,7 @@ def _run(plan: dict, args: argparse.Namespace) -> dict:
     cmd = [
         sys.executable, str(ROOT / "benchmarks" / "run_once.py"), "--tree", str(ROOT),
         "--world", plan["world"], "--slam", args.slam, "--seed", str(args.seed), "--cold",
+        "--report",
     ]  # fmt: skip
     if args.time_limit is not None:
         cmd += ["--time-limit", str(args.time_limit)]

@@ -17,6 +17,9 @@ warm-up the C heap's free memory is given back (glibc's malloc_trim) and the pea
 (/proc/self/clear_refs), so peak_mb is the run's own, not what the warm-up left in the
 allocator's free lists (about 270 MiB on the generated 200 m x 100 m warehouse). --cold: no
 warm-up (a fresh process, as `mapqual run`; the first run loads the kernels from numba's cache).
+--report then writes the run's report folder (worker.report.folder.write_report) into a
+temporary folder before the peak is read, as `mapqual run` does after the run: its figures
+hold a plan-sized image for a moment, so without it the peak is the run's alone.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import gc
 import json
 import resource
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -45,6 +49,7 @@ def main() -> None:
     ap.add_argument("--realtime", type=float, default=None, help="real-time SLAM at this speed")
     ap.add_argument("--cold", action="store_true", help="no warm-up run")
     ap.add_argument("--explore", type=json.loads, default={}, help="explore settings, JSON")
+    ap.add_argument("--report", action="store_true", help="write the report folder too")
     args = ap.parse_args()
     sys.path.insert(0, str(args.tree.resolve()))
     from worker.pipeline import run_one
@@ -78,6 +83,11 @@ def main() -> None:
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_one(world, params, args.seed, sampler)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if args.report:
+        from worker.report.folder import write_report
+
+        with tempfile.TemporaryDirectory() as folder:
+            write_report(result, folder)
     s = result.summary
     s = s if isinstance(s, dict) else s.to_dict()  # a dict in older trees
     print(json.dumps({
@@ -86,7 +96,7 @@ def main() -> None:
         "peak_mb": _peak_mb(),
         "parts_mb": {k: round(v / 2**20, 1) for k, v in parts.items()},
         "stop": s.get("stop"), "coverage": s.get("coverage"), "ate": s.get("ate"), "trace": trace,
-        "reason": s.get("reason"), "stop_detail": s.get("stop_detail"),
+        "reason": s.get("reason"), "stop_detail": s.get("stop_detail"), "report": args.report,
     }, default=str))  # fmt: skip
 
 
