@@ -180,3 +180,18 @@ def test_the_navigation_grids_are_let_go_before_the_final_map_is_assembled():
     result = run.result(stop)
     assert seen_at_assembly == [True]
     assert result.goals == goals and result.safety_triggers == triggers
+
+
+def test_the_heap_is_given_back_after_each_whole_map_read_and_at_the_end(monkeypatch):
+    """glibc keeps freed memory in its heap: the run gives it back after each whole-map read
+    (every full_map_check_period; 4 s here) and at its end, not at every step."""
+    import worker.explore.loop as loop_module
+
+    calls = []
+    monkeypatch.setattr(loop_module, "release_free_heap", lambda: calls.append(1) or True)
+    result, _ = _run(_dead_end_world(), time_limit=95.0, full_map_check_period=4.0)
+    assert result.t[-1] > 12.0
+    # the whole-map reads come with the map updates at 2 Hz, the first one 4 s on or later
+    reads = int(result.t[-1] // 4.0)
+    assert reads - 1 <= len(calls) - 1 <= reads, (len(calls), result.t[-1])
+    assert len(calls) < len(result.t) / 10
