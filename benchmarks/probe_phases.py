@@ -32,7 +32,7 @@ from worker.run_params import RunParams
 from worker.world.loader import load_world
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from memory_parts import _exploration, sample  # noqa: E402
+from memory_parts import _exploration, peak_mb, sample  # noqa: E402
 
 
 class Sampler:
@@ -146,17 +146,11 @@ def main() -> None:
 
         with tempfile.TemporaryDirectory() as folder:
             _timed(rss, "report", write_report)(result, Path(folder))
-    print(f"whole process: peak {_hwm_mib():.0f} MiB (VmHWM)")
+    print(f"whole process: peak {peak_mb():.0f} MiB (VmHWM)")
 
 
 def _ignore(progress) -> None:
     """A progress callback that does nothing: the run measures what `mapqual run`'s does."""
-
-
-def _hwm_mib() -> float:
-    with open("/proc/self/status") as f:
-        line = next(x for x in f if x.startswith("VmHWM:"))
-    return int(line.split()[1]) / 1024
 
 
 if __name__ == "__main__":

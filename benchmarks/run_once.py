@@ -28,13 +28,12 @@ import argparse
 import ctypes
 import gc
 import json
-import resource
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from memory_parts import peak_sampler
+from memory_parts import peak_mb, peak_sampler
 
 
 def main() -> None:
@@ -93,7 +92,7 @@ def main() -> None:
     print(json.dumps({
         "sim_s": s["timings"]["sim_time_s"], "wall_s": wall, "cpu_s": cpu,
         "outcome": s["outcome"], "threads": params.slam.threads,
-        "peak_mb": _peak_mb(),
+        "peak_mb": peak_mb(),
         "parts_mb": {k: round(v / 2**20, 1) for k, v in parts.items()},
         "stop": s.get("stop"), "coverage": s.get("coverage"), "ate": s.get("ate"), "trace": trace,
         "reason": s.get("reason"), "stop_detail": s.get("stop_detail"), "report": args.report,
@@ -108,17 +107,6 @@ def _fresh_peak() -> None:
         Path("/proc/self/clear_refs").write_text("5")
     except (AttributeError, OSError):
         pass  # not glibc or not Linux: the peak keeps the warm-up's
-
-
-def _peak_mb() -> float:
-    """The peak resident memory [MiB] since the start or `_fresh_peak` (VmHWM)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 if __name__ == "__main__":
