@@ -1,4 +1,5 @@
-"""Give the C heap's free memory back to the system after a run.
+"""Give the C heap's free memory back to the system: after a run, and during one after each
+whole-map read and at the exploration's end (worker.explore.loop).
 
 A run's map-sized arrays are freed when it ends, but glibc keeps much of the memory they came
 from (and the many small blocks freed with them) in its heap for the next allocation: a 5 s
