@@ -10,7 +10,12 @@ skipped, so an interrupted invocation resumes where it stopped.
 
     .venv/bin/python benchmarks/bench_plans.py --out plans.jsonl [--largest N]
         [--time-limit S] [--slam rbpf] [--seed 1] [--threads N] [--list]
-        [--exclude worlds/schools/virginia_cross.yaml ...] [--shard K/N]
+        [--exclude worlds/schools/virginia_cross.yaml ...] [--shard K/N] [--command]
+
+--command runs the command users run instead, `mapqual run PLAN -o DIR` (database, report and
+all), each in a fresh folder of its own (its SQLite database there), and reads its peak from the
+kernel's account of the finished process (wait4's ru_maxrss), so nothing samples it; the line
+then holds sim_s, wall_s, outcome, stop, coverage and peak_mb, without the parts.
 
 --shard K/N runs every N-th plan from the K-th, so that N invocations (one a core, each with
 its own --out) share the list; the memory a run holds does not depend on the load.
@@ -28,6 +33,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -84,6 +90,36 @@ def _run(plan: dict, args: argparse.Namespace) -> dict:
             "commit": _commit(), "time_limit": args.time_limit}  # fmt: skip
 
 
+def _run_command(plan: dict, args: argparse.Namespace) -> dict:
+    """`mapqual run` itself, in a fresh folder; its peak from wait4 once it has ended."""
+    started = time.strftime("%Y-%m-%d %H:%M", time.gmtime())
+    with tempfile.TemporaryDirectory(prefix="bench_plans_") as tmp:
+        cmd = [
+            str(Path(sys.executable).with_name("mapqual")), "run", str(ROOT / plan["world"]),
+            "-o", f"{tmp}/report", "--seed", str(args.seed), "--slam", args.slam,
+        ]  # fmt: skip
+        if args.time_limit is not None:
+            cmd += ["--time-limit", str(args.time_limit)]
+        env = dict(os.environ)
+        if args.threads is not None:
+            env["MAPQUAL_SLAM_THREADS"] = str(args.threads)
+        t0 = time.perf_counter()
+        with open(f"{tmp}/stderr", "wb") as err:
+            proc = subprocess.Popen(cmd, cwd=tmp, env=env, stdout=subprocess.DEVNULL, stderr=err)
+            _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            tail = Path(f"{tmp}/stderr").read_text(errors="replace")[-1500:]
+            return {**plan, "error": tail, "utc": started, "how": "mapqual run"}
+        s = json.loads(Path(f"{tmp}/report/summary.json").read_text())
+    return {**plan, "how": "mapqual run", "sim_s": s["timings"]["sim_time_s"], "wall_s": wall,
+            "outcome": s["outcome"], "stop": s["stop"], "coverage": s["coverage"],
+            "peak_mb": usage.ru_maxrss / 1024, "utc": started,
+            "load": round(os.getloadavg()[0], 1), "commit": _commit(),
+            "time_limit": args.time_limit}  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("plans.jsonl"), help="JSONL, appended")
@@ -96,6 +132,7 @@ def main() -> None:
     ap.add_argument("--list", action="store_true", help="print the plans and stop")
     ap.add_argument("--exclude", nargs="*", default=[], help="plans to leave out (paths)")
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th plan from the K-th (0-based)")
+    ap.add_argument("--command", action="store_true", help="measure `mapqual run` itself")
     args = ap.parse_args()
     k, n = (int(v) for v in args.shard.split("/"))
     todo = [p for p in plans(args.folder)[: args.largest] if p["world"] not in args.exclude]
@@ -108,7 +145,7 @@ def main() -> None:
     for plan in todo:
         if plan["world"] in done:
             continue
-        row = _run(plan, args)
+        row = (_run_command if args.command else _run)(plan, args)
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")
         print(
