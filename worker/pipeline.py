@@ -28,6 +28,7 @@ from worker.evaluate.relations import (
 )
 from worker.evaluate.trajectory import Trajectory
 from worker.explore.loop import ExplorationResult, ExploreProgress, explore
+from worker.kernel_cache import warm_kernels
 from worker.report.summary import RunSummary
 from worker.report.timeline import Timeline
 from worker.run_params import EvalParams, RunParams
@@ -163,7 +164,9 @@ def run_one(
     the relation sampling, so the same inputs give the same result bit for bit. `sim_log`
     (optional; `.gz` compresses) receives the full CARMEN log with every scan, for replaying
     other SLAM algorithms on the same data. `on_progress` may raise `RunCancelled`.
+    The first run of a version compiles the kernels in a child process (worker.kernel_cache).
     """
+    warm_kernels(params.algorithm)
     wall0 = time.perf_counter()
     rng_sim, rng_slam, rng_eval = np.random.default_rng(seed).spawn(3)
     entry = registry.get(params.algorithm)

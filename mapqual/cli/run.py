@@ -100,6 +100,7 @@ def run(
     """Simulate, explore with SLAM, evaluate, and store one run of WORLD. The run's scan
     matcher uses every core this process may run on (MAPQUAL_SLAM_THREADS=1 keeps it to one;
     the result is the same)."""
+    from worker.kernel_cache import warm_kernels
     from worker.slam.threads import claim_default
     from worker.world.loader import load_world
 
@@ -109,11 +110,19 @@ def run(
         raise InputError(f"--slam must be one of {', '.join(registry.names())}, not {slam!r}")
     params = build_params(params_file, slam, laser_noise, time_limit, realtime)
     world = load_world(world_path, resolution, allow_outside=allow_outside)
+    warm_kernels(params.algorithm, announce=_announce_compiling)
     run_id, shown, summary = _execute(world, world_path.suffix, params, seed, out, as_json)
     if as_json:
         print(json.dumps({"run_id": run_id, "report_dir": str(shown), **summary.to_dict()}))
     else:
         _print_summary(summary, run_id, str(shown))
+
+
+def _announce_compiling() -> None:
+    if not sys.stderr.isatty():  # as the progress bar: a pipe or a log gets the summary only
+        return
+    print("mapqual: compiling the kernels, once for this version (about a minute)",
+          file=sys.stderr, flush=True)  # fmt: skip
 
 
 def _execute(
