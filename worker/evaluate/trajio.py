@@ -14,13 +14,12 @@ from worker.evaluate.clock import clock_order, warn_notes
 from worker.evaluate.relations import Relations
 from worker.evaluate.textio import (
     drop_truncated_tail,
-    format_rows,
     is_row,
     load_table,
     parse_columns,
     parse_table,
     read_text,
-    write_text,
+    write_rows,
 )
 from worker.evaluate.trajectory import Trajectory
 
@@ -212,21 +211,22 @@ def read_trajectory(
 
 def write_carmen(path: str | Path, traj: Trajectory) -> None:
     """CARMEN log as the thesis's listener wrote it: `FLASER 0 0.0 0.0 0.0 x y theta t`."""
-    text = format_rows(
+    write_rows(
+        path,
         "FLASER 0 0.0 0.0 0.0 %.9f %.9f %.9f %.6f\n",
         [traj.poses[:, 0], traj.poses[:, 1], traj.poses[:, 2], traj.t],
     )
-    write_text(path, text)
 
 
 def write_tum(path: str | Path, traj: Trajectory) -> None:
     """TUM `t x y z qx qy qz qw` with z = 0 and the yaw as a rotation about z."""
     half = 0.5 * traj.poses[:, 2]
-    text = format_rows(
+    write_rows(
+        path,
         "%.6f %.9f %.9f 0 0 0 %.12f %.12f\n",
         [traj.t, traj.poses[:, 0], traj.poses[:, 1], np.sin(half), np.cos(half)],
+        head="# t x y z qx qy qz qw\n",
     )
-    write_text(path, "# t x y z qx qy qz qw\n" + text)
 
 
 def read_relations(path: str | Path) -> Relations:
@@ -240,12 +240,13 @@ def read_relations(path: str | Path) -> Relations:
 def write_relations(path: str | Path, rel: Relations) -> None:
     """Relations file, one `t1 t2 x y 0 0 0 yaw` line per relation."""
     d = rel.delta
-    text = format_rows(
-        "%.6f %.6f %.9f %.9f 0.0 0.0 0.0 %.9f\n", [rel.t1, rel.t2, d[:, 0], d[:, 1], d[:, 2]]
+    write_rows(
+        path,
+        "%.6f %.6f %.9f %.9f 0.0 0.0 0.0 %.9f\n",
+        [rel.t1, rel.t2, d[:, 0], d[:, 1], d[:, 2]],
     )
-    write_text(path, text)
 
 
 def write_errors(path: str | Path, t1: np.ndarray, t2: np.ndarray, error: np.ndarray) -> None:
     """Per-relation error file, `t1 t2 error` per line (metricEvaluator's T.errors/R.errors)."""
-    write_text(path, format_rows("%.6f %.6f %.9f\n", [t1, t2, error]))
+    write_rows(path, "%.6f %.6f %.9f\n", [t1, t2, error])
