@@ -21,6 +21,7 @@ kernels with the same results.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import logging
 import os
@@ -50,13 +51,20 @@ def cache_folder() -> Path | None:
 
 def marker_name(algorithm: str) -> str:
     """The marker's file name: the algorithm, the package's sources, numba and Python."""
+    return f"warmed-{algorithm}-{_version_key()}"
+
+
+@functools.cache
+def _version_key() -> str:
+    """The sources as this process loaded them (their paths, sizes and times, as the cache
+    folder's name), numba and Python: read once a process, not once a run."""
     import numba
 
     from worker import numba_cache_dir
 
     sources = numba_cache_dir(Path(__file__).resolve().parent).name
     what = f"{sources}\0{numba.__version__}\0{sys.version}\0{sys.executable}"
-    return f"warmed-{algorithm}-{hashlib.blake2b(what.encode(), digest_size=8).hexdigest()}"
+    return hashlib.blake2b(what.encode(), digest_size=8).hexdigest()
 
 
 def warm_algorithm(algorithm: str) -> str:

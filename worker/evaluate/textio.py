@@ -7,7 +7,7 @@ import io
 import itertools
 import warnings
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -181,34 +181,31 @@ def parse_columns(lines: Sequence[str], usecols: Sequence[int]) -> NDArray[np.fl
         return None
 
 
-def format_rows(fmt: str, columns: Sequence[NDArray], chunk: int = 100_000) -> str:
-    """Text of rows formatted with the printf-style `fmt` (one row, newline included) from
-    equally long 1-D columns; one `%` per chunk of rows, far faster than a loop per row."""
+def row_chunks(fmt: str, columns: Sequence[NDArray], chunk: int) -> Iterator[str]:
+    """The text of rows formatted with the printf-style `fmt` (one row, newline included) from
+    equally long 1-D columns, `chunk` rows at a time; one `%` per chunk, far faster than a
+    loop per row."""
     n = len(columns[0]) if columns else 0
-    parts = []
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
         flat = np.column_stack([np.asarray(c[start:stop], dtype=np.float64) for c in columns])
-        parts.append((fmt * (stop - start)) % tuple(flat.ravel().tolist()))
-    return "".join(parts)
+        yield (fmt * (stop - start)) % tuple(flat.ravel().tolist())
 
 
 def write_rows(
     path: str | Path, fmt: str, columns: Sequence[NDArray], *, head: str = "",
     chunk: int = 20_000,
 ) -> None:  # fmt: skip
-    """`head`, then the rows of `format_rows(fmt, columns)`, written chunk by chunk: the same
-    bytes as `write_text(path, head + format_rows(fmt, columns))` without the whole text in
-    memory (the SM relations of a 7,200 s run are 480 MB of it, and its bytes as much again);
-    a chunk of `chunk` rows holds about 470 bytes a row at once (its floats, text and bytes).
-    A `.gz` name is gzip-compressed as write_text does it (level 6, no time stamp)."""
+    """`head`, then the rows of `columns` formatted with `fmt` (`row_chunks`), written chunk by
+    chunk: the same bytes as the whole text written at once, without it in memory (the SM
+    relations of a 7,200 s run are 480 MB of it, and its bytes as much again); a chunk of
+    `chunk` rows holds about 470 bytes a row at once (its floats, text and bytes). A `.gz`
+    name is gzip-compressed as write_text does it (level 6, no time stamp)."""
     p = Path(path)
-    n = len(columns[0]) if columns else 0
     packer = zlib.compressobj(level=6, wbits=31) if p.suffix == ".gz" else None
-    parts = (format_rows(fmt, [c[i : i + chunk] for c in columns]) for i in range(0, n, chunk))
     try:
         with p.open("wb") as f:
-            for text in itertools.chain([head], parts):
+            for text in itertools.chain([head], row_chunks(fmt, columns, chunk)):
                 data = text.encode("utf-8")
                 f.write(data if packer is None else packer.compress(data))
             if packer is not None:
